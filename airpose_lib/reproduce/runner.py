@@ -1,0 +1,449 @@
+"""Run the kit's notebooks with a profile's parameters and collect their figures.
+
+The catalog (``catalog.yaml``) lists the notebooks in order with the figures each must write;
+a profile (``profiles/<name>.yaml``) is the one place where sizes live (render size, dataset
+size, epochs ...). For every catalogued notebook the runner
+
+1. checks that it has a cell tagged ``parameters`` that declares ``output_dir`` and every
+   parameter the profile sets for it (so a typo in a profile fails before anything runs);
+2. executes it in-process with papermill, injecting ``profile``, ``output_dir`` (a fresh per-run
+   folder) and the profile's parameters, with an environment that renders off-screen;
+3. checks that the expected figures exist, copies them into the figures folder and records
+   wall time, status and parameters in ``<out>/<profile>/report.json``.
+
+It stops at the first failure (later notebooks may consume earlier outputs) unless asked to keep
+going. This module imports nothing else of the kit: it must be able to run any notebook.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import datetime as _dt
+import json
+import os
+import shutil
+import time
+from collections.abc import Iterator, Sequence
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import nbformat
+import yaml
+
+__all__ = [
+    "CATALOG_PATH",
+    "PROFILES_DIR",
+    "NOTEBOOKS_DIR",
+    "CatalogEntry",
+    "NotebookResult",
+    "RunReport",
+    "ReproductionError",
+    "load_catalog",
+    "load_profile",
+    "list_profiles",
+    "check_notebook",
+    "notebook_outputs",
+    "kernel_environment",
+    "run_profile",
+]
+
+_HERE = Path(__file__).resolve().parent
+#: Ordered list of notebooks and the figures each must produce.
+CATALOG_PATH = _HERE / "catalog.yaml"
+#: Folder of ``<profile>.yaml`` files.
+PROFILES_DIR = _HERE / "profiles"
+#: The checkout this package lives in (notebooks/, runs/ and figures/ sit at its root).
+REPO_ROOT = _HERE.parents[1]
+NOTEBOOKS_DIR = REPO_ROOT / "notebooks"
+
+#: Parameters the runner itself injects into every notebook.
+RESERVED_PARAMETERS = ("profile", "output_dir")
+
+
+class ReproductionError(RuntimeError):
+    """A notebook failed, lacks a parameters cell, or did not write an expected figure."""
+
+
+@dataclass(frozen=True)
+class CatalogEntry:
+    """One notebook of the reproduction, as listed in ``catalog.yaml``.
+
+    Attributes:
+        name: identifier (``00_body_model``); ``--only`` and the profiles refer to it.
+        file: notebook file name relative to the notebooks folder.
+        reproduces: the paper artefact (figure, table, section) the notebook reproduces.
+        figures: file names the notebook must write into its ``output_dir``.
+    """
+
+    name: str
+    file: str
+    reproduces: str
+    figures: tuple[str, ...] = ()
+
+
+@dataclass
+class NotebookResult:
+    """Outcome of one notebook in a run.
+
+    ``status`` is ``ok``, ``failed`` (a cell raised / the kernel died), ``missing_figures``,
+    ``invalid`` (no parameters cell, unknown parameter, missing file) or ``skipped`` (not run
+    because an earlier notebook failed).
+    """
+
+    name: str
+    file: str
+    status: str = "skipped"
+    wall_s: float = 0.0
+    parameters: dict = field(default_factory=dict)
+    executed_notebook: str | None = None
+    figures: list[str] = field(default_factory=list)
+    missing_figures: list[str] = field(default_factory=list)
+    error: str | None = None
+
+
+@dataclass
+class RunReport:
+    """Everything a run did; written to ``<out>/<profile>/report.json``."""
+
+    profile: str
+    description: str
+    kit_version: str
+    kernel_name: str
+    started_at: str
+    run_dir: str
+    figures_dir: str
+    results: list[NotebookResult] = field(default_factory=list)
+    wall_s: float = 0.0
+
+    @property
+    def ok(self) -> bool:
+        """True when every selected notebook ran and wrote all its figures."""
+        return bool(self.results) and all(r.status == "ok" for r in self.results)
+
+    @property
+    def failures(self) -> list[NotebookResult]:
+        return [r for r in self.results if r.status not in ("ok", "skipped")]
+
+    def to_dict(self) -> dict:
+        d = asdict(self)
+        d["ok"] = self.ok
+        return d
+
+    def write(self, path: Path) -> None:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_suffix(".json.tmp")
+        tmp.write_text(json.dumps(self.to_dict(), indent=2, default=str) + "\n")
+        tmp.replace(path)  # atomic: a reader never sees half a report
+
+    def table(self) -> str:
+        """A short fixed-width summary table."""
+        width = max([len("notebook")] + [len(r.name) for r in self.results])
+        lines = [f"profile {self.profile!r} (airpose_lib {self.kit_version}) -> {self.run_dir}",
+                 f"{'notebook':<{width}}  {'status':<15} {'time':>8}  figures"]
+        for r in self.results:
+            n_expected = len(r.figures) + len(r.missing_figures)
+            lines.append(f"{r.name:<{width}}  {r.status:<15} {r.wall_s:>7.1f}s  "
+                         f"{len(r.figures)}/{n_expected}")
+        lines.append(f"{'total':<{width}}  {'ok' if self.ok else 'FAILED':<15} {self.wall_s:>7.1f}s")
+        return "\n".join(lines)
+
+    def failure_message(self) -> str:
+        return "\n".join(f"{r.name}: {r.error}" for r in self.failures)
+
+    def raise_for_failures(self) -> None:
+        """Raise :class:`ReproductionError` naming each failed notebook and why."""
+        if not self.ok:
+            raise ReproductionError(self.failure_message() or "no notebook was run")
+
+
+# -- catalog and profiles -------------------------------------------------------------------------
+def load_catalog(path: Path = CATALOG_PATH) -> list[CatalogEntry]:
+    """The ordered notebooks of ``catalog.yaml``; checks names and figure names are unique."""
+    raw = yaml.safe_load(Path(path).read_text()) or {}
+    entries = []
+    for item in raw.get("notebooks") or []:
+        try:
+            entries.append(CatalogEntry(name=str(item["name"]), file=str(item["file"]),
+                                        reproduces=str(item.get("reproduces", "")),
+                                        figures=tuple(str(f) for f in item.get("figures") or ())))
+        except (KeyError, TypeError) as e:
+            raise ReproductionError(f"{path}: malformed catalog entry {item!r} ({e})") from None
+    names = [e.name for e in entries]
+    if len(set(names)) != len(names):
+        raise ReproductionError(f"{path}: duplicate notebook names in {names}")
+    figures = [f for e in entries for f in e.figures]
+    if len(set(figures)) != len(figures):
+        # Figures are collected into one flat folder, so two notebooks may not share a name.
+        dup = sorted({f for f in figures if figures.count(f) > 1})
+        raise ReproductionError(f"{path}: figure names used by more than one notebook: {dup}")
+    return entries
+
+
+def list_profiles(profiles_dir: Path = PROFILES_DIR) -> list[str]:
+    """Names of the available profiles."""
+    return sorted(p.stem for p in Path(profiles_dir).glob("*.yaml"))
+
+
+def load_profile(profile: str | Path, profiles_dir: Path = PROFILES_DIR) -> dict:
+    """A profile as ``{"name", "description", "cell_timeout_s", "notebooks": {name: params}}``.
+
+    ``profile`` is a profile name or a path to a YAML file of the same format.
+    """
+    path = Path(profile)
+    if path.suffix not in (".yaml", ".yml"):
+        path = Path(profiles_dir) / f"{profile}.yaml"
+    if not path.is_file():
+        raise ReproductionError(f"unknown profile {str(profile)!r}; available: "
+                                f"{', '.join(list_profiles(profiles_dir))}")
+    raw = yaml.safe_load(path.read_text()) or {}
+    notebooks = raw.get("notebooks") or {}
+    if not isinstance(notebooks, dict) or not all(isinstance(v, dict) or v is None
+                                                  for v in notebooks.values()):
+        raise ReproductionError(f"{path}: `notebooks` must map notebook names to parameter dicts")
+    for nb_name, params in notebooks.items():
+        clash = set(params or {}) & set(RESERVED_PARAMETERS)
+        if clash:
+            raise ReproductionError(f"{path}: {nb_name} sets {sorted(clash)}, which the runner injects")
+    return {"name": path.stem, "path": str(path), "description": str(raw.get("description", "")).strip(),
+            "cell_timeout_s": raw.get("cell_timeout_s"),
+            "notebooks": {k: dict(v or {}) for k, v in notebooks.items()}}
+
+
+# -- notebook checks ------------------------------------------------------------------------------
+def _parameters_cell(nb) -> int | None:
+    for i, cell in enumerate(nb.cells):
+        if "parameters" in (cell.get("metadata", {}).get("tags") or []):
+            return i
+    return None
+
+
+def check_notebook(path: Path, parameters: Sequence[str] = ()) -> dict:
+    """Check a notebook can be parameterised; returns its declared defaults ``{name: source}``.
+
+    Raises :class:`ReproductionError` if the file is missing, no cell is tagged ``parameters``,
+    or the parameters cell does not declare ``output_dir`` or one of ``parameters``.
+    """
+    import papermill
+
+    path = Path(path)
+    if not path.is_file():
+        raise ReproductionError(f"notebook {path} does not exist")
+    nb = nbformat.read(path, as_version=4)
+    if _parameters_cell(nb) is None:
+        raise ReproductionError(
+            f"notebook {path.name} has no cell tagged 'parameters': papermill cannot inject the "
+            f"profile's values. Tag the cell that sets the defaults (View > Cell toolbar > Tags).")
+    declared = {name: info.get("default") for name, info in papermill.inspect_notebook(str(path)).items()}
+    missing = [p for p in ("output_dir", *parameters) if p not in declared]
+    if missing:
+        raise ReproductionError(
+            f"notebook {path.name}: its parameters cell does not declare {missing} "
+            f"(declared: {sorted(declared)}); a profile may only set parameters the notebook has")
+    return declared
+
+
+def notebook_outputs(path: Path) -> list[int]:
+    """Indices of code cells that carry outputs or execution counts (notebooks in git must not)."""
+    nb = nbformat.read(Path(path), as_version=4)
+    return [i for i, c in enumerate(nb.cells)
+            if c.cell_type == "code" and (c.get("outputs") or c.get("execution_count") is not None)]
+
+
+# -- execution ------------------------------------------------------------------------------------
+@contextlib.contextmanager
+def kernel_environment(extra: dict[str, str] | None = None) -> Iterator[dict[str, str]]:
+    """Temporarily set the environment the notebook kernels inherit, then restore it.
+
+    VTK renders through EGL without an X server, matplotlib uses Agg, and the checkout is put on
+    ``PYTHONPATH`` so the kernel imports this kit even when it is not pip-installed.
+    """
+    env = {
+        "PYVISTA_OFF_SCREEN": "true",
+        "VTK_DEFAULT_OPENGL_WINDOW": "vtkEGLRenderWindow",
+        "MPLBACKEND": "Agg",
+    }
+    if (REPO_ROOT / "airpose_lib").is_dir():
+        paths = [str(REPO_ROOT)] + [p for p in os.environ.get("PYTHONPATH", "").split(os.pathsep) if p]
+        env["PYTHONPATH"] = os.pathsep.join(dict.fromkeys(paths))
+    env.update(extra or {})
+    saved = {k: os.environ.get(k) for k in env}
+    os.environ.update(env)
+    try:
+        yield env
+    finally:
+        for k, v in saved.items():
+            if v is None:
+                os.environ.pop(k, None)
+            else:
+                os.environ[k] = v
+
+
+def _kit_version() -> str:
+    from airpose_lib import __version__  # the package root imports nothing else of the kit
+
+    return __version__
+
+
+def _select(catalog: list[CatalogEntry], only: Sequence[str] | None) -> list[CatalogEntry]:
+    if not only:
+        return list(catalog)
+    chosen = []
+    for key in only:
+        hits = [e for e in catalog if key in (e.name, e.file, Path(e.file).stem)]
+        hits = hits or [e for e in catalog if e.name.startswith(key)]
+        if len(hits) != 1:
+            raise ReproductionError(
+                f"--only {key!r} matches {[e.name for e in hits] or 'no notebook'}; "
+                f"catalogued: {[e.name for e in catalog]}")
+        if hits[0] not in chosen:
+            chosen.append(hits[0])
+    return [e for e in catalog if e in chosen]  # keep catalog order
+
+
+def _execution_error(exc: Exception, executed: Path) -> str:
+    from papermill.exceptions import PapermillExecutionError
+
+    if isinstance(exc, PapermillExecutionError):
+        return (f"cell In [{exc.exec_count}] (cell #{exc.cell_index}) raised "
+                f"{exc.ename}: {exc.evalue} -- traceback in {executed}")
+    return f"{type(exc).__name__}: {exc} -- partial output in {executed}"
+
+
+def _record_provenance(figures_dir: Path, copied: dict[str, str], entry: CatalogEntry,
+                       report: RunReport) -> None:
+    path = figures_dir / "provenance.json"
+    try:
+        prov = json.loads(path.read_text())
+    except (OSError, ValueError):
+        prov = {}
+    stamp = _dt.datetime.now().isoformat(timespec="seconds")
+    for fig, src in copied.items():
+        prov[fig] = {"notebook": entry.name, "profile": report.profile, "source": src,
+                     "kit_version": report.kit_version, "collected_at": stamp}
+    path.write_text(json.dumps(prov, indent=2, sort_keys=True) + "\n")
+
+
+def _run_one(entry: CatalogEntry, nb_path: Path, params: dict, run_dir: Path, figures_dir: Path,
+             kernel_name: str, cell_timeout_s, log_output: bool, report: RunReport) -> NotebookResult:
+    import papermill
+
+    result = NotebookResult(entry.name, entry.file, parameters=params)
+    output_dir = Path(params["output_dir"])
+    executed = run_dir / "notebooks" / Path(entry.file).name
+    t0 = time.perf_counter()
+    try:
+        check_notebook(nb_path, [k for k in params if k not in RESERVED_PARAMETERS])
+    except ReproductionError as e:
+        result.status, result.error = "invalid", str(e)
+        return result
+    # A fresh output folder: a figure left from an earlier run must not hide a missing one.
+    if output_dir.exists():
+        shutil.rmtree(output_dir)
+    output_dir.mkdir(parents=True)
+    executed.parent.mkdir(parents=True, exist_ok=True)
+    result.executed_notebook = str(executed)
+    try:
+        with kernel_environment():
+            papermill.execute_notebook(
+                str(nb_path), str(executed), parameters=params, kernel_name=kernel_name,
+                cwd=str(nb_path.parent), progress_bar=False, log_output=log_output,
+                execution_timeout=cell_timeout_s)
+    except Exception as e:  # noqa: BLE001 - any failure is reported with the notebook's name
+        result.wall_s = time.perf_counter() - t0
+        result.status, result.error = "failed", _execution_error(e, executed)
+        return result
+    result.wall_s = time.perf_counter() - t0
+
+    for fig in entry.figures:
+        f = output_dir / fig
+        (result.figures if f.is_file() and f.stat().st_size > 0 else result.missing_figures).append(fig)
+    if result.missing_figures:
+        result.status = "missing_figures"
+        result.error = (f"ran, but did not write {result.missing_figures} into {output_dir} "
+                        f"(the catalog expects {list(entry.figures)})")
+        return result
+    figures_dir.mkdir(parents=True, exist_ok=True)
+    copied = {}
+    for fig in entry.figures:
+        shutil.copy2(output_dir / fig, figures_dir / fig)
+        copied[fig] = str(output_dir / fig)
+    _record_provenance(figures_dir, copied, entry, report)
+    result.status = "ok"
+    return result
+
+
+def run_profile(
+    profile: str,
+    only: Sequence[str] | None = None,
+    out_dir: Path | str | None = None,
+    figures_dir: Path | str | None = None,
+    kernel_name: str = "python3",
+    *,
+    notebooks_dir: Path | str | None = None,
+    catalog_path: Path | str = CATALOG_PATH,
+    profiles_dir: Path | str = PROFILES_DIR,
+    keep_going: bool = False,
+    log_output: bool = False,
+    verbose: bool = True,
+) -> RunReport:
+    """Execute the catalogued notebooks with a profile's parameters.
+
+    Args:
+        profile: ``smoke``, ``cpu``, ``paper`` (or a path to a profile YAML file).
+        only: notebook names (or unique prefixes such as ``00``) to run; default all, in order.
+        out_dir: run root; executed notebooks go to ``<out>/<profile>/notebooks/``, each notebook's
+            figures to ``<out>/<profile>/<notebook name>/``. Default ``<checkout>/runs``.
+        figures_dir: where the expected figures are collected. Default ``<checkout>/figures``.
+        kernel_name: Jupyter kernel to execute with.
+        notebooks_dir: folder of the notebooks (default: the checkout's ``notebooks/``).
+        keep_going: run the remaining notebooks after a failure instead of stopping.
+        log_output: stream the notebooks' cell outputs to the log while they run.
+        verbose: print the summary table.
+
+    Returns:
+        A :class:`RunReport` (also written to ``<out>/<profile>/report.json``); check ``.ok`` or
+        call ``.raise_for_failures()``. Configuration errors (unknown profile or notebook, a
+        profile entry for a notebook not in the catalog) raise :class:`ReproductionError` at once.
+    """
+    notebooks_dir = Path(notebooks_dir) if notebooks_dir is not None else NOTEBOOKS_DIR
+    root = notebooks_dir.resolve().parent
+    out_dir = Path(out_dir) if out_dir is not None else root / "runs"
+    figures_dir = Path(figures_dir) if figures_dir is not None else root / "figures"
+    prof = load_profile(profile, Path(profiles_dir))
+    catalog = load_catalog(Path(catalog_path))
+    unknown = sorted(set(prof["notebooks"]) - {e.name for e in catalog})
+    if unknown:
+        raise ReproductionError(f"profile {prof['name']!r} sets parameters for notebooks not in the "
+                                f"catalog: {unknown}")
+    selected = _select(catalog, only)
+    run_dir = (out_dir / prof["name"]).resolve()
+    figures_dir = figures_dir.resolve()
+
+    report = RunReport(profile=prof["name"], description=prof["description"], kit_version=_kit_version(),
+                       kernel_name=kernel_name,
+                       started_at=_dt.datetime.now().isoformat(timespec="seconds"),
+                       run_dir=str(run_dir), figures_dir=str(figures_dir))
+    report.results = [NotebookResult(e.name, e.file) for e in selected]
+    t_start = time.perf_counter()
+    stop = False
+    for i, entry in enumerate(selected):
+        params = {"profile": prof["name"], "output_dir": str(run_dir / entry.name),
+                  **prof["notebooks"].get(entry.name, {})}
+        if stop:
+            report.results[i].parameters = params
+            report.results[i].error = "not run: an earlier notebook failed"
+            continue
+        if verbose:
+            print(f"[reproduce:{prof['name']}] {entry.name} ...", flush=True)
+        result = _run_one(entry, notebooks_dir / entry.file, params, run_dir, figures_dir,
+                          kernel_name, prof["cell_timeout_s"], log_output, report)
+        report.results[i] = result
+        report.wall_s = time.perf_counter() - t_start
+        report.write(run_dir / "report.json")  # after every notebook: a killed run leaves a trace
+        if result.status != "ok" and not keep_going:
+            stop = True
+    report.wall_s = time.perf_counter() - t_start
+    report.write(run_dir / "report.json")
+    if verbose:
+        print(report.table(), flush=True)
+    return report

@@ -1,0 +1,132 @@
+"""One figure style for every kit figure, and the colours that stand for methods and views.
+
+Colours follow the Okabe-Ito palette (distinguishable with the common colour-vision
+deficiencies). The per-camera colours keep the paper's convention for 3D scenes (Fig. 4): red for
+the estimate from the first camera, blue for the second, green for the ground truth.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Mapping
+from pathlib import Path
+
+import matplotlib as mpl
+
+__all__ = [
+    "METHOD_COLORS",
+    "VIEW_COLORS",
+    "SIDE_COLORS",
+    "MESH_COLOR",
+    "method_color",
+    "use_kit_style",
+    "save_figure",
+    "kit_version",
+]
+
+#: One colour per method of the paper's tables and plots, plus the ground truth.
+METHOD_COLORS: dict[str, str] = {
+    "Baseline": "#E69F00",             # orange
+    "Baseline+Multi-view": "#56B4E9",  # sky blue
+    "Baseline+Fullcam": "#CC79A7",     # reddish purple
+    "AirPose": "#0072B2",              # blue
+    "AirPose+": "#D55E00",             # vermillion
+    "Ground truth": "#009E73",         # bluish green
+}
+
+#: Estimates per camera in 3D scenes, as in the paper's figures.
+VIEW_COLORS: dict[str, str] = {"camera 1": "#D55E00", "camera 2": "#0072B2",
+                               "ground truth": "#009E73"}
+
+#: Left / right / centre limbs in skeleton drawings.
+SIDE_COLORS: dict[str, str] = {"left": "#0072B2", "right": "#D55E00", "centre": "#444444"}
+
+#: Body mesh colour in renders, RGB in [0, 1].
+MESH_COLOR: tuple[float, float, float] = (0.70, 0.74, 0.82)
+
+
+def _key(name: str) -> str:
+    return "".join(ch for ch in name.lower() if ch.isalnum() or ch == "+")
+
+
+_METHOD_KEYS = {_key(k): v for k, v in METHOD_COLORS.items()}
+_METHOD_KEYS.update({"gt": METHOD_COLORS["Ground truth"], "groundtruth": METHOD_COLORS["Ground truth"]})
+
+
+def method_color(name: str) -> str:
+    """Colour of a method, tolerant of case, spaces and dashes (``"airpose+"``, ``"GT"``)."""
+    try:
+        return _METHOD_KEYS[_key(name)]
+    except KeyError:
+        raise KeyError(f"no colour for method {name!r}; known: {list(METHOD_COLORS)}") from None
+
+
+def use_kit_style() -> None:
+    """Set matplotlib defaults for kit figures (call once at the top of a notebook)."""
+    mpl.rcParams.update({
+        "figure.dpi": 100,
+        "savefig.dpi": 150,
+        "savefig.bbox": "tight",
+        "savefig.pad_inches": 0.05,
+        "figure.facecolor": "white",
+        "savefig.facecolor": "white",
+        "font.size": 9,
+        "axes.titlesize": 10,
+        "axes.labelsize": 9,
+        "xtick.labelsize": 8,
+        "ytick.labelsize": 8,
+        "legend.fontsize": 8,
+        "legend.frameon": False,
+        "axes.spines.top": False,
+        "axes.spines.right": False,
+        "axes.grid": True,
+        "grid.alpha": 0.3,
+        "grid.linewidth": 0.5,
+        "lines.linewidth": 1.5,
+        "image.interpolation": "antialiased",
+        "axes.prop_cycle": mpl.cycler(color=list(METHOD_COLORS.values())),
+    })
+
+
+def kit_version() -> str:
+    """Version string of the kit, recorded in every figure's metadata."""
+    from airpose_lib import __version__
+
+    return __version__
+
+
+def save_figure(fig, path: str | Path, *, params: Mapping | None = None, show: bool = True,
+                close: bool = True) -> Path:
+    """Save a matplotlib figure as a kit artefact and (in IPython) display the saved file.
+
+    The PNG's metadata carries the kit version and ``params`` (JSON), so a figure found on disk
+    says what made it. Displaying the saved file rather than the live figure makes the notebook
+    look the same under any matplotlib backend (the reproduction runner uses Agg).
+
+    Args:
+        fig: a ``matplotlib.figure.Figure``.
+        path: output file; parent folders are created.
+        params: parameters to record (JSON-serialisable).
+        show: display the saved image when running inside IPython.
+        close: close the figure afterwards (frees memory in long notebooks).
+    """
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    meta = {"Software": f"airpose_lib {kit_version()}"}
+    if params is not None and path.suffix.lower() == ".png":
+        meta["Description"] = json.dumps(dict(params), default=str, sort_keys=True)
+    fig.savefig(path, metadata=meta if path.suffix.lower() == ".png" else None)
+    if close:
+        import matplotlib.pyplot as plt
+
+        plt.close(fig)
+    if show:
+        try:
+            from IPython import get_ipython
+            from IPython.display import Image, display
+
+            if get_ipython() is not None:
+                display(Image(filename=str(path)))
+        except ImportError:
+            pass
+    return path

@@ -1,0 +1,59 @@
+"""The builder itself: deterministic, atomic, and honest about what it wrote."""
+from __future__ import annotations
+
+import json
+import os
+
+import numpy as np
+import pytest
+
+from airpose_lib.body import open_model as om
+
+
+@pytest.fixture
+def small_build(tmp_path, monkeypatch, open_model_files):
+    # a private kit cache, but anny's own (expensive) cache stays shared
+    from airpose_lib.body.cache import cache_dir
+
+    monkeypatch.setenv("ANNY_CACHE_DIR", os.environ.get("ANNY_CACHE_DIR", str(cache_dir() / "anny")))
+    monkeypatch.setenv("AIRPOSE_CACHE", str(tmp_path))
+    return om.OpenModelConfig(num_samples=60, seed=7)
+
+
+def _arrays(path):
+    with np.load(path) as data:
+        return {k: data[k] for k in data.files}
+
+
+def test_same_seed_same_model_and_no_leftovers(small_build, tmp_path):
+    first = om.build_open_model(genders=("female",), config=small_build)["female"]
+    a = _arrays(first)
+    second = om.build_open_model(genders=("female",), config=small_build, force=True)["female"]
+    b = _arrays(second)
+    assert a.keys() == b.keys()
+    for key in a:
+        np.testing.assert_array_equal(a[key], b[key], err_msg=key)
+    leftovers = [p.name for p in first.parent.iterdir() if p.name.endswith(".tmp")]
+    assert not leftovers
+    info = json.loads(first.with_suffix(".json").read_text())
+    assert info["config"]["num_samples"] == 60 and info["config"]["seed"] == 7
+
+
+def test_existing_file_is_not_rebuilt(small_build):
+    path = om.build_open_model(genders=("male",), config=small_build)["male"]
+    stamp = path.stat().st_mtime_ns
+    om.build_open_model(genders=("male",), config=small_build)
+    assert path.stat().st_mtime_ns == stamp
+
+
+def test_failed_write_keeps_the_previous_file(tmp_path):
+    from airpose_lib.body.cache import atomic_path
+
+    target = tmp_path / "model.npz"
+    target.write_bytes(b"old")
+    with pytest.raises(RuntimeError):
+        with atomic_path(target) as tmp:
+            tmp.write_bytes(b"half")
+            raise RuntimeError("interrupted")
+    assert target.read_bytes() == b"old"
+    assert [p.name for p in tmp_path.iterdir()] == ["model.npz"]

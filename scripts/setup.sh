@@ -16,7 +16,8 @@ log() { printf '[setup] %s\n' "$*"; }
 need_apt=()
 ldconfig -p | grep -q 'libEGL.so.1' || need_apt+=(libegl1 libegl-mesa0)
 ldconfig -p | grep -q 'libGL.so.1' || need_apt+=(libgl1 libglx-mesa0)
-ls /usr/lib/*/dri/swrast_dri.so /usr/lib/*/dri/llvmpipe_dri.so >/dev/null 2>&1 || need_apt+=(libgl1-mesa-dri)
+compgen -G '/usr/lib/*/dri/swrast_dri.so' >/dev/null || compgen -G '/usr/lib/*/dri/*llvmpipe*' >/dev/null \
+  || need_apt+=(libgl1-mesa-dri)
 ldconfig -p | grep -q 'libXrender.so.1' || need_apt+=(libxrender1)
 if [ ${#need_apt[@]} -gt 0 ]; then
   if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null; then

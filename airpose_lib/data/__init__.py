@@ -1,0 +1,66 @@
+"""Synthetic data of the kit: scene and pose samplers, appearance, off-screen rendering, shards,
+manifests and the PyTorch datasets.
+
+Modules: ``scene`` (people, drone cameras, crop boxes, environment), ``poses`` (plausible body
+poses), ``motions`` and ``sequences`` (simulated recordings), ``detections`` (simulated keypoint
+detectors), ``official_layout`` (the official real-data folder layout, ``load_sequence``),
+``appearance`` (skin / hair / clothing colours), ``render`` (textured scenes, pyvista),
+``shards`` and ``manifest`` (files on disk), ``generate`` (the still-frame generator and
+``airpose data generate``), ``dataset`` (``StillFrameDataset``).
+
+Names are imported lazily, so ``import airpose_lib.data`` stays cheap and pulls in neither VTK
+nor torch until they are used.
+"""
+from __future__ import annotations
+
+import importlib
+
+_EXPORTS = {
+    # scene
+    "SceneConfig": "scene", "sample_person": "scene", "sample_cameras": "scene",
+    "sample_environment": "scene", "GENDER_CODES": "scene",
+    # poses
+    "sample_body_pose": "poses",
+    # appearance
+    "AppearanceConfig": "appearance", "sample_appearance": "appearance", "BodyPaint": "appearance",
+    # rendering
+    "SceneRenderer": "render", "ground_textures": "render",
+    # files
+    "DatasetError": "manifest", "ShardIntegrityError": "manifest", "load_manifest": "manifest",
+    # generation
+    "GENERATOR_VERSION": "generate", "GenerationConfig": "generate",
+    "StillFrameGenerator": "generate", "generate_still_dataset": "generate",
+    "ensure_still_dataset": "generate", "profile_config": "generate", "default_root": "generate",
+    # datasets
+    "StillFrameDataset": "dataset", "IMAGENET_MEAN": "dataset", "IMAGENET_STD": "dataset",
+    "denormalize_images": "dataset",
+}
+
+# Other modules' public names (their ``__all__``) are found on first use, in this order; the
+# renderer comes last because importing it starts VTK.
+_SEARCHED = ("official_layout", "sequences", "motions", "detections", "poses", "scene", "appearance",
+             "manifest", "shards", "generate", "dataset", "render")
+
+__all__ = sorted(_EXPORTS)
+
+
+def __getattr__(name: str):
+    module = _EXPORTS.get(name)
+    if module is None and not name.startswith("_"):
+        for candidate in _SEARCHED:
+            try:
+                mod = importlib.import_module(f"{__name__}.{candidate}")
+            except ImportError:
+                continue
+            if name in getattr(mod, "__all__", ()):
+                module = candidate
+                break
+    if module is None:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(importlib.import_module(f"{__name__}.{module}"), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_EXPORTS))

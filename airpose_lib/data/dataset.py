@@ -1,0 +1,172 @@
+"""PyTorch dataset over generated still-frame shards.
+
+``StillFrameDataset(root, split)`` returns, per sample, the dict the model and training code
+agree on (``V`` views, crop side ``S``):
+
+==============  =====================  ===========================================================
+key             shape / dtype          meaning
+==============  =====================  ===========================================================
+images          (V, 3, S, S) float32   RGB / 255, ImageNet-normalised; bbox resized keeping aspect,
+                                       black padding outside the box (geometry.crop_affine_matrix)
+P               (V, 3) float32         ``[bx, by, s]`` = geometry.crop_vector(bbox, K, S)
+K               (V, 3, 3) float32      full-frame intrinsics
+bbox            (V, 4) float32         ``[x0, y0, x1, y1]`` of the crop, full-frame pixels
+R_cw, t_cw      (V, 3, 3), (V, 3)      world -> camera extrinsics
+phi, tau        (V, 3, 3), (V, 3)      root rotation / model-origin translation in each camera
+theta           (21, 3) float32        body pose, axis-angle
+beta            (10,) float32          shape
+gender          () int64               0 neutral, 1 male, 2 female (ground-truth model)
+j2d             (V, 22, 2) float32     22 body joints projected into the full frame
+kp2d            (V, 25, 2) float32     BODY_25 keypoints in the full frame
+kp_visible      (V, 25) bool           keypoint inside the frame
+j3d_cam         (V, 22, 3) float32     22 body joints in each camera frame, metres
+index           () int64               sample index in the dataset
+==============  =====================  ===========================================================
+
+Training augmentation (``augment=True``, the default for the train split) permutes the views
+(a swap for two views); every per-view field moves together, so the sample stays consistent.
+Shards are checked against the manifest's SHA-256 when the dataset is opened.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import torch
+from torch.utils.data import Dataset
+
+from .manifest import check_complete, verify_shard
+from .shards import ShardImages, read_shard
+
+__all__ = ["StillFrameDataset", "IMAGENET_MEAN", "IMAGENET_STD", "PER_VIEW_KEYS", "SAMPLE_KEYS", "EXTRA_KEYS",
+           "normalize_images", "denormalize_images", "decode_image"]
+
+IMAGENET_MEAN = (0.485, 0.456, 0.406)
+IMAGENET_STD = (0.229, 0.224, 0.225)
+
+#: Per-view entries of a sample (permuted together by the view-swap augmentation).
+PER_VIEW_KEYS: tuple[str, ...] = ("images", "P", "K", "bbox", "R_cw", "t_cw", "phi", "tau",
+                                  "j2d", "kp2d", "kp_visible", "j3d_cam")
+#: All keys of a sample dict.
+SAMPLE_KEYS: tuple[str, ...] = PER_VIEW_KEYS + ("theta", "beta", "gender", "index")
+
+_FLOAT_KEYS = ("P", "K", "bbox", "R_cw", "t_cw", "phi", "tau", "j2d", "kp2d", "j3d_cam", "theta", "beta")
+#: Stored with every sample besides the item's keys (world pose, cameras, tight box, scene draws),
+#: for analysis and figures: see :attr:`StillFrameDataset.arrays`.
+EXTRA_KEYS: tuple[str, ...] = ("R_wb", "t_wb", "heading", "cam_centre", "cam_distance", "cam_pitch",
+                               "cam_azimuth", "bbox_tight", "attempt", "env_texture", "env_light_dir",
+                               "env_light_intensity", "env_num_distractors", "skin_color")
+_LOADED = _FLOAT_KEYS + ("kp_visible", "gender", "index", "image_offsets") + EXTRA_KEYS
+
+
+def decode_image(data: bytes) -> np.ndarray:
+    """Encoded JPEG/PNG bytes -> ``(S, S, 3)`` uint8 RGB."""
+    import cv2
+
+    img = cv2.imdecode(np.frombuffer(data, dtype=np.uint8), cv2.IMREAD_COLOR)
+    if img is None:
+        raise ValueError("could not decode an image of the shard (corrupted data)")
+    return np.ascontiguousarray(img[..., ::-1])
+
+
+def normalize_images(rgb: np.ndarray) -> torch.Tensor:
+    """``(..., S, S, 3)`` uint8 RGB -> ``(..., 3, S, S)`` float32, /255 and ImageNet-normalised."""
+    x = torch.from_numpy(np.ascontiguousarray(rgb)).float().div_(255.0)
+    x = x.movedim(-1, -3)
+    mean = torch.tensor(IMAGENET_MEAN).view(3, 1, 1)
+    std = torch.tensor(IMAGENET_STD).view(3, 1, 1)
+    return (x - mean) / std
+
+
+def denormalize_images(x: torch.Tensor) -> np.ndarray:
+    """Inverse of :func:`normalize_images`: ``(..., 3, S, S)`` -> ``(..., S, S, 3)`` uint8 (for figures)."""
+    mean = torch.tensor(IMAGENET_MEAN).view(3, 1, 1)
+    std = torch.tensor(IMAGENET_STD).view(3, 1, 1)
+    rgb = (x.detach().cpu().float() * std + mean).clamp(0, 1).mul(255).round().to(torch.uint8)
+    return rgb.movedim(-3, -1).numpy()
+
+
+class StillFrameDataset(Dataset):
+    """Multi-view still frames of a generated dataset (see the module docstring for the items).
+
+    Args:
+        root: dataset folder (with ``manifest.yaml`` and ``shard_*.npz``).
+        split: ``"train"``, ``"test"`` or ``"all"``.
+        augment: random view permutation; default True for the train split, else False.
+        verify: check every shard's size and SHA-256 against the manifest when opening.
+
+    Raises:
+        DatasetError: no dataset, or an unfinished one (with the command that completes it).
+        ShardIntegrityError: a shard is missing, truncated or altered (names the file and fix).
+    """
+
+    def __init__(self, root: Path | str, split: str = "train", augment: bool | None = None, *,
+                 verify: bool = True) -> None:
+        if split not in ("train", "test", "all"):
+            raise ValueError(f"split must be 'train', 'test' or 'all', got {split!r}")
+        self.root = Path(root)
+        self.split = split
+        self.augment = (split == "train") if augment is None else bool(augment)
+        self.manifest = check_complete(self.root)
+        records = [r for r in self.manifest["shards"] if split == "all" or r["split"] == split]
+        self.num_views = int(self.manifest["num_views"])
+        self.crop_size = int(self.manifest["crop_size"])
+        parts: dict[str, list[np.ndarray]] = {k: [] for k in _LOADED}
+        self._images: list[ShardImages] = []
+        loc = []
+        for s, rec in enumerate(records):
+            path = verify_shard(self.root, rec, self.manifest) if verify else self.root / rec["file"]
+            arrays = read_shard(path, list(_LOADED))
+            for k in _LOADED:
+                if k != "image_offsets":
+                    parts[k].append(arrays[k])
+            self._images.append(ShardImages(path, arrays["image_offsets"]))
+            n = len(arrays["index"])
+            loc.append(np.stack([np.full(n, s), np.arange(n)], 1))
+        if not loc:
+            raise ValueError(f"{self.root}: the {split!r} split is empty")
+        self._loc = np.concatenate(loc).astype(np.int64)
+        self._arrays = {}
+        for k in _LOADED:
+            if k == "image_offsets":
+                continue
+            a = np.concatenate(parts[k])
+            self._arrays[k] = a.astype(np.float32) if k in _FLOAT_KEYS else a
+
+    def __len__(self) -> int:
+        return len(self._loc)
+
+    @property
+    def arrays(self) -> dict[str, np.ndarray]:
+        """The split's arrays, one row per sample (no images): the item keys (float32) and
+        :data:`EXTRA_KEYS` as stored (float64): world root pose ``R_wb (N, 3, 3)``, ``t_wb (N, 3)``
+        and ``heading``, camera centres ``cam_centre (N, V, 3)``, distances and pitches, the
+        tight boxes and the scene draws."""
+        return self._arrays
+
+    def rgb(self, i: int) -> np.ndarray:
+        """The crops of sample ``i`` as stored: ``(V, S, S, 3)`` uint8 RGB."""
+        s, j = self._loc[i]
+        V = self.num_views
+        return np.stack([decode_image(self._images[s].get(j * V + c)) for c in range(V)])
+
+    def __getitem__(self, i: int) -> dict[str, torch.Tensor]:
+        if not -len(self) <= i < len(self):
+            raise IndexError(f"index {i} out of range for {len(self)} samples")
+        i = i % len(self)
+        a = self._arrays
+        item = {"images": normalize_images(self.rgb(i))}
+        for k in ("P", "K", "bbox", "R_cw", "t_cw", "phi", "tau", "j2d", "kp2d", "j3d_cam", "theta", "beta"):
+            item[k] = torch.from_numpy(a[k][i].copy())
+        item["kp_visible"] = torch.from_numpy(a["kp_visible"][i].copy())
+        item["gender"] = torch.tensor(int(a["gender"][i]), dtype=torch.int64)
+        item["index"] = torch.tensor(int(a["index"][i]), dtype=torch.int64)
+        if self.augment and self.num_views > 1:
+            perm = torch.randperm(self.num_views)
+            for k in PER_VIEW_KEYS:
+                item[k] = item[k][perm]
+        return item
+
+    def __repr__(self) -> str:
+        return (f"StillFrameDataset({str(self.root)!r}, split={self.split!r}, n={len(self)}, "
+                f"views={self.num_views}, S={self.crop_size}, augment={self.augment})")

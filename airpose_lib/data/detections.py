@@ -1,0 +1,276 @@
+"""Simulated 2D keypoint detectors: an OpenPose-like BODY_25 and an AlphaPose-like COCO-18 source.
+
+The paper fine-tunes on OpenPose keypoints, drops joints where OpenPose and AlphaPose disagree by
+more than 100 px, and fits AirPose+ to both. On generated sequences the kit needs two
+*independent* keypoint sources that fail like real detectors. Each :class:`DetectorModel` turns
+the projected ground-truth keypoints into detections by the documented model below; every
+random draw comes from one ``numpy.random.Generator`` seeded by the caller (same seed, same
+detections), in a fixed order.
+
+Detector model (per frame f, view v, keypoint j; ``s`` = apparent person size in pixels = the
+larger side of the tight box of the projected joints, ``k_j`` = per-keypoint difficulty
+:data:`JOINT_DIFFICULTY`):
+
+1. **Localisation noise**: Gaussian per coordinate with std
+   ``sigma_j = k_j (sigma_px + sigma_rel * s)`` pixels, temporally correlated as AR(1) over frames
+   (``temporal_corr``; the marginal std stays ``sigma_j``). Relative to the person's size the
+   error ``sigma_j / s = k_j (sigma_rel + sigma_px / s)`` grows like ``1 / apparent size``, i.e.
+   with distance (and so does its metric size at the person, ``sigma_j * depth / f``): a detector
+   sees a far person with fewer pixels.
+2. **Outliers**: with probability ``outlier_rate * k_j`` a keypoint lands anywhere within
+   ``+- 0.3 s`` of its true position (a limb confused with the background or another limb).
+3. **Left/right swaps**: per frame and view, with probability ``swap_rate`` every left/right pair
+   is exchanged (the whole person read mirrored, typical for back views), else with probability
+   ``limb_swap_rate`` only the arms or only the legs are exchanged. Swapped keypoints keep the
+   confidence of their own location: detectors are confidently wrong on swaps.
+4. **Misses**: keypoints outside the image or behind the camera are missed; any other keypoint is
+   missed with probability ``min(0.5, miss_rate * k_j * miss_size_ref / s)`` (more for small
+   persons); with probability ``frame_miss_rate`` the person is not found at all in a frame.
+5. **Confidence**: ``conf = conf_max * exp(-0.5 (e / (conf_err_frac * s + 1))^2) + N(0, conf_noise)``
+   clipped to [0.05, 1] from the realised error ``e`` (px) of a detected keypoint (for swapped ones
+   the error of the unswapped location), so confidence falls as the error grows.
+
+Conventions: keypoints are ``(F, V, J, 3)`` float64 ``[x, y, confidence]`` in pixels of the image
+the detector saw; a missed keypoint is ``(0, 0, 0)`` exactly as OpenPose writes it (never NaN).
+Inputs may contain NaN (e.g. a point behind the camera): such keypoints are treated as missed.
+"""
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from airpose_lib.body.joint_sets import BODY_25_NAMES, COCO18_NAMES
+
+__all__ = [
+    "KEYPOINT_SETS",
+    "JOINT_DIFFICULTY",
+    "DetectorModel",
+    "Detections",
+    "OPENPOSE",
+    "ALPHAPOSE",
+    "DEFAULT_DETECTORS",
+    "left_right_permutation",
+    "detect_keypoints",
+    "simulate_detections",
+]
+
+KEYPOINT_SETS: dict[str, tuple[str, ...]] = {"body25": BODY_25_NAMES, "coco18": COCO18_NAMES}
+"""Keypoint names of each layout (OpenPose BODY_25; OpenPose-style COCO-18 as AlphaPose writes)."""
+
+JOINT_DIFFICULTY: dict[str, float] = {
+    "Nose": 0.8, "REye": 0.7, "LEye": 0.7, "REar": 0.9, "LEar": 0.9, "Neck": 1.0,
+    "RShoulder": 1.0, "LShoulder": 1.0, "RElbow": 1.2, "LElbow": 1.2, "RWrist": 1.5,
+    "LWrist": 1.5, "MidHip": 1.3, "RHip": 1.5, "LHip": 1.5, "RKnee": 1.2, "LKnee": 1.2,
+    "RAnkle": 1.3, "LAnkle": 1.3, "LBigToe": 1.5, "LSmallToe": 1.6, "LHeel": 1.5,
+    "RBigToe": 1.5, "RSmallToe": 1.6, "RHeel": 1.5,
+}
+"""Relative difficulty ``k_j`` of each keypoint: scales its noise, outlier and miss rates (hips
+are ill-defined under clothes, wrists and feet are small and fast, the face is easy)."""
+
+_ARMS = ("Shoulder", "Elbow", "Wrist")
+_LEGS = ("Hip", "Knee", "Ankle", "BigToe", "SmallToe", "Heel")
+
+
+def left_right_permutation(names: Sequence[str], parts: Sequence[str] | None = None) -> np.ndarray:
+    """(J,) index permutation exchanging left/right keypoints (``L...`` <-> ``R...``).
+
+    Args:
+        names: keypoint names (OpenPose style).
+        parts: only exchange these parts (e.g. ``("Shoulder", "Elbow", "Wrist")``); None = all.
+    """
+    perm = np.arange(len(names))
+    index = {n: i for i, n in enumerate(names)}
+    for i, n in enumerate(names):
+        if len(n) > 1 and n[0] in "LR" and n[1].isupper():
+            other = ("R" if n[0] == "L" else "L") + n[1:]
+            if other in index and (parts is None or n[1:] in parts):
+                perm[i] = index[other]
+    return perm
+
+
+@dataclass(frozen=True)
+class DetectorModel:
+    """Parameters of one simulated detector (see the module doc for the model).
+
+    Attributes:
+        name: ``openpose`` / ``alphapose`` (the official files' names).
+        keypoints: ``body25`` or ``coco18``.
+        sigma_px: constant part of the localisation std, pixels.
+        sigma_rel: part of the std proportional to the apparent person size.
+        temporal_corr: AR(1) correlation of the noise between consecutive frames, in [0, 1).
+        outlier_rate: per-keypoint outlier probability (times ``k_j``).
+        swap_rate: per frame/view probability of a whole-body left/right swap.
+        limb_swap_rate: per frame/view probability of an arms-only or legs-only swap.
+        miss_rate: per-keypoint miss probability at ``miss_size_ref`` (times ``k_j``).
+        miss_size_ref: person size (px) at which ``miss_rate`` applies.
+        frame_miss_rate: probability that the person is not detected in a frame.
+        conf_max, conf_err_frac, conf_noise: confidence model.
+    """
+
+    name: str
+    keypoints: str = "body25"
+    sigma_px: float = 1.5
+    sigma_rel: float = 0.012
+    temporal_corr: float = 0.5
+    outlier_rate: float = 0.01
+    swap_rate: float = 0.015
+    limb_swap_rate: float = 0.02
+    miss_rate: float = 0.03
+    miss_size_ref: float = 200.0
+    frame_miss_rate: float = 0.01
+    conf_max: float = 0.92
+    conf_err_frac: float = 0.04
+    conf_noise: float = 0.05
+
+    def __post_init__(self) -> None:
+        if self.keypoints not in KEYPOINT_SETS:
+            raise ValueError(f"keypoints must be one of {tuple(KEYPOINT_SETS)}, got {self.keypoints!r}")
+        if not 0 <= self.temporal_corr < 1:
+            raise ValueError("temporal_corr must be in [0, 1)")
+        for k in ("outlier_rate", "swap_rate", "limb_swap_rate", "miss_rate", "frame_miss_rate"):
+            if not 0 <= getattr(self, k) <= 1:
+                raise ValueError(f"{k} must be a probability, got {getattr(self, k)}")
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        return KEYPOINT_SETS[self.keypoints]
+
+    @property
+    def difficulty(self) -> np.ndarray:
+        """(J,) ``k_j`` of this detector's keypoints."""
+        return np.array([JOINT_DIFFICULTY[n] for n in self.names])
+
+    def sigma(self, size_px: np.ndarray) -> np.ndarray:
+        """Noise std (..., J) pixels for apparent person sizes ``size_px`` (...,)."""
+        s = np.asarray(size_px, dtype=np.float64)[..., None]
+        return self.difficulty * (self.sigma_px + self.sigma_rel * s)
+
+    def miss_probability(self, size_px: np.ndarray) -> np.ndarray:
+        """Per-keypoint miss probability (..., J) of an in-frame keypoint."""
+        s = np.maximum(np.asarray(size_px, dtype=np.float64)[..., None], 1.0)
+        return np.minimum(0.5, self.miss_rate * self.difficulty * self.miss_size_ref / s)
+
+
+OPENPOSE = DetectorModel("openpose", "body25")
+"""OpenPose-like BODY_25: noisier, more misses and swaps, strongly correlated in time."""
+ALPHAPOSE = DetectorModel("alphapose", "coco18", sigma_px=1.0, sigma_rel=0.010, temporal_corr=0.3,
+                          outlier_rate=0.006, swap_rate=0.01, limb_swap_rate=0.015,
+                          miss_rate=0.015, frame_miss_rate=0.005, conf_max=0.88)
+"""AlphaPose-like COCO-18: a little more precise and fewer misses, its own error stream."""
+DEFAULT_DETECTORS: dict[str, DetectorModel] = {"openpose": OPENPOSE, "alphapose": ALPHAPOSE}
+
+
+@dataclass
+class Detections:
+    """Output of one simulated detector.
+
+    Attributes:
+        keypoints: (F, V, J, 3) ``[x, y, conf]``; missed keypoints are ``(0, 0, 0)``.
+        names: the J keypoint names.
+        detector: the model that made them.
+        sigma_px: (F, V, J) localisation std used.
+        missed: (F, V, J) bool.
+        outlier: (F, V, J) bool.
+        swap: (F, V) int8: 0 none, 1 whole body, 2 arms, 3 legs.
+        frame_missed: (F, V) bool: nobody detected.
+    """
+
+    keypoints: np.ndarray
+    names: tuple[str, ...]
+    detector: DetectorModel
+    sigma_px: np.ndarray
+    missed: np.ndarray
+    outlier: np.ndarray
+    swap: np.ndarray
+    frame_missed: np.ndarray
+
+
+def detect_keypoints(kp2d: np.ndarray, size_px: np.ndarray, image_size: np.ndarray,
+                     model: DetectorModel, rng: np.random.Generator,
+                     depth: np.ndarray | None = None) -> Detections:
+    """Simulate a detector on projected ground-truth keypoints.
+
+    Args:
+        kp2d: (F, V, J, 2) true keypoint pixels (J = the model's layout); NaN allowed.
+        size_px: (F, V) apparent person size, pixels.
+        image_size: (V, 2) or (2,) image (W, H) per view.
+        model: the detector.
+        rng: the random source.
+        depth: (F, V, J) keypoint depth; ``<= 0`` (behind the camera) is missed. Optional.
+    Returns:
+        :class:`Detections`.
+    """
+    kp2d = np.asarray(kp2d, dtype=np.float64)
+    F, V, J, _ = kp2d.shape
+    if J != len(model.names):
+        raise ValueError(f"{model.name}: {J} keypoints given, its {model.keypoints} layout has {len(model.names)}")
+    size = np.nan_to_num(np.asarray(size_px, dtype=np.float64).reshape(F, V), nan=1.0)
+    size = np.maximum(size, 1.0)
+    wh = np.broadcast_to(np.asarray(image_size, dtype=np.float64).reshape(-1, 2), (V, 2))
+    sigma = model.sigma(size)  # (F, V, J)
+    k = model.difficulty
+
+    # 1. AR(1) noise over frames, marginal N(0, 1) per coordinate before scaling.
+    rho = model.temporal_corr
+    white = rng.standard_normal((F, V, J, 2))
+    noise = np.empty_like(white)
+    noise[0] = white[0]
+    c = np.sqrt(1.0 - rho * rho)
+    for f in range(1, F):
+        noise[f] = rho * noise[f - 1] + c * white[f]
+    det = kp2d + noise * sigma[..., None]
+    # 2. outliers
+    outlier = rng.random((F, V, J)) < np.minimum(1.0, model.outlier_rate * k)
+    jump = rng.uniform(-0.3, 0.3, (F, V, J, 2)) * size[..., None, None]
+    det = np.where(outlier[..., None], kp2d + jump, det)
+    err = np.linalg.norm(det - kp2d, axis=-1)  # error of each location before any swap
+    # 5. confidence from the error of the location itself
+    conf = model.conf_max * np.exp(-0.5 * (err / (model.conf_err_frac * size[..., None] + 1.0)) ** 2)
+    conf = np.clip(conf + model.conf_noise * rng.standard_normal((F, V, J)), 0.05, 1.0)
+    # 3. swaps: the labels of left/right pairs are exchanged (locations keep their confidence)
+    u = rng.random((F, V))
+    limb = rng.random((F, V)) < 0.5
+    swap = np.zeros((F, V), dtype=np.int8)
+    swap[u < model.swap_rate] = 1
+    part = (u >= model.swap_rate) & (u < model.swap_rate + model.limb_swap_rate)
+    swap[part & limb] = 2
+    swap[part & ~limb] = 3
+    perms = {1: left_right_permutation(model.names), 2: left_right_permutation(model.names, _ARMS),
+             3: left_right_permutation(model.names, _LEGS)}
+    for code, perm in perms.items():
+        m = swap == code
+        det[m] = det[m][:, perm]
+        conf[m] = conf[m][:, perm]
+    # 4. misses
+    finite = np.isfinite(kp2d).all(-1)
+    x, y = kp2d[..., 0], kp2d[..., 1]
+    inside = finite & (x >= 0) & (y >= 0) & (x <= wh[None, :, None, 0] - 1) & (y <= wh[None, :, None, 1] - 1)
+    if depth is not None:
+        inside &= np.nan_to_num(np.asarray(depth, dtype=np.float64), nan=-1.0) > 0
+    for code, perm in perms.items():  # a swapped label is missed where its source is
+        m = swap == code
+        inside[m] = inside[m][:, perm]
+    missed = ~inside | (rng.random((F, V, J)) < model.miss_probability(size))
+    frame_missed = rng.random((F, V)) < model.frame_miss_rate
+    missed |= frame_missed[..., None]
+    missed |= ~np.isfinite(det).all(-1)
+    out = np.concatenate([det, conf[..., None]], -1)
+    out[missed] = 0.0
+    return Detections(out, model.names, model, sigma, missed, outlier & ~missed, swap, frame_missed)
+
+
+def simulate_detections(gt: Mapping[str, np.ndarray], model: DetectorModel,
+                        seed: int | Sequence[int] = 0) -> Detections:
+    """Run a simulated detector on a sequence's ground truth.
+
+    Args:
+        gt: ground-truth arrays of :func:`airpose_lib.data.sequences.simulate_sequence`
+            (``kp2d_<layout>``, ``kp_depth_<layout>``, ``person_size_px``, ``image_size``).
+        model: the detector.
+        seed: seed (or seed sequence) of its random stream.
+    """
+    rng = np.random.default_rng(seed)
+    return detect_keypoints(gt[f"kp2d_{model.keypoints}"], gt["person_size_px"], gt["image_size"],
+                            model, rng, depth=gt.get(f"kp_depth_{model.keypoints}"))

@@ -1,0 +1,133 @@
+"""The manifest of a generated still-frame dataset: what made it and a SHA-256 per shard.
+
+``<root>/manifest.yaml`` is written by the generator after every finished shard (atomically), so
+it always lists exactly the shards that are complete; generation resumes from it and readers
+verify shards against it. When the last shard is done its ``status`` becomes ``complete`` and a
+copy goes to the checkout's ``data_manifests/generated_<profile>.yaml`` (the record that says
+which data a profile's figures were made from).
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import yaml
+
+from airpose_lib.body.cache import atomic_path
+
+from .shards import sha256_file
+
+__all__ = [
+    "MANIFEST_NAME",
+    "DATASET_KIND",
+    "DatasetError",
+    "ShardIntegrityError",
+    "load_manifest",
+    "write_manifest",
+    "repo_manifest_dir",
+    "record_manifest",
+    "regenerate_command",
+    "verify_shard",
+    "check_complete",
+]
+
+MANIFEST_NAME = "manifest.yaml"
+DATASET_KIND = "airpose-still-frames"
+
+
+class DatasetError(RuntimeError):
+    """A dataset folder is missing, incomplete or was made with other settings."""
+
+
+class ShardIntegrityError(DatasetError):
+    """A shard file is missing, truncated or altered (its SHA-256 does not match the manifest)."""
+
+
+def load_manifest(root: Path) -> dict | None:
+    """The manifest of the dataset in ``root``, or None if there is none."""
+    path = Path(root) / MANIFEST_NAME
+    if not path.is_file():
+        return None
+    data = yaml.safe_load(path.read_text())
+    if not isinstance(data, dict) or data.get("kind") != DATASET_KIND:
+        raise DatasetError(f"{path} is not a still-frame dataset manifest (kind != {DATASET_KIND!r})")
+    return data
+
+
+def write_manifest(root: Path, manifest: dict) -> Path:
+    """Write ``<root>/manifest.yaml`` atomically; returns its path."""
+    path = Path(root) / MANIFEST_NAME
+    with atomic_path(path) as tmp:
+        tmp.write_text(_dump(manifest))
+    return path
+
+
+def _dump(manifest: dict) -> str:
+    header = ("# Written by `airpose data generate` (airpose_lib.data.generate); do not edit.\n"
+              "# One entry per finished shard with its SHA-256; readers refuse shards that differ.\n")
+    return header + yaml.safe_dump(manifest, sort_keys=False, default_flow_style=None, width=100)
+
+
+def repo_manifest_dir() -> Path | None:
+    """The checkout's ``data_manifests/`` folder, or None when the kit is installed elsewhere."""
+    folder = Path(__file__).resolve().parents[2] / "data_manifests"
+    return folder if folder.is_dir() else None
+
+
+def record_manifest(manifest: dict, folder: Path | None = None) -> Path | None:
+    """Copy a complete manifest to ``<folder>/generated_<profile>.yaml`` (default: the checkout's
+    ``data_manifests/``). Returns the path, or None if there is no such folder or no profile."""
+    folder = Path(folder) if folder is not None else repo_manifest_dir()
+    profile = manifest.get("profile")
+    if folder is None or not profile:
+        return None
+    path = folder / f"generated_{profile}.yaml"
+    with atomic_path(path) as tmp:
+        tmp.write_text(_dump(manifest))
+    return path
+
+
+def regenerate_command(manifest: dict | None, root: Path) -> str:
+    """The command that (re)generates or resumes this dataset."""
+    profile = (manifest or {}).get("profile")
+    prof = f" --profile {profile}" if profile else " --profile PROFILE"
+    return f"airpose data generate{prof} --out {root}"
+
+
+def verify_shard(root: Path, record: dict, manifest: dict | None = None) -> Path:
+    """Check one shard against its manifest record (size, then SHA-256); returns its path.
+
+    Raises:
+        ShardIntegrityError: naming the file, what is wrong and the command that repairs it.
+    """
+    path = Path(root) / record["file"]
+    fix = (f"regenerate it with `{regenerate_command(manifest, root)}` (finished shards are kept, "
+           f"missing or damaged ones are rebuilt identically)")
+    if not path.is_file():
+        raise ShardIntegrityError(f"shard {path} is missing; {fix}")
+    size = path.stat().st_size
+    if size != record["bytes"]:
+        raise ShardIntegrityError(
+            f"shard {path} is damaged: {size} bytes instead of {record['bytes']} (truncated or "
+            f"altered); {fix}")
+    digest = sha256_file(path)
+    if digest != record["sha256"]:
+        raise ShardIntegrityError(
+            f"shard {path} is damaged: SHA-256 {digest[:16]}... does not match the manifest's "
+            f"{record['sha256'][:16]}... (altered or corrupted); {fix}")
+    return path
+
+
+def check_complete(root: Path) -> dict:
+    """The manifest of ``root``, raising :class:`DatasetError` if absent or unfinished."""
+    root = Path(root)
+    manifest = load_manifest(root)
+    if manifest is None:
+        raise DatasetError(
+            f"no dataset in {root} (no {MANIFEST_NAME}); generate it with "
+            f"`{regenerate_command(None, root)}`")
+    if manifest.get("status") != "complete":
+        done = len(manifest.get("shards") or [])
+        raise DatasetError(
+            f"dataset in {root} is incomplete ({done} of {manifest.get('num_shards')} shards); "
+            f"resume with `{regenerate_command(manifest, root)}`")
+    return manifest

@@ -1,0 +1,516 @@
+r"""Supervised training losses of the paper (Sec. III): ``L_baseline`` (eq. 3) and ``L_AirPose`` (eq. 4).
+
+Every term is a mean squared error, ``||a - b||^2`` read as the mean over the batch and over the
+elements of one view (joints x coordinates, vertices x coordinates, matrix entries ...), like the
+official code's ``MSELoss``; the paper's weights (``w_j2d = 0.01`` on pixels^2 next to
+``w_theta = 100`` on rotation-matrix entries) only make sense with that normalisation.
+
+Per-view terms. AirPose sums the per-view terms over the cameras (``sum_c``, paper eq. 4,
+``view_reduction="sum"``). The Baseline (and Fullcam) network is monocular and trained "for one
+camera": the views of a sample are independent examples and their terms are averaged
+(``view_reduction="mean"``), so the loss does not depend on how many views a sample holds.
+
+The terms (pred = neutral body model, ground truth = the sample's gendered model, both evaluated
+through :class:`PaperBody`, ``V = phi V0(theta, beta) + tau`` about the model origin):
+
+``j2d``    the 22 body joints ``phi J0 + tau`` projected with the full-frame ``K`` versus the
+           sample's ``j2d`` (full-image pixels).
+``j3d``    the 22 body joints of ``J0(theta, beta)``: identity root rotation and zero translation
+           ("default values (zero-filled vector) are provided for tau and phi"), i.e. the model
+           frame, without pelvis alignment (``j3d_align_pelvis`` adds it).
+``phi``    root rotation; ``theta`` the 21 body rotations: on rotation matrices (SPIN and the
+           official code: the Gram-Schmidt-decoded 6D output against the ground-truth matrix) or,
+           with ``rotation_space="6d"``, on the raw 6D output against the ground truth's first two
+           columns (which also penalises unnormalised 6D outputs).
+``tau``    root translation in the camera frame (metres).
+``beta``   the shape prior ``||beta||^2`` (paper and code: no ground-truth beta term;
+           ``w_beta_gt`` adds ``||beta - beta_gt||^2`` as an option).
+``V``      vertices. Baseline: ``V(theta, beta)`` in the model frame. AirPose (eq. 4):
+           ``V(phi_c, theta_c, beta_c)`` against ``V(phi_c_gt, theta_gt, beta_gt)``, root rotation
+           included, no translation (``vertices_with_phi``). ``vertex_subsample`` evaluates a
+           fixed random subset of the vertices (the full mesh is the expensive part of the loss).
+
+Cross-view consistency (AirPose, ``cross_view=True``): ``||1theta - 2theta||^2`` is added to the
+theta term, ``||1beta - 2beta||^2`` to the beta term and a vertex term to ``V``. The paper writes
+the vertex term as ``||V(1phi, 1theta, 1beta) - V(2phi, 2theta, 2beta)||^2``, each view with its
+**own** root rotation. Read literally that term is not zero for a perfect prediction: the two
+cameras see the person under different rotations (``1phi != 2phi`` whenever the cameras are not
+aligned), so it pulls the root rotations of the views together, against ``L_phi``. Our default
+(``cross_vertex_frame="model"``) compares the two views' bodies without their root rotation,
+``||V(1theta, 1beta) - V(2theta, 2beta)||^2``, which is zero exactly when the views agree on the
+body (this is also what the official code computes: the SMPL-X output before its rigid
+transform). ``cross_vertex_frame="own_phi"`` is the literal reading. With more than two views the
+cross terms average over all pairs; with one view they are zero.
+
+Official-code variations (``official_variations``): the total multiplied by 60, knee/elbow
+joints x3 and ankle/wrist joints x9 in the 3D joint loss (``limb_weight_j3d = 3``; the same
+scheme is available for theta, ``limb_weight_theta``, whose value the facts do not give), no
+ground-truth beta term, and two details of the official two-view code: a cross-view term in the
+3D joint loss (``j3d_cross_view``) and ``L_V`` on the bodies without root rotation
+(``vertices_with_phi=False``).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Literal
+
+import torch
+from smplx.lbs import batch_rigid_transform
+from torch import Tensor, nn
+
+from airpose_lib.body.joint_sets import NUM_BODY_JOINTS, NUM_POSE_JOINTS
+from airpose_lib.geometry import (
+    axis_angle_to_matrix,
+    matrix_to_rot6d,
+    project_points,
+    transform_points,
+)
+
+__all__ = [
+    "GENDER_CODES",
+    "LIMB_JOINTS_X1",
+    "LIMB_JOINTS_X2",
+    "LossConfig",
+    "BaselineLossConfig",
+    "MultiviewLossConfig",
+    "FullcamLossConfig",
+    "AirPoseLossConfig",
+    "VARIANT_LOSS_CONFIGS",
+    "loss_config",
+    "official_variations",
+    "PaperBody",
+    "SupervisedLoss",
+    "limb_weights",
+    "view_mse",
+    "cross_view_mse",
+]
+
+#: ``sample['gender']`` codes.
+GENDER_CODES: dict[int, str] = {0: "neutral", 1: "male", 2: "female"}
+#: Knees and elbows (indices into the 22 body joints): weighted ``limb_weight``.
+LIMB_JOINTS_X1: tuple[int, ...] = (4, 5, 18, 19)
+#: Ankles and wrists: weighted ``limb_weight ** 2``.
+LIMB_JOINTS_X2: tuple[int, ...] = (7, 8, 20, 21)
+
+
+# -- configuration --------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class LossConfig:
+    """Weights and options of the supervised loss (see the module docstring for each term).
+
+    Attributes:
+        w_j2d, w_j3d, w_phi, w_tau, w_theta, w_beta, w_V: the paper's term weights.
+        w_beta_gt: weight of an optional ``||beta - beta_gt||^2`` (in neither paper nor code).
+        cross_view: add the cross-view consistency terms to theta, beta and V.
+        view_reduction: ``"sum"`` over views (AirPose, ``sum_c``) or ``"mean"`` (monocular nets).
+        vertices_with_phi: rotate vertices by the root rotation in ``L_V`` (AirPose eq. 4).
+        cross_vertex_frame: ``"model"`` (default, bodies without root rotation) or ``"own_phi"``
+            (the paper's literal cross term, each view with its own root rotation).
+        rotation_space: ``"matrix"`` or ``"6d"`` for ``L_phi`` and ``L_theta``.
+        limb_weight_j3d: knees/elbows x w, ankles/wrists x w^2 in ``L_j3d`` (official: 3).
+        limb_weight_theta: the same for the matching joints of ``L_theta``.
+        j3d_cross_view: add ``||J(1theta, 1beta) - J(2theta, 2beta)||^2`` to ``L_j3d`` (code).
+        j3d_align_pelvis: subtract the pelvis from both sides of ``L_j3d``.
+        vertex_subsample: evaluate ``L_V`` on this many fixed random vertices (None: all).
+        vertex_subsample_seed: seed of that subset.
+        total_scale: multiplies the total (official code: 60).
+        min_depth: depth floor (m) when projecting for ``L_j2d``: a prediction behind the camera
+            gives large but finite pixels.
+    """
+
+    w_j2d: float = 0.01
+    w_j3d: float = 1.0
+    w_phi: float = 1.0
+    w_tau: float = 0.0
+    w_theta: float = 100.0
+    w_beta: float = 1.0
+    w_V: float = 100.0
+    w_beta_gt: float = 0.0
+    cross_view: bool = False
+    view_reduction: Literal["sum", "mean"] = "mean"
+    vertices_with_phi: bool = False
+    cross_vertex_frame: Literal["model", "own_phi"] = "model"
+    rotation_space: Literal["matrix", "6d"] = "matrix"
+    limb_weight_j3d: float = 1.0
+    limb_weight_theta: float = 1.0
+    j3d_cross_view: bool = False
+    j3d_align_pelvis: bool = False
+    vertex_subsample: int | None = None
+    vertex_subsample_seed: int = 0
+    total_scale: float = 1.0
+    min_depth: float = 0.1
+
+    def __post_init__(self) -> None:
+        if self.view_reduction not in ("sum", "mean"):
+            raise ValueError(f"view_reduction must be 'sum' or 'mean', got {self.view_reduction!r}")
+        if self.cross_vertex_frame not in ("model", "own_phi"):
+            raise ValueError(f"cross_vertex_frame must be 'model' or 'own_phi', got {self.cross_vertex_frame!r}")
+        if self.rotation_space not in ("matrix", "6d"):
+            raise ValueError(f"rotation_space must be 'matrix' or '6d', got {self.rotation_space!r}")
+        if self.vertex_subsample is not None and self.vertex_subsample <= 0:
+            raise ValueError(f"vertex_subsample must be positive or None, got {self.vertex_subsample}")
+
+    @property
+    def weights(self) -> dict[str, float]:
+        """Term name -> weight (the keys of :meth:`SupervisedLoss.forward`'s terms)."""
+        return {"j2d": self.w_j2d, "j3d": self.w_j3d, "phi": self.w_phi, "tau": self.w_tau,
+                "theta": self.w_theta, "beta": self.w_beta, "V": self.w_V, "beta_gt": self.w_beta_gt}
+
+    def to_dict(self) -> dict:
+        return dataclasses.asdict(self)
+
+
+@dataclass(frozen=True)
+class BaselineLossConfig(LossConfig):
+    """``L_baseline`` (paper eq. 3): monocular, weak-perspective camera (no tau term)."""
+
+
+@dataclass(frozen=True)
+class AirPoseLossConfig(LossConfig):
+    """``L_AirPose`` (paper eq. 4): sum over the views, tau term, cross-view terms, phi in L_V."""
+
+    w_j2d: float = 0.002
+    w_tau: float = 10.0
+    w_theta: float = 50.0
+    w_V: float = 50.0
+    cross_view: bool = True
+    view_reduction: Literal["sum", "mean"] = "sum"
+    vertices_with_phi: bool = True
+
+
+@dataclass(frozen=True)
+class MultiviewLossConfig(AirPoseLossConfig):
+    """Ablation "Baseline + Multi-view" (the paper gives no loss; our choice): ``L_AirPose`` with the
+    cross-view terms, but, like the Baseline, no tau term (the weak camera has no tau output; the
+    2D term supervises it)."""
+
+    w_tau: float = 0.0
+
+
+@dataclass(frozen=True)
+class FullcamLossConfig(AirPoseLossConfig):
+    """Ablation "Baseline + Fullcam" (the paper gives no loss; our choice): ``L_AirPose``'s weights
+    and tau term on a monocular network: no cross-view terms, views averaged."""
+
+    cross_view: bool = False
+    view_reduction: Literal["sum", "mean"] = "mean"
+
+
+#: Variant name (as ``airpose_lib.model``'s variants) -> config class.
+VARIANT_LOSS_CONFIGS: dict[str, type[LossConfig]] = {
+    "baseline": BaselineLossConfig,
+    "multiview": MultiviewLossConfig,
+    "fullcam": FullcamLossConfig,
+    "airpose": AirPoseLossConfig,
+}
+
+
+def official_variations(config: LossConfig) -> LossConfig:
+    """The official code's variations on top of ``config``: total x60, knee/elbow x3 and
+    ankle/wrist x9 in ``L_j3d``, cross-view term in ``L_j3d`` when the config has cross-view terms,
+    ``L_V`` without root rotation, no ground-truth beta term."""
+    return dataclasses.replace(config, total_scale=60.0, limb_weight_j3d=3.0, j3d_cross_view=config.cross_view,
+                               vertices_with_phi=False, w_beta_gt=0.0)
+
+
+def loss_config(variant: str, official: bool = False, **overrides) -> LossConfig:
+    """The loss config of a network variant (``baseline``, ``multiview``, ``fullcam``, ``airpose``),
+    optionally with the official code's variations, then ``overrides`` (field=value)."""
+    key = variant.lower().replace("-", "").replace("_", "").replace("+", "")
+    if key not in VARIANT_LOSS_CONFIGS:
+        raise ValueError(f"unknown variant {variant!r}; one of {tuple(VARIANT_LOSS_CONFIGS)}")
+    cfg = VARIANT_LOSS_CONFIGS[key]()
+    if official:
+        cfg = official_variations(cfg)
+    return dataclasses.replace(cfg, **overrides) if overrides else cfg
+
+
+# -- body model in the paper's convention ---------------------------------------------------------
+class PaperBody(nn.Module):
+    """SMPL-X body joints and vertices in the paper's convention, from rotation matrices.
+
+    ``V0(theta, beta)`` is the SMPL-X output with the 21 body rotations, identity global
+    orientation, zero translation and flat hands/face; then ``V = phi V0 + tau`` (rotation about
+    the model origin). Only what the body needs is kept: the 22 body joints, the first
+    21 x 9 pose correctives and the skinning weights folded onto the 22 body joints (hand, jaw and
+    eye joints carry the identity rotation, so a vertex bound to them moves exactly like one bound
+    to their nearest body ancestor). The result equals ``smplx``'s forward (tested).
+
+    Args:
+        model: a loaded ``smplx.SMPLX`` (open or licensed); its buffers are copied.
+        vertex_ids: ``(N,)`` vertex indices to evaluate (None: all vertices).
+    """
+
+    def __init__(self, model, vertex_ids: Tensor | None = None) -> None:
+        super().__init__()
+        if hasattr(model, "pose_mean") and model.pose_mean[3 * NUM_BODY_JOINTS:].abs().max() > 0:
+            # the folding of hand/face skinning weights below needs identity hand/face rotations
+            raise ValueError("PaperBody needs a flat-hand model (load_body_model's default flat_hand_mean=True)")
+        n_betas = model.num_betas
+        nv = model.v_template.shape[0]
+        reg = model.J_regressor[:NUM_BODY_JOINTS]  # (22, Nv)
+        shapedirs = model.shapedirs[..., :n_betas]  # (Nv, 3, 10)
+        # Buffers are not persistent: they are the body model's data, not trained state.
+        buf = lambda name, value: self.register_buffer(name, value, persistent=False)  # noqa: E731
+        buf("J_template", reg @ model.v_template)
+        buf("J_dirs", torch.einsum("jv,vcs->jcs", reg, shapedirs))
+        # the first 21 x 9 pose correctives belong to the body joints 1..21
+        posedirs = model.posedirs[: NUM_POSE_JOINTS * 9]
+        W = torch.zeros(nv, NUM_BODY_JOINTS, dtype=model.lbs_weights.dtype, device=model.lbs_weights.device)
+        parents = model.parents.tolist()
+        body_of = []  # nearest body-joint ancestor of every joint
+        for j in range(len(parents)):
+            a = j
+            while a >= NUM_BODY_JOINTS:
+                a = parents[a]
+            body_of.append(a)
+        W.index_add_(1, torch.tensor(body_of, device=W.device), model.lbs_weights)
+        if vertex_ids is None:  # views, no copies of the large arrays
+            ids = torch.arange(nv)
+            buf("v_template", model.v_template)
+            buf("v_dirs", shapedirs)
+            buf("posedirs", posedirs)
+        else:
+            ids = torch.as_tensor(vertex_ids).long()
+            buf("v_template", model.v_template[ids])
+            buf("v_dirs", shapedirs[ids])
+            buf("posedirs", posedirs.reshape(NUM_POSE_JOINTS * 9, nv, 3)[:, ids].reshape(NUM_POSE_JOINTS * 9, -1))
+        buf("vertex_ids", ids)
+        buf("weights", W[ids] if vertex_ids is not None else W)
+        buf("parents", model.parents[:NUM_BODY_JOINTS].clone())
+        self.num_betas = n_betas
+
+    @property
+    def num_vertices(self) -> int:
+        return self.v_template.shape[0]
+
+    def forward(self, theta: Tensor, beta: Tensor, phi: Tensor | None = None, tau: Tensor | None = None,
+                vertices: bool = True) -> tuple[Tensor, Tensor | None]:
+        """Joints and vertices of ``V = phi V0(theta, beta) + tau``.
+
+        Args:
+            theta: ``(..., 21, 3, 3)`` body rotations.
+            beta: ``(..., 10)`` (broadcast over theta's leading dims).
+            phi: ``(..., 3, 3)`` root rotation, or None (identity).
+            tau: ``(..., 3)`` translation of the model origin, or None (zero).
+            vertices: also return the (selected) vertices.
+
+        Returns:
+            ``joints (..., 22, 3)`` and ``vertices (..., N, 3)`` (None unless ``vertices``).
+        """
+        lead = torch.broadcast_shapes(theta.shape[:-3], beta.shape[:-1])
+        theta = theta.expand(*lead, NUM_POSE_JOINTS, 3, 3).reshape(-1, NUM_POSE_JOINTS, 3, 3)
+        beta = beta.expand(*lead, beta.shape[-1]).reshape(-1, beta.shape[-1])
+        n = theta.shape[0]
+        eye = torch.eye(3, dtype=theta.dtype, device=theta.device)
+        rot = torch.cat((eye.expand(n, 1, 3, 3), theta), dim=1)
+        J_rest = self.J_template + torch.einsum("jcs,bs->bjc", self.J_dirs, beta)
+        joints, A = batch_rigid_transform(rot, J_rest, self.parents, dtype=theta.dtype)
+        joints = joints.reshape(*lead, NUM_BODY_JOINTS, 3)
+        verts = None
+        if vertices:
+            v = self.v_template + torch.einsum("vcs,bs->bvc", self.v_dirs, beta)
+            v = v + ((theta - eye).reshape(n, -1) @ self.posedirs).reshape(n, -1, 3)
+            T = torch.einsum("vj,bjxy->bvxy", self.weights, A[:, :, :3, :])  # (n, N, 3, 4)
+            v = (T[..., :3] @ v.unsqueeze(-1)).squeeze(-1) + T[..., 3]
+            verts = v.reshape(*lead, -1, 3)
+        if phi is not None:
+            joints = joints @ phi.transpose(-1, -2)
+            verts = verts @ phi.transpose(-1, -2) if verts is not None else None
+        if tau is not None:
+            joints = joints + tau.unsqueeze(-2)
+            verts = verts + tau.unsqueeze(-2) if verts is not None else None
+        return joints, verts
+
+
+# -- term helpers ---------------------------------------------------------------------------------
+def limb_weights(limb_weight: float, n_joints: int = NUM_BODY_JOINTS, offset: int = 0,
+                 dtype: torch.dtype = torch.float32, device=None) -> Tensor:
+    """Per-joint weights ``(n_joints,)``: knees/elbows ``w``, ankles/wrists ``w^2``, others 1.
+
+    ``offset=1`` indexes the 21 body rotations (theta has no root entry).
+    """
+    w = torch.ones(n_joints, dtype=dtype, device=device)
+    w[[j - offset for j in LIMB_JOINTS_X1]] = limb_weight
+    w[[j - offset for j in LIMB_JOINTS_X2]] = limb_weight ** 2
+    return w
+
+
+def _reduce_views(per_view: Tensor, view_reduction: str) -> Tensor:
+    return per_view.sum() if view_reduction == "sum" else per_view.mean()
+
+
+def view_mse(pred: Tensor, target: Tensor, weight: Tensor | None = None, view_reduction: str = "sum") -> Tensor:
+    """``sum_c mean_{b, e} w_e (pred - target)^2`` (or the mean over c).
+
+    Args:
+        pred: ``(B, V, *E)``.
+        target: broadcastable to ``pred``.
+        weight: broadcastable to ``E`` (e.g. ``(22, 1)`` per joint), or None.
+        view_reduction: ``"sum"`` or ``"mean"`` over the V views.
+
+    Returns:
+        scalar.
+    """
+    se = (pred - target).square()
+    if weight is not None:
+        se = se * weight
+    per_view = se.transpose(0, 1).reshape(pred.shape[1], -1).mean(dim=1)
+    return _reduce_views(per_view, view_reduction)
+
+
+def cross_view_mse(x: Tensor, weight: Tensor | None = None) -> Tensor:
+    """Mean over the view pairs ``i < j`` of ``mean_{b, e} w_e (x_i - x_j)^2``; 0 for one view.
+
+    Args:
+        x: ``(B, V, *E)``.
+        weight: broadcastable to ``E``, or None.
+
+    Returns:
+        scalar (``||1x - 2x||^2`` for two views).
+    """
+    V = x.shape[1]
+    if V < 2:
+        return x.sum() * 0.0
+    terms = []
+    for i in range(V):
+        for j in range(i + 1, V):
+            se = (x[:, i] - x[:, j]).square()
+            terms.append((se * weight).mean() if weight is not None else se.mean())
+    return torch.stack(terms).mean()
+
+
+# -- the loss -------------------------------------------------------------------------------------
+class SupervisedLoss(nn.Module):
+    """``L_baseline`` / ``L_AirPose`` (paper eq. 3-4) on a batch of still-frame samples.
+
+    Args:
+        config: a :class:`LossConfig` (e.g. :func:`loss_config`).
+        body_models: gender name -> loaded ``smplx.SMPLX`` (``neutral`` is needed for the
+            predictions; ``male``/``female`` for ground truth of those genders). Default: the
+            body models of ``source`` loaded on demand in float32.
+        source: ``"open"`` or ``"smplx"`` (see ``airpose_lib.body.load_body_model``).
+    """
+
+    def __init__(self, config: LossConfig | None = None, body_models: Mapping | None = None,
+                 source: str = "open") -> None:
+        super().__init__()
+        self.config = config if config is not None else BaselineLossConfig()
+        if body_models is None:
+            from airpose_lib.body import load_body_model
+
+            body_models = {g: load_body_model(source, g) for g in GENDER_CODES.values()}
+        ids = None
+        n_vertices = body_models["neutral"].v_template.shape[0]
+        if self.config.vertex_subsample is not None and self.config.vertex_subsample < n_vertices:
+            g = torch.Generator().manual_seed(self.config.vertex_subsample_seed)
+            ids = torch.randperm(n_vertices, generator=g)[: self.config.vertex_subsample].sort().values
+        self.bodies = nn.ModuleDict({g: PaperBody(m, ids) for g, m in body_models.items()})
+        c = self.config
+        self.register_buffer("w_joints", limb_weights(c.limb_weight_j3d).unsqueeze(-1), persistent=False)
+        self.register_buffer("w_rot", limb_weights(c.limb_weight_theta, NUM_POSE_JOINTS, offset=1)[:, None, None],
+                             persistent=False)
+
+    def ground_truth_body(self, theta: Tensor, beta: Tensor, gender: Tensor | None,
+                          vertices: bool = True) -> tuple[Tensor, Tensor | None]:
+        """Model-frame ground-truth body ``J0, V0`` with each sample's gendered model.
+
+        Args:
+            theta: ``(B, 21, 3, 3)``; beta: ``(B, 10)``; gender: ``(B,)`` codes (None: neutral).
+
+        Returns:
+            ``(B, 22, 3)`` joints and ``(B, N, 3)`` vertices (or None).
+        """
+        B = theta.shape[0]
+        if gender is None:
+            gender = torch.zeros(B, dtype=torch.long, device=theta.device)
+        joints = theta.new_empty(B, NUM_BODY_JOINTS, 3)
+        verts = theta.new_empty(B, self.bodies["neutral"].num_vertices, 3) if vertices else None
+        for code in gender.unique().tolist():
+            name = GENDER_CODES[int(code)]
+            if name not in self.bodies:
+                raise KeyError(f"no {name} body model given to SupervisedLoss (sample gender {code})")
+            m = gender == code
+            j, v = self.bodies[name](theta[m], beta[m], vertices=vertices)
+            joints[m] = j
+            if vertices:
+                verts[m] = v
+        return joints, verts
+
+    def forward(self, pred: Mapping[str, Tensor], batch: Mapping[str, Tensor]) -> dict[str, Tensor]:
+        """Loss terms and their weighted total.
+
+        Args:
+            pred: camera-frame parameters per view (``airpose_lib.model.to_smplx_params``):
+                ``phi (B, V, 3, 3)``, ``theta (B, V, 21, 3, 3)``, ``beta (B, V, 10)``,
+                ``tau (B, V, 3)``; with ``rotation_space="6d"`` also the network's raw
+                ``phi6d (B, V, 6)`` and ``theta6d (B, V, 21, 6)``.
+            batch: a collated still-frame batch: ``K (B, V, 3, 3)``, ``j2d (B, V, 22, 2)``,
+                ``phi (B, V, 3, 3)``, ``tau (B, V, 3)``, ``theta (B, 21, 3)`` axis-angle,
+                ``beta (B, 10)``, ``gender (B,)``.
+
+        Returns:
+            ``{"total": scalar, "j2d", "j3d", "phi", "tau", "theta", "beta", "V", "beta_gt"}``:
+            the unweighted terms (``V`` is 0 when ``w_V == 0``: the vertices are then skipped) and
+            ``total = total_scale * sum_k w_k term_k``.
+        """
+        c = self.config
+        phi, theta, beta, tau = pred["phi"], pred["theta"], pred["beta"], pred["tau"]
+        dtype = theta.dtype
+        vr = c.view_reduction
+        need_v = c.w_V != 0
+        J0, V0 = self.bodies["neutral"](theta, beta, vertices=need_v)  # (B, V, 22, 3), (B, V, N, 3)
+
+        theta_gt = axis_angle_to_matrix(batch["theta"].to(dtype))  # (B, 21, 3, 3)
+        beta_gt = batch["beta"].to(dtype)
+        phi_gt = batch["phi"].to(dtype)
+        with torch.no_grad():
+            J0_gt, V0_gt = self.ground_truth_body(theta_gt, beta_gt, batch.get("gender"), vertices=need_v)
+
+        terms: dict[str, Tensor] = {}
+        uv = project_points(transform_points(J0, phi, tau), batch["K"].to(dtype), min_depth=c.min_depth)
+        terms["j2d"] = view_mse(uv, batch["j2d"].to(dtype), view_reduction=vr)
+
+        Jp, Jg = J0, J0_gt.unsqueeze(1)
+        if c.j3d_align_pelvis:
+            Jp, Jg = Jp - Jp[..., :1, :], Jg - Jg[..., :1, :]
+        terms["j3d"] = view_mse(Jp, Jg, self.w_joints.to(dtype), vr)
+        if c.j3d_cross_view:
+            terms["j3d"] = terms["j3d"] + cross_view_mse(Jp, self.w_joints.to(dtype))
+
+        w_rot = self.w_rot.to(dtype)
+        if c.rotation_space == "6d":
+            phi_p, phi_t = pred["phi6d"], matrix_to_rot6d(phi_gt)
+            th_p, th_t = pred["theta6d"], matrix_to_rot6d(theta_gt).unsqueeze(1)
+            w_rot = w_rot[..., 0]
+        else:
+            phi_p, phi_t = phi, phi_gt
+            th_p, th_t = theta, theta_gt.unsqueeze(1)
+        terms["phi"] = view_mse(phi_p, phi_t, view_reduction=vr)
+        terms["tau"] = view_mse(tau, batch["tau"].to(dtype), view_reduction=vr)
+        terms["theta"] = view_mse(th_p, th_t, w_rot, vr)
+        terms["beta"] = view_mse(beta, torch.zeros_like(beta), view_reduction=vr)
+        terms["beta_gt"] = view_mse(beta, beta_gt.unsqueeze(1), view_reduction=vr)
+        if c.cross_view:
+            terms["theta"] = terms["theta"] + cross_view_mse(th_p, w_rot)
+            terms["beta"] = terms["beta"] + cross_view_mse(beta)
+
+        if need_v:
+            if c.vertices_with_phi:
+                Vp = V0 @ phi.transpose(-1, -2)
+                Vg = V0_gt.unsqueeze(1) @ phi_gt.transpose(-1, -2)
+            else:
+                Vp, Vg = V0, V0_gt.unsqueeze(1)
+            terms["V"] = view_mse(Vp, Vg, view_reduction=vr)
+            if c.cross_view:
+                own = c.cross_vertex_frame == "own_phi"
+                terms["V"] = terms["V"] + cross_view_mse(V0 @ phi.transpose(-1, -2) if own else V0)
+        else:
+            terms["V"] = J0.sum() * 0.0
+
+        total = sum(c.weights[k] * terms[k] for k in c.weights)
+        terms = {"total": c.total_scale * total, **terms}
+        return terms

@@ -1,0 +1,77 @@
+"""Train and evaluate the four ablation variants of Table I with one profile's sizes."""
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import pandas as pd
+
+from airpose_lib.eval.ablation import VARIANT_LABELS
+
+from .config import load_train_config
+from .evaluate import evaluate_checkpoint
+from .loop import TrainResult, default_out_dir, train
+
+__all__ = ["AblationRun", "run_ablation"]
+
+
+@dataclass
+class AblationRun:
+    """One trained and evaluated variant: its checkpoint and test-split tables."""
+
+    variant: str
+    seed: int
+    checkpoint: Path
+    tables: dict[str, pd.DataFrame]
+
+
+def run_ablation(profile: str, variants: Sequence[str] = tuple(VARIANT_LABELS), seeds: Sequence[int] = (123,),
+                 out_root: str | Path | None = None, eval_max_samples: int | None = None,
+                 progress: bool = False) -> dict[tuple[str, int], AblationRun]:
+    """Train (or resume / reuse finished runs of) every variant for every seed, then evaluate.
+
+    A run whose ``result.json`` shows it finished with the same configuration is reused as it is;
+    an unfinished one resumes from ``last.pt``. Re-running a notebook therefore only evaluates.
+
+    Args:
+        profile: reproduction profile (its ``train:`` and ``data: still:`` sections).
+        variants: kit variant names (``baseline``, ``multiview``, ``fullcam``, ``airpose``).
+        seeds: training seeds.
+        out_root: parent of the run folders (default ``runs/train/<profile>``).
+        eval_max_samples: evaluate on at most this many test samples (None: all).
+        progress: tqdm bars during training.
+    Returns:
+        (variant, seed) -> :class:`AblationRun` (tables of :func:`airpose_lib.train.evaluate.evaluate`
+        on the test split).
+    """
+    results = {}
+    for variant in variants:
+        for seed in seeds:
+            out = (Path(out_root) / variant / f"seed{seed}") if out_root is not None \
+                else default_out_dir(profile, variant, seed)
+            run = _finished_run(out, profile, variant, seed) or train(
+                variant, profile, seed=seed, out_dir=out, resume=True, overrides={"progress": progress})
+            if run.checkpoint is None:
+                raise RuntimeError(f"training {variant} (seed {seed}) wrote no checkpoint in {out}")
+            tables = evaluate_checkpoint(run.checkpoint, split="test", method=VARIANT_LABELS[variant],
+                                         max_samples=eval_max_samples)
+            results[variant, seed] = AblationRun(variant, seed, Path(run.checkpoint), tables)
+    return results
+
+
+def _finished_run(out: Path, profile: str, variant: str, seed: int) -> TrainResult | None:
+    """The run in ``out`` if it completed with the configuration the profile asks for now."""
+    import json
+
+    try:
+        done = TrainResult.from_json(json.loads((Path(out) / "result.json").read_text()))
+    except (OSError, ValueError, KeyError):
+        return None
+    wanted = load_train_config(profile, variant, seed).to_dict()
+    # training fills in the resolved dataset folder when the profile names none
+    ignore = {"progress"} | ({"data"} if not wanted["data"] else set())
+    same = all(done.config.get(k) == wanted[k] for k in wanted.keys() - ignore)
+    if same and done.step >= wanted["steps"] and done.checkpoint is not None and Path(done.checkpoint).is_file():
+        return done
+    return None

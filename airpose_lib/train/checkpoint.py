@@ -1,0 +1,109 @@
+"""Checkpoints: written atomically, complete enough to resume a run bit for bit.
+
+A checkpoint (``torch.save`` dict, loadable with ``weights_only=True``) holds
+
+``model``        the unwrapped model's ``state_dict``
+``optimizer``    the optimiser's ``state_dict``
+``rng``          per process: torch CPU (and CUDA), numpy and python RNG states
+``step``         optimiser steps done; ``epoch`` and ``batch_in_epoch``: the data-order position
+``config``       the :class:`TrainConfig` as a dict; ``kit_version``; ``world_size``
+
+``<out>/checkpoints/last.pt`` is always the newest; ``step_<n>.pt`` copies are kept as configured.
+"""
+
+from __future__ import annotations
+
+import random
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from airpose_lib.body.cache import atomic_path
+
+__all__ = [
+    "kit_version",
+    "capture_rng_state",
+    "restore_rng_state",
+    "save_checkpoint",
+    "load_checkpoint",
+    "checkpoint_dir",
+    "last_checkpoint",
+]
+
+FORMAT_VERSION = 1
+
+
+def kit_version() -> str:
+    """Installed kit version (``unknown`` when not installed)."""
+    try:
+        from importlib.metadata import version
+
+        return version("airpose_lib")
+    except Exception:  # noqa: BLE001 - any metadata problem
+        return "unknown"
+
+
+def capture_rng_state() -> dict[str, Any]:
+    """This process's RNG states as plain types and tensors (``weights_only``-loadable)."""
+    kind, keys, pos, has_gauss, gauss = np.random.get_state()
+    version, internal, py_gauss = random.getstate()
+    state: dict[str, Any] = {
+        "torch": torch.get_rng_state(),
+        "numpy": {"kind": kind, "keys": torch.from_numpy(keys.astype(np.int64)), "pos": int(pos),
+                  "has_gauss": int(has_gauss), "gauss": float(gauss)},
+        "python": {"version": version, "internal": list(internal), "gauss": py_gauss},
+    }
+    if torch.cuda.is_available() and torch.cuda.is_initialized():
+        state["cuda"] = torch.cuda.get_rng_state_all()
+    return state
+
+
+def restore_rng_state(state: dict[str, Any]) -> None:
+    """Inverse of :func:`capture_rng_state`."""
+    torch.set_rng_state(state["torch"])
+    n = state["numpy"]
+    np.random.set_state((n["kind"], n["keys"].numpy().astype(np.uint32), n["pos"], n["has_gauss"], n["gauss"]))
+    p = state["python"]
+    random.setstate((p["version"], tuple(p["internal"]), p["gauss"]))
+    if "cuda" in state and torch.cuda.is_available():
+        torch.cuda.set_rng_state_all(state["cuda"])
+
+
+def checkpoint_dir(out_dir: str | Path) -> Path:
+    return Path(out_dir) / "checkpoints"
+
+
+def last_checkpoint(out_dir: str | Path) -> Path | None:
+    """``<out>/checkpoints/last.pt`` if it exists."""
+    p = checkpoint_dir(out_dir) / "last.pt"
+    return p if p.is_file() else None
+
+
+def save_checkpoint(out_dir: str | Path, state: dict[str, Any], keep: int = 2) -> Path:
+    """Write ``state`` as ``last.pt`` and ``step_<step>.pt`` (atomically), prune old step files.
+
+    Returns:
+        the path of ``last.pt``.
+    """
+    folder = checkpoint_dir(out_dir)
+    state = {"format_version": FORMAT_VERSION, "kit_version": kit_version(), **state}
+    last = folder / "last.pt"
+    with atomic_path(last) as tmp:
+        torch.save(state, tmp)
+    if keep > 0:
+        with atomic_path(folder / f"step_{state['step']:08d}.pt") as tmp:
+            torch.save(state, tmp)
+        numbered = sorted(folder.glob("step_*.pt"))
+        for old in numbered[:-keep]:
+            old.unlink(missing_ok=True)
+    return last
+
+
+def load_checkpoint(path: str | Path, map_location: str | torch.device = "cpu") -> dict[str, Any]:
+    """Load a checkpoint written by :func:`save_checkpoint`."""
+    state = torch.load(Path(path), map_location=map_location, weights_only=True)
+    if state.get("format_version") != FORMAT_VERSION:
+        raise ValueError(f"{path}: unsupported checkpoint format {state.get('format_version')!r}")
+    return state

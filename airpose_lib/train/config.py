@@ -1,0 +1,159 @@
+"""Training configuration: defaults, the profile's ``train:`` section, per-variant overrides.
+
+A profile file (``airpose_lib/reproduce/profiles/<name>.yaml``, the one place sizes live) holds
+
+.. code-block:: yaml
+
+    train:
+      steps: 200            # any TrainConfig field
+      batch_size: 4
+      backbone: resnet18
+      data: {...}           # keyword arguments of the still-frame dataset
+      variants:             # per-variant overrides of the fields above
+        baseline: {lr: 1.0e-4}
+
+The file is read as YAML data; ``train`` imports nothing from ``reproduce``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+__all__ = ["TrainConfig", "PROFILES_DIR", "profile_path", "load_train_config"]
+
+#: Folder of the profile files (read as data, see the module docstring).
+PROFILES_DIR = Path(__file__).resolve().parents[1] / "reproduce" / "profiles"
+
+
+@dataclass
+class TrainConfig:
+    """Everything that determines a training run (saved in every checkpoint).
+
+    Attributes:
+        variant: ``baseline``, ``multiview``, ``fullcam`` or ``airpose``.
+        steps: optimiser steps in total.
+        batch_size: global batch (samples; each holds V views), split evenly over processes.
+        lr, amsgrad, weight_decay: Adam (paper: lr 5e-5, AMSGrad, batch 30, seed 123).
+        grad_clip: clip the gradient norm to this value (None: no clipping, as the paper).
+        seed: seeds python, numpy, torch, the data order and every sample's augmentation.
+        backbone: ``resnet50`` (paper), ``resnet34``, ``resnet18``.
+        model: extra keyword arguments of ``airpose_lib.model.build_model`` (``dropout``,
+            ``num_iterations``, ``mean_params`` ...).
+        freeze_backbone: train only the regressor; the backbone's BatchNorm stays in eval mode
+            (the paper's real-data fine-tuning).
+        loss: :class:`airpose_lib.losses.LossConfig` field overrides; ``official_loss`` applies the
+            official code's variations first.
+        body_source: body model of the losses (``open`` or ``smplx``).
+        profile: the profile the config came from (names the default dataset).
+        data: the still-frame dataset: ``root`` (a generated dataset folder) or ``profile`` (whose
+            ``data: still:`` dataset is used, generated on first use; default: ``profile`` above),
+            other keys are passed to ``StillFrameDataset`` (e.g. ``augment``).
+        train_split, val_split: split names passed to the dataset (the generated datasets have
+            ``train`` and ``test``; validation uses ``test`` by default: there is no third split).
+        num_workers: DataLoader worker processes per training process.
+        checkpoint_every: write a checkpoint every this many steps (and always at the end).
+        keep_checkpoints: numbered checkpoints kept besides ``last.pt`` (0: only ``last.pt``).
+        val_every: validation loss every this many steps (0: only at the end; None: never).
+        val_batches: at most this many validation batches (None: the whole split).
+        val_batch_size: validation batch (default: ``batch_size``).
+        log_every: CSV/TensorBoard row every this many steps.
+        world_size: processes (DDP); 1 = single process.
+        device: ``auto`` (CUDA if available), ``cpu`` or ``cuda``.
+        num_threads: torch CPU threads per process (None: torch's default, divided by the number
+            of processes under DDP).
+        deterministic: ``torch.use_deterministic_algorithms`` (warn only).
+        progress: tqdm progress bar.
+    """
+
+    variant: str = "airpose"
+    steps: int = 1000
+    batch_size: int = 30
+    lr: float = 5e-5
+    amsgrad: bool = True
+    weight_decay: float = 0.0
+    grad_clip: float | None = None
+    seed: int = 123
+    backbone: str = "resnet50"
+    model: dict = field(default_factory=dict)
+    freeze_backbone: bool = False
+    loss: dict = field(default_factory=dict)
+    official_loss: bool = False
+    body_source: str = "open"
+    profile: str | None = None
+    data: dict = field(default_factory=dict)
+    train_split: str = "train"
+    val_split: str = "test"
+    num_workers: int = 0
+    checkpoint_every: int = 500
+    keep_checkpoints: int = 2
+    val_every: int | None = 500
+    val_batches: int | None = None
+    val_batch_size: int | None = None
+    log_every: int = 10
+    world_size: int = 1
+    device: str = "auto"
+    num_threads: int | None = None
+    deterministic: bool = True
+    progress: bool = True
+
+    def __post_init__(self) -> None:
+        if self.steps < 0 or self.batch_size < 1:
+            raise ValueError("steps must be >= 0 and batch_size >= 1")
+        if self.world_size < 1 or self.batch_size % self.world_size:
+            raise ValueError(f"batch_size {self.batch_size} must be a multiple of world_size {self.world_size}")
+        if self.checkpoint_every < 1 or self.log_every < 1:
+            raise ValueError("checkpoint_every and log_every must be >= 1")
+
+    def to_dict(self) -> dict:
+        return dataclasses.asdict(self)
+
+    def replace(self, **changes: Any) -> "TrainConfig":
+        return dataclasses.replace(self, **changes)
+
+    # Fields whose change makes a resumed run differ from a straight one.
+    RESUME_KEYS = ("variant", "batch_size", "lr", "amsgrad", "weight_decay", "grad_clip", "seed", "backbone",
+                   "model", "freeze_backbone", "loss", "official_loss", "body_source", "data", "train_split")
+
+
+def profile_path(profile: str | Path) -> Path:
+    """Path of a profile file from its name (``smoke``) or a path to a YAML file."""
+    p = Path(profile)
+    if p.suffix in (".yaml", ".yml"):
+        return p
+    return PROFILES_DIR / f"{profile}.yaml"
+
+
+def load_train_config(profile: str | Path | None, variant: str, seed: int | None = None,
+                      **overrides: Any) -> TrainConfig:
+    """The profile's ``train`` section, then its ``variants[variant]`` entry, then ``seed`` and
+    ``overrides`` (TrainConfig fields), on top of :class:`TrainConfig`'s defaults.
+
+    ``profile=None`` uses the defaults only. Unknown keys raise ``ValueError`` (typos in a
+    profile fail before anything runs).
+    """
+    values: dict[str, Any] = {}
+    if profile is not None:
+        path = profile_path(profile)
+        if not path.is_file():
+            raise ValueError(f"profile file not found: {path}")
+        raw = yaml.safe_load(path.read_text()) or {}
+        section = dict(raw.get("train") or {})
+        per_variant = section.pop("variants", None) or {}
+        values.update(section)
+        values.update(per_variant.get(variant) or {})
+    values["variant"] = variant
+    if profile is not None:
+        values.setdefault("profile", Path(str(profile)).stem)
+    if seed is not None:
+        values["seed"] = seed
+    values.update(overrides)
+    known = {f.name for f in dataclasses.fields(TrainConfig)}
+    unknown = sorted(set(values) - known)
+    if unknown:
+        raise ValueError(f"unknown training option(s) {unknown}; known: {sorted(known)}")
+    return TrainConfig(**values)

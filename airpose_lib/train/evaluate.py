@@ -1,0 +1,102 @@
+"""Run a trained network over a still-frame split and turn the result into evaluation tables.
+
+Predicted joints are the 22 body joints of the neutral body model in the paper's convention
+(``phi J0 + tau``, camera frame); ground truth is the sample's ``j3d_cam`` (gendered model), as
+the paper evaluates.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pandas as pd
+import torch
+from torch import nn
+from torch.utils.data import DataLoader
+
+from airpose_lib.eval import per_joint_table, per_view_table, relative_camera_table
+from airpose_lib.losses import PaperBody
+
+from .checkpoint import load_checkpoint
+from .config import TrainConfig
+
+__all__ = ["predict", "evaluate", "load_trained_model", "evaluate_checkpoint"]
+
+
+@torch.no_grad()
+def predict(model: nn.Module, dataset, batch_size: int = 8, device: str | torch.device = "cpu",
+            body: PaperBody | str = "open", num_workers: int = 0, max_samples: int | None = None
+            ) -> tuple[dict[str, torch.Tensor], dict[str, torch.Tensor]]:
+    """Predictions and matching ground truth for a dataset, in order.
+
+    Args:
+        body: the neutral body of the predictions: a :class:`PaperBody` or a body-model source
+            (``"open"``, ``"smplx"``).
+
+    Returns:
+        ``pred``: phi (N, V, 3, 3), theta (N, V, 21, 3, 3), beta (N, V, 10), tau (N, V, 3),
+        joints (N, V, 22, 3); ``gt``: phi, tau, j3d_cam (N, V, 22, 3), index (N,). CPU tensors.
+    """
+    from airpose_lib.body import load_body_model
+    from airpose_lib.model import to_smplx_params
+
+    device = torch.device(device)
+    if isinstance(body, str):
+        body = PaperBody(load_body_model(body, "neutral"))
+    body = body.to(device)
+    model = model.to(device).eval()
+    loader = DataLoader(dataset, batch_size=batch_size, shuffle=False, num_workers=num_workers)
+    preds: dict[str, list] = {}
+    gts: dict[str, list] = {}
+    n = 0
+    for batch in loader:
+        batch = {k: v.to(device) if isinstance(v, torch.Tensor) else v for k, v in batch.items()}
+        out = model(batch["images"], batch["P"])
+        p = dict(to_smplx_params(out, batch["P"], batch["K"]))
+        p["joints"], _ = body(p["theta"], p["beta"], p["phi"], p["tau"], vertices=False)
+        for k, v in p.items():
+            preds.setdefault(k, []).append(v.float().cpu())
+        for k in ("phi", "tau", "j3d_cam", "index"):
+            if k in batch:
+                gts.setdefault(k, []).append(batch[k].cpu())
+        n += batch["images"].shape[0]
+        if max_samples is not None and n >= max_samples:
+            break
+    cat = lambda d: {k: torch.cat(v)[:max_samples] for k, v in d.items()}  # noqa: E731
+    return cat(preds), cat(gts)
+
+
+def evaluate(model: nn.Module, dataset, method: str = "", **predict_kwargs) -> dict[str, pd.DataFrame]:
+    """Tables of a model on a dataset: ``per_view``, ``per_joint`` and (two views or more)
+    ``relative_camera`` (see :mod:`airpose_lib.eval.tables`)."""
+    pred, gt = predict(model, dataset, **predict_kwargs)
+    ids = gt.get("index")
+    tables = {"per_view": per_view_table(pred, gt, method, ids), "per_joint": per_joint_table(pred, gt, method, ids)}
+    if pred["tau"].shape[1] >= 2:
+        tables["relative_camera"] = relative_camera_table(pred, gt, method, ids)
+    return tables
+
+
+def load_trained_model(checkpoint: str | Path, device: str | torch.device = "cpu") -> tuple[nn.Module, TrainConfig]:
+    """The network of a training checkpoint (built with ``airpose_lib.model.build_model``)."""
+    from airpose_lib.model import build_model
+
+    state = load_checkpoint(checkpoint)
+    cfg = TrainConfig(**state["config"])
+    model = build_model(cfg.variant, backbone=cfg.backbone, **cfg.model)
+    model.load_state_dict(state["model"])
+    return model.to(device).eval(), cfg
+
+
+def evaluate_checkpoint(checkpoint: str | Path, split: str = "test", method: str | None = None,
+                        data: dict | None = None, batch_size: int = 8, device: str | torch.device = "cpu",
+                        max_samples: int | None = None) -> dict[str, pd.DataFrame]:
+    """Evaluate a checkpoint on a split of the dataset it was trained with (or ``data`` kwargs)."""
+    from .loop import default_dataset_factory, prepare_data
+
+    model, cfg = load_trained_model(checkpoint, device)
+    if data is not None:
+        cfg = cfg.replace(data=dict(data))
+    dataset = default_dataset_factory(prepare_data(cfg, progress=False), split)
+    return evaluate(model, dataset, method or cfg.variant, batch_size=batch_size, device=device,
+                    max_samples=max_samples, body=cfg.body_source)

@@ -1,0 +1,464 @@
+"""One training loop for every variant: deterministic, resumable, single process or DDP.
+
+``train(variant, profile, seed, out_dir, resume=True)`` builds the model
+(``airpose_lib.model.build_model``), the still-frame datasets (``airpose_lib.data``) and the
+supervised loss of the variant (``airpose_lib.losses``), and optimises with Adam (AMSGrad).
+
+Determinism and resume. Python, numpy and torch are seeded from the config's seed; the data order
+and every sample's augmentation depend only on ``(seed, epoch, index)``
+(:mod:`airpose_lib.train.sampling`); a checkpoint stores model, optimiser, every process's RNG
+states and the data position. A run interrupted after a checkpoint and resumed therefore ends
+with exactly the weights of an uninterrupted run (same machine, same thread count). An
+interruption (Ctrl-C, a killed job) loses the steps since the last checkpoint
+(``checkpoint_every``); nothing is written on the way out, so no checkpoint can hold a
+half-applied step.
+
+Multi-process training (DDP). ``world_size > 1`` spawns that many processes
+(``torch.multiprocessing``; ``gloo`` on CPU, ``nccl`` on CUDA); under ``torchrun`` the processes
+already exist and are joined from the environment. The global batch is split evenly: process r
+gets the r-th slice of every global batch, gradients are averaged, so with the same global batch
+the updates equal the single-process ones up to floating-point summation order -- except for
+what is computed per process by design: BatchNorm batch statistics (per-process batches) and
+dropout masks (per-process RNG streams).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import socket
+import time
+import warnings
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import torch
+import torch.distributed as dist
+from torch import nn
+from torch.utils.data import DataLoader
+
+from .checkpoint import (
+    capture_rng_state,
+    checkpoint_dir,
+    last_checkpoint,
+    load_checkpoint,
+    restore_rng_state,
+    save_checkpoint,
+)
+from .config import TrainConfig, load_train_config
+from .logger import RunLogger
+from .sampling import ResumableBatchSampler, SeededDataset, _mix, seed_everything, worker_init_fn
+
+__all__ = [
+    "TrainResult",
+    "train",
+    "run_training",
+    "default_out_dir",
+    "default_model_factory",
+    "default_dataset_factory",
+    "prepare_data",
+    "default_loss_factory",
+    "forward_loss",
+    "validation_loss",
+]
+
+
+# -- factories (top-level functions: picklable for spawned processes) -----------------------------
+def default_model_factory(cfg: TrainConfig) -> nn.Module:
+    """``airpose_lib.model.build_model(cfg.variant, backbone=cfg.backbone, **cfg.model)``."""
+    from airpose_lib.model import build_model
+
+    return build_model(cfg.variant, backbone=cfg.backbone, **cfg.model)
+
+
+def prepare_data(cfg: TrainConfig, progress: bool | None = None) -> TrainConfig:
+    """Resolve the dataset folder: ``cfg.data["root"]``, or the ``data: still:`` dataset of
+    ``cfg.data["profile"]`` / ``cfg.profile``, generated (``airpose_lib.data``) if missing.
+
+    Returns the config with ``data["root"]`` set. Called once by :func:`train` before any training
+    process opens the data.
+    """
+    data = dict(cfg.data)
+    if data.get("root") is None:
+        source = data.pop("profile", None) or cfg.profile
+        if source is None:
+            raise ValueError("no still-frame dataset: set data.root, or train with a profile that has a "
+                             "`data: still:` section")
+        from airpose_lib.data.generate import ensure_still_dataset
+
+        data["root"] = str(ensure_still_dataset(source, progress=cfg.progress if progress is None else progress))
+    return cfg.replace(data=data)
+
+
+def default_dataset_factory(cfg: TrainConfig, split: str):
+    """``StillFrameDataset(cfg.data["root"], split, **other data keys)`` (after :func:`prepare_data`)."""
+    from airpose_lib.data.dataset import StillFrameDataset
+
+    kwargs = {k: v for k, v in cfg.data.items() if k not in ("root", "profile")}
+    if cfg.data.get("root") is None:
+        raise ValueError("cfg.data has no root; call prepare_data(cfg) first")
+    return StillFrameDataset(cfg.data["root"], split=split, **kwargs)
+
+
+def default_loss_factory(cfg: TrainConfig) -> nn.Module:
+    """The variant's :class:`~airpose_lib.losses.SupervisedLoss` (``cfg.loss`` overrides)."""
+    from airpose_lib.losses import SupervisedLoss, loss_config
+
+    return SupervisedLoss(loss_config(cfg.variant, cfg.official_loss, **cfg.loss), source=cfg.body_source)
+
+
+def forward_loss(model: nn.Module, loss_fn: nn.Module, batch: Mapping[str, torch.Tensor]) -> dict[str, torch.Tensor]:
+    """Network forward on a batch, camera-frame parameters, loss terms (``"total"`` included)."""
+    from airpose_lib.model import to_smplx_params
+
+    out = model(batch["images"], batch["P"])
+    pred = dict(to_smplx_params(out, batch["P"], batch["K"]))
+    pred["phi6d"], pred["theta6d"] = out["phi6d"], out["theta6d"]
+    return loss_fn(pred, batch)
+
+
+# -- results --------------------------------------------------------------------------------------
+@dataclass
+class TrainResult:
+    """What a run ended with (also written to ``<out>/result.json``)."""
+
+    out_dir: Path
+    step: int
+    checkpoint: Path | None
+    train_loss: float | None = None
+    val_losses: dict[str, float] | None = None
+    tensorboard: bool = False
+    stopped_early: bool = False
+    config: dict = field(default_factory=dict)
+
+    def to_json(self) -> dict:
+        return {"out_dir": str(self.out_dir), "step": self.step,
+                "checkpoint": str(self.checkpoint) if self.checkpoint else None,
+                "train_loss": self.train_loss, "val_losses": self.val_losses, "tensorboard": self.tensorboard,
+                "stopped_early": self.stopped_early, "config": self.config}
+
+    @classmethod
+    def from_json(cls, d: dict) -> "TrainResult":
+        return cls(out_dir=Path(d["out_dir"]), step=d["step"],
+                   checkpoint=Path(d["checkpoint"]) if d["checkpoint"] else None, train_loss=d["train_loss"],
+                   val_losses=d["val_losses"], tensorboard=d["tensorboard"], stopped_early=d["stopped_early"],
+                   config=d["config"])
+
+
+def default_out_dir(profile: str | Path | None, variant: str, seed: int) -> Path:
+    """``runs/train/<profile>/<variant>/seed<seed>`` (relative to the working directory)."""
+    name = Path(str(profile)).stem if profile is not None else "default"
+    return Path("runs") / "train" / name / variant / f"seed{seed}"
+
+
+# -- entry point ----------------------------------------------------------------------------------
+def train(variant: str, profile: str | Path | None = "smoke", seed: int | None = None,
+          out_dir: str | Path | None = None, resume: bool = True, *, config: TrainConfig | None = None,
+          overrides: Mapping | None = None, model_factory: Callable | None = None,
+          dataset_factory: Callable | None = None, loss_factory: Callable | None = None,
+          stop_at: int | None = None) -> TrainResult:
+    """Train a variant with a profile's sizes.
+
+    Args:
+        variant: ``baseline``, ``multiview``, ``fullcam`` or ``airpose``.
+        profile: profile name or YAML path (its ``train:`` section); None: defaults only.
+        seed: overrides the profile's seed.
+        out_dir: run folder (default :func:`default_out_dir`): ``config.json``, ``log.csv``,
+            ``checkpoints/``, ``result.json``.
+        resume: continue from ``<out_dir>/checkpoints/last.pt`` if present; otherwise (or with
+            False) start afresh, deleting earlier checkpoints in ``out_dir``.
+        config: a ready :class:`TrainConfig` (then profile, seed and overrides are ignored).
+        overrides: TrainConfig fields, applied after the profile.
+        model_factory: ``cfg -> nn.Module`` (default :func:`default_model_factory`).
+        dataset_factory: ``(cfg, split) -> Dataset`` (default :func:`default_dataset_factory`).
+        loss_factory: ``cfg -> nn.Module`` (default :func:`default_loss_factory`).
+        stop_at: stop (with a checkpoint) once this step is reached, as if interrupted there;
+            a later call with ``resume=True`` continues to ``cfg.steps``.
+
+    Returns:
+        :class:`TrainResult`.
+    """
+    cfg = config if config is not None else load_train_config(profile, variant, seed, **dict(overrides or {}))
+    out = Path(out_dir) if out_dir is not None else default_out_dir(profile, cfg.variant, cfg.seed)
+    factories = (model_factory or default_model_factory, dataset_factory or default_dataset_factory,
+                 loss_factory or default_loss_factory)
+    if "RANK" in os.environ and "WORLD_SIZE" in os.environ:  # torchrun: join the existing group
+        world = int(os.environ["WORLD_SIZE"])
+        cfg = cfg.replace(world_size=world)
+        if not dist.is_initialized():
+            dist.init_process_group(_backend(cfg))
+        if dataset_factory is None:  # rank 0 generates a missing dataset, the others then verify it
+            if dist.get_rank() == 0:
+                cfg = prepare_data(cfg)
+            dist.barrier()
+            if dist.get_rank() != 0:
+                cfg = prepare_data(cfg, progress=False)
+        return run_training(cfg, out, resume, *factories, stop_at=stop_at)
+    if dataset_factory is None:
+        cfg = prepare_data(cfg)
+    if cfg.world_size > 1:
+        return _spawn(cfg, out, resume, factories, stop_at)
+    return run_training(cfg, out, resume, *factories, stop_at=stop_at)
+
+
+def _backend(cfg: TrainConfig) -> str:
+    return "nccl" if _device(cfg, 0).type == "cuda" else "gloo"
+
+
+def _device(cfg: TrainConfig, local_rank: int) -> torch.device:
+    if cfg.device == "auto":
+        return torch.device(f"cuda:{local_rank}") if torch.cuda.is_available() else torch.device("cpu")
+    dev = torch.device(cfg.device)
+    if dev.type == "cuda" and dev.index is None:
+        dev = torch.device(f"cuda:{local_rank}")
+    return dev
+
+
+def _free_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def _spawn(cfg: TrainConfig, out: Path, resume: bool, factories: tuple, stop_at: int | None) -> TrainResult:
+    import torch.multiprocessing as mp
+
+    port = _free_port()
+    mp.spawn(_ddp_entry, args=(cfg.world_size, port, cfg, str(out), resume, factories, stop_at),
+             nprocs=cfg.world_size, join=True)
+    return TrainResult.from_json(json.loads((out / "result.json").read_text()))
+
+
+def _ddp_entry(rank: int, world: int, port: int, cfg: TrainConfig, out: str, resume: bool, factories: tuple,
+               stop_at: int | None) -> None:
+    os.environ.update(MASTER_ADDR="127.0.0.1", MASTER_PORT=str(port), RANK=str(rank), WORLD_SIZE=str(world),
+                      LOCAL_RANK=str(rank))
+    dist.init_process_group(_backend(cfg), rank=rank, world_size=world)
+    try:
+        run_training(cfg, Path(out), resume, *factories, stop_at=stop_at)
+    finally:
+        dist.destroy_process_group()
+
+
+# -- the loop -------------------------------------------------------------------------------------
+def _to_device(batch: Mapping, device: torch.device) -> dict:
+    return {k: (v.to(device, non_blocking=True) if isinstance(v, torch.Tensor) else v) for k, v in batch.items()}
+
+
+def _unwrap(model: nn.Module) -> nn.Module:
+    return model.module if isinstance(model, nn.parallel.DistributedDataParallel) else model
+
+
+def _set_train_mode(model: nn.Module, cfg: TrainConfig) -> None:
+    model.train()
+    if cfg.freeze_backbone and hasattr(model, "backbone"):
+        model.backbone.eval()  # frozen BatchNorm statistics
+
+
+def _check_resume(saved: dict, cfg: TrainConfig) -> None:
+    now = cfg.to_dict()
+    strip = lambda d: {k: v for k, v in (d or {}).items() if k != "root"}  # noqa: E731 - may move
+    diff = [k for k in TrainConfig.RESUME_KEYS
+            if (strip(saved.get(k)) != strip(now.get(k)) if k == "data" else saved.get(k) != now.get(k))]
+    if diff:
+        raise ValueError(f"cannot resume: the checkpoint was trained with different {diff}; use another "
+                         "out_dir or resume=False")
+
+
+def run_training(cfg: TrainConfig, out_dir: Path, resume: bool, model_factory: Callable,
+                 dataset_factory: Callable, loss_factory: Callable, stop_at: int | None = None) -> TrainResult:
+    """The loop itself, in this process (``torch.distributed`` initialised for DDP).
+
+    Torch's process-wide settings it changes (thread count, deterministic algorithms) are
+    restored on return.
+    """
+    saved = (torch.get_num_threads(), torch.are_deterministic_algorithms_enabled(),
+             torch.is_deterministic_algorithms_warn_only_enabled())
+    try:
+        return _run_training(cfg, out_dir, resume, model_factory, dataset_factory, loss_factory, stop_at)
+    finally:
+        torch.set_num_threads(saved[0])
+        torch.use_deterministic_algorithms(saved[1], warn_only=saved[2])
+
+
+def _run_training(cfg: TrainConfig, out_dir: Path, resume: bool, model_factory: Callable,
+                  dataset_factory: Callable, loss_factory: Callable, stop_at: int | None) -> TrainResult:
+    from tqdm.auto import tqdm
+
+    distributed = dist.is_available() and dist.is_initialized()
+    rank = dist.get_rank() if distributed else 0
+    world = dist.get_world_size() if distributed else 1
+    if world != cfg.world_size:
+        cfg = cfg.replace(world_size=world)
+    local_rank = int(os.environ.get("LOCAL_RANK", rank))
+    device = _device(cfg, local_rank)
+    if device.type == "cuda":
+        torch.cuda.set_device(device)
+    threads = cfg.num_threads or (max(1, torch.get_num_threads() // world) if world > 1 else None)
+    if threads:
+        torch.set_num_threads(threads)
+    if cfg.deterministic:
+        torch.use_deterministic_algorithms(True, warn_only=True)
+    out_dir = Path(out_dir)
+
+    seed_everything(cfg.seed)
+    model = model_factory(cfg).to(device)  # identical initial weights in every process
+    if cfg.freeze_backbone and hasattr(model, "backbone"):
+        for p in model.backbone.parameters():
+            p.requires_grad_(False)
+    loss_fn = loss_factory(cfg).to(device)
+    train_ds = dataset_factory(cfg, cfg.train_split)
+    val_ds = dataset_factory(cfg, cfg.val_split) if cfg.val_every is not None and rank == 0 else None
+    optimizer = torch.optim.Adam([p for p in model.parameters() if p.requires_grad], lr=cfg.lr,
+                                 amsgrad=cfg.amsgrad, weight_decay=cfg.weight_decay)
+
+    step = epoch = batch_in_epoch = 0
+    ckpt_path = last_checkpoint(out_dir) if resume else None
+    if ckpt_path is not None:
+        state = load_checkpoint(ckpt_path, map_location="cpu")
+        _check_resume(state["config"], cfg)
+        model.load_state_dict(state["model"])
+        optimizer.load_state_dict(state["optimizer"])
+        step, epoch, batch_in_epoch = state["step"], state["epoch"], state["batch_in_epoch"]
+        if len(state["rng"]) == world:
+            restore_rng_state(state["rng"][rank])
+        else:
+            warnings.warn(f"checkpoint written by {len(state['rng'])} process(es), resuming with {world}: "
+                          "RNG streams are re-seeded, the run will not match an uninterrupted one")
+            seed_everything(_mix(cfg.seed, 2, rank, step))
+    else:
+        seed_everything(_mix(cfg.seed, 2, rank))  # per-process stream (dropout) after the shared init
+        if rank == 0:
+            for old in checkpoint_dir(out_dir).glob("*.pt"):
+                old.unlink()
+    if distributed:
+        dist.barrier()
+
+    net: nn.Module = model
+    if distributed:
+        net = nn.parallel.DistributedDataParallel(model, device_ids=[device] if device.type == "cuda" else None)
+
+    logger = None
+    if rank == 0:
+        out_dir.mkdir(parents=True, exist_ok=True)
+        (out_dir / "config.json").write_text(json.dumps(cfg.to_dict(), indent=2, sort_keys=True))
+        logger = RunLogger(out_dir, resume_step=step if ckpt_path is not None else None)
+
+    def save() -> Path | None:
+        rng = capture_rng_state()
+        if distributed:
+            all_rng: list = [None] * world
+            dist.all_gather_object(all_rng, rng)
+        else:
+            all_rng = [rng]
+        path = None
+        if rank == 0:
+            path = save_checkpoint(out_dir, {
+                "model": model.state_dict(), "optimizer": optimizer.state_dict(), "rng": all_rng,
+                "step": step, "epoch": epoch, "batch_in_epoch": batch_in_epoch, "config": cfg.to_dict(),
+                "world_size": world}, keep=cfg.keep_checkpoints)
+        if distributed:
+            dist.barrier()
+        return path
+
+    def validate() -> dict[str, float] | None:
+        result = None
+        if rank == 0 and val_ds is not None and len(val_ds) > 0:
+            result = validation_loss(model, loss_fn, val_ds, cfg, device)
+            logger.log(step, epoch, "val", time.time() - t_start, cfg.lr, result)
+            _set_train_mode(model, cfg)
+        if distributed:
+            dist.barrier()
+        return result
+
+    bar = tqdm(total=cfg.steps, initial=step, disable=not (cfg.progress and rank == 0), desc=f"train {cfg.variant}",
+               dynamic_ncols=True)
+    t_start = time.time()
+    last_values: dict[str, float] | None = None
+    val_losses: dict[str, float] | None = None
+    checkpoint: Path | None = ckpt_path
+    stopped = False
+    _set_train_mode(model, cfg)
+    n_train = len(train_ds)
+    if ResumableBatchSampler(n_train, cfg.batch_size, cfg.seed, 0).num_batches() == 0 and step < cfg.steps:
+        raise ValueError(f"training split has {n_train} samples, fewer than one batch of {cfg.batch_size}")
+    try:
+        while step < cfg.steps and not stopped:
+            sampler = ResumableBatchSampler(n_train, cfg.batch_size, cfg.seed, epoch, batch_in_epoch, rank, world)
+            loader = DataLoader(SeededDataset(train_ds), batch_sampler=sampler, num_workers=cfg.num_workers,
+                                worker_init_fn=worker_init_fn, pin_memory=device.type == "cuda",
+                                generator=torch.Generator().manual_seed(_mix(cfg.seed, 3, epoch, rank)))
+            for batch in loader:
+                batch = _to_device(batch, device)
+                terms = forward_loss(net, loss_fn, batch)
+                optimizer.zero_grad(set_to_none=True)
+                terms["total"].backward()
+                if cfg.grad_clip is not None:
+                    nn.utils.clip_grad_norm_(model.parameters(), cfg.grad_clip)
+                optimizer.step()
+                step += 1
+                batch_in_epoch += 1
+
+                values = torch.stack([v.detach().float() for v in terms.values()])
+                if distributed:
+                    dist.all_reduce(values)
+                    values /= world
+                last_values = dict(zip(terms.keys(), values.tolist()))
+                if not math.isfinite(last_values["total"]):
+                    raise FloatingPointError(f"non-finite loss at step {step}: {last_values}")
+                if rank == 0:
+                    if step % cfg.log_every == 0 or step == cfg.steps:
+                        logger.log(step, epoch, "train", time.time() - t_start, cfg.lr, last_values)
+                    bar.update(1)
+                    bar.set_postfix(loss=f"{last_values['total']:.4g}")
+                done = step >= cfg.steps
+                stopped = stop_at is not None and step >= stop_at and not done
+                if step % cfg.checkpoint_every == 0 or done or stopped:
+                    checkpoint = save() or checkpoint
+                if cfg.val_every is not None and ((cfg.val_every and step % cfg.val_every == 0) or done):
+                    val_losses = validate() or val_losses
+                if done or stopped:
+                    break
+            else:  # the epoch ran out
+                epoch += 1
+                batch_in_epoch = 0
+    finally:
+        bar.close()
+        if logger is not None:
+            logger.close()
+
+    result = TrainResult(out_dir=out_dir, step=step, checkpoint=checkpoint,
+                         train_loss=last_values["total"] if last_values else None, val_losses=val_losses,
+                         tensorboard=bool(logger and logger.tensorboard), stopped_early=stopped,
+                         config=cfg.to_dict())
+    if rank == 0:
+        (out_dir / "result.json").write_text(json.dumps(result.to_json(), indent=2))
+    return result
+
+
+@torch.no_grad()
+def validation_loss(model: nn.Module, loss_fn: nn.Module, dataset, cfg: TrainConfig,
+                    device: torch.device | str = "cpu") -> dict[str, float]:
+    """Mean loss terms over the validation split (first ``cfg.val_batches`` batches, in order).
+
+    Eval mode, no augmentation randomness leaks out (samples seeded, RNG states restored).
+    """
+    model.eval()
+    bs = cfg.val_batch_size or cfg.batch_size
+    sampler = ResumableBatchSampler(len(dataset), bs, cfg.seed, epoch=0, drop_last=False, shuffle=False)
+    loader = DataLoader(SeededDataset(dataset), batch_sampler=sampler, num_workers=cfg.num_workers,
+                        worker_init_fn=worker_init_fn, generator=torch.Generator().manual_seed(cfg.seed))
+    sums: dict[str, float] = {}
+    n = 0
+    for b, batch in enumerate(loader):
+        if cfg.val_batches is not None and b >= cfg.val_batches:
+            break
+        batch = _to_device(batch, device)
+        terms = forward_loss(model, loss_fn, batch)
+        k = batch["images"].shape[0]
+        for key, v in terms.items():
+            sums[key] = sums.get(key, 0.0) + float(v) * k
+        n += k
+    return {key: v / max(n, 1) for key, v in sums.items()}

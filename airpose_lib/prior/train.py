@@ -1,0 +1,264 @@
+"""Training the kit's pose prior on a corpus of body poses, and measuring it.
+
+The loss follows VPoser v2's trainer (``human_body_prior``, release V02_05), without its mesh term
+(the kit's corpus has no mesh-level data and the joints carry the skeleton's geometry):
+
+    L = w_rot * mean geodesic(R_rec, R)                                   (radians, per joint)
+      + w_joints * mean |J(R_rec) - J(R)|_1     (optional, metres, through a body model)
+      + w_kl(step) * mean_batch sum_latent KL(q(z | theta) || N(0, I))
+
+``w_kl`` rises linearly from 0 to its value over ``kl_anneal_steps`` (KL annealing: the decoder
+learns to reconstruct before the posterior is pulled to the prior). Adam with weight decay
+(the release's optimiser settings) and a cosine learning-rate decay; batches are drawn by a
+seeded generator, so the same corpus, config and seed give the same weights.
+
+The corpus is any ``(N, 21, 3)`` axis-angle array; the kit trains on
+:func:`airpose_lib.data.poses.sample_body_pose` and poses of :mod:`airpose_lib.data.motions`
+(assembled by ``airpose prior train``; this package does not import ``data``).
+"""
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable
+from dataclasses import asdict, dataclass, fields
+from pathlib import Path
+
+import numpy as np
+import torch
+from torch import Tensor
+
+from airpose_lib.geometry import axis_angle_to_matrix, geodesic_angle
+
+from .vposer import LATENT_DIM, NUM_JOINTS, NUM_NEURONS, VPoser
+
+__all__ = ["PriorTrainConfig", "CorpusConfig", "prior_profile", "train_prior", "evaluate_prior",
+           "rotation_geodesic"]
+
+_PROFILES_DIR = Path(__file__).resolve().parents[1] / "reproduce" / "profiles"
+
+JointsFn = Callable[[Tensor], Tensor]
+"""Body rotations ``(B, 21, 3, 3)`` -> joint positions ``(B, J, 3)`` metres (e.g. the open model)."""
+
+
+@dataclass
+class PriorTrainConfig:
+    """Sizes and weights of prior training (defaults: the ``cpu`` profile's, a few minutes)."""
+
+    steps: int = 6000
+    batch_size: int = 256
+    lr: float = 1e-3
+    lr_final_fraction: float = 0.05  # cosine decay to lr * this at the last step
+    weight_decay: float = 1e-5  # the release's Adam setting
+    w_rot: float = 2.0  # the release's loss_matrot_wt (geodesic, radians)
+    w_joints: float = 2.0  # the release's loss_jtr_wt (L1, metres); used only with joints_fn
+    w_kl: float = 5e-3  # the release's loss_kl_wt
+    kl_anneal_steps: int = 1000
+    num_neurons: int = NUM_NEURONS
+    latent_dim: int = LATENT_DIM
+    seed: int = 0
+    log_every: int = 250
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+@dataclass
+class CorpusConfig:
+    """The training corpus drawn from the kit's pose generators (``airpose prior train``).
+
+    ``n_poses`` still poses of :func:`airpose_lib.data.poses.sample_body_pose` plus about
+    ``n_motion_poses`` poses sampled at ``motion_fps`` from random scripts of
+    :mod:`airpose_lib.data.motions` (transitions and blends the still sampler does not make);
+    ``n_val`` held-out poses from a separate stream with the same mixture.
+    """
+
+    n_poses: int = 100_000
+    n_motion_poses: int = 20_000
+    motion_fps: float = 5.0
+    n_val: int = 2000
+    seed: int = 0
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+def prior_profile(profile: str) -> tuple[PriorTrainConfig, CorpusConfig]:
+    """Training and corpus settings from a profile's ``prior:`` section (the YAML is read as data).
+
+    Keys of the section are fields of :class:`PriorTrainConfig` or :class:`CorpusConfig`
+    (``seed`` sets both); missing keys keep the defaults.
+    """
+    import yaml
+
+    path = _PROFILES_DIR / f"{profile}.yaml"
+    if not path.is_file():
+        known = sorted(p.stem for p in _PROFILES_DIR.glob("*.yaml"))
+        raise ValueError(f"unknown profile {profile!r}; available: {known}")
+    section = dict((yaml.safe_load(path.read_text()) or {}).get("prior") or {})
+    train_keys = {f.name for f in fields(PriorTrainConfig)}
+    corpus_keys = {f.name for f in fields(CorpusConfig)}
+    unknown = set(section) - train_keys - corpus_keys
+    if unknown:
+        raise ValueError(f"{path}: unknown keys in `prior:`: {sorted(unknown)}")
+    train = PriorTrainConfig(**{k: v for k, v in section.items() if k in train_keys})
+    corpus = CorpusConfig(**{k: v for k, v in section.items() if k in corpus_keys})
+    return train, corpus
+
+
+def rotation_geodesic(R1: Tensor, R2: Tensor, eps: float = 1e-7) -> Tensor:
+    """Geodesic angle (radians) with a finite gradient at zero, for losses.
+
+    ``||R1 - R2||_F = 2 sqrt(2) sin(angle / 2)``; the square root gets ``eps`` added inside so
+    that identical rotations (angle 0, where the exact angle is not differentiable) give a zero
+    gradient instead of NaN. Error ``< sqrt(eps)``.
+
+    Args:
+        R1, R2: ``(..., 3, 3)``.
+    Returns:
+        ``(...)`` angles.
+    """
+    chord = ((R1 - R2).square().sum(dim=(-1, -2)) + eps).sqrt()
+    return 2.0 * torch.asin((chord / (2.0 * math.sqrt(2.0))).clamp(max=1.0 - 1e-7))
+
+
+def _as_poses(poses) -> Tensor:
+    t = torch.as_tensor(np.asarray(poses), dtype=torch.float32)
+    if t.ndim == 2 and t.shape[1] == NUM_JOINTS * 3:
+        t = t.reshape(-1, NUM_JOINTS, 3)
+    if t.ndim != 3 or tuple(t.shape[1:]) != (NUM_JOINTS, 3):
+        raise ValueError(f"poses must be (N, 21, 3) axis-angle, got {tuple(t.shape)}")
+    if not torch.isfinite(t).all():
+        raise ValueError("poses contain NaN or inf")
+    return t
+
+
+def train_prior(
+    poses,
+    config: PriorTrainConfig | None = None,
+    *,
+    joints_fn: JointsFn | None = None,
+    val_poses=None,
+    progress: bool = False,
+    log: Callable[[str], None] | None = None,
+) -> tuple[VPoser, dict]:
+    """Train a VPoser-architecture prior.
+
+    Args:
+        poses: ``(N, 21, 3)`` (or ``(N, 63)``) axis-angle training poses, N >= 2.
+        config: sizes and weights (default :class:`PriorTrainConfig`).
+        joints_fn: optional body-model joints for the joint term (``w_joints``).
+        val_poses: optional held-out poses, evaluated at the end (:func:`evaluate_prior`).
+        progress: tqdm bar.
+        log: called with a line every ``config.log_every`` steps.
+    Returns:
+        the trained model (eval mode) and a history dict: ``config``, ``steps``, per-log-step
+        ``loss``/``rot_deg``/``kl``, ``seconds``, and ``val`` metrics if ``val_poses`` was given.
+    """
+    cfg = config or PriorTrainConfig()
+    data = _as_poses(poses)
+    if data.shape[0] < 2:
+        raise ValueError("need at least 2 training poses (batch norm)")
+    torch.manual_seed(cfg.seed)  # weight initialisation
+    model = VPoser(cfg.num_neurons, cfg.latent_dim)
+    model.train()
+    opt = torch.optim.Adam(model.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
+    final = cfg.lr_final_fraction
+
+    def lr_at(step: int) -> float:
+        frac = step / max(cfg.steps - 1, 1)
+        return cfg.lr * (final + (1 - final) * 0.5 * (1 + math.cos(math.pi * frac)))
+
+    gen = torch.Generator().manual_seed(cfg.seed + 1)
+    batch = min(cfg.batch_size, data.shape[0])
+    order, pos = torch.randperm(data.shape[0], generator=gen), 0
+    R_all = axis_angle_to_matrix(data)  # (N, 21, 3, 3), computed once
+    J_all = None
+    if joints_fn is not None and cfg.w_joints > 0:
+        with torch.no_grad():
+            J_all = torch.cat([joints_fn(R_all[i:i + 4096]) for i in range(0, len(R_all), 4096)])
+    hist: dict = {"config": cfg.to_dict(), "step": [], "loss": [], "rot_deg": [], "kl": []}
+    bar = None
+    if progress:
+        from tqdm.auto import tqdm
+
+        bar = tqdm(total=cfg.steps, desc="prior", unit="step")
+    t0 = time.perf_counter()
+    for step in range(cfg.steps):
+        if pos + batch > data.shape[0]:
+            order, pos = torch.randperm(data.shape[0], generator=gen), 0
+        idx = order[pos:pos + batch]
+        pos += batch
+        for g in opt.param_groups:
+            g["lr"] = lr_at(step)
+        out = model(data[idx])
+        R_rec = out["pose_body_matrot"]
+        rot = rotation_geodesic(R_rec, R_all[idx]).mean()
+        q_z = out["q_z"]
+        kl = torch.distributions.kl_divergence(q_z, torch.distributions.Normal(0.0, 1.0)).sum(-1).mean()
+        w_kl = cfg.w_kl * min(1.0, (step + 1) / max(cfg.kl_anneal_steps, 1))
+        loss = cfg.w_rot * rot + w_kl * kl
+        if J_all is not None:
+            loss = loss + cfg.w_joints * (joints_fn(R_rec) - J_all[idx]).abs().mean()
+        opt.zero_grad(set_to_none=True)
+        loss.backward()
+        opt.step()
+        if step % cfg.log_every == 0 or step == cfg.steps - 1:
+            rot_deg = math.degrees(rot.item())
+            hist["step"].append(step)
+            hist["loss"].append(loss.item())
+            hist["rot_deg"].append(rot_deg)
+            hist["kl"].append(kl.item())
+            if log is not None:
+                log(f"step {step:6d}  loss {loss.item():.4f}  rot {rot_deg:.2f} deg  kl {kl.item():.1f}")
+        if bar is not None:
+            bar.update(1)
+    if bar is not None:
+        bar.close()
+    hist["seconds"] = time.perf_counter() - t0
+    hist["steps"] = cfg.steps
+    model.eval()
+    if val_poses is not None:
+        hist["val"] = evaluate_prior(model, val_poses, joints_fn=joints_fn)
+    return model, hist
+
+
+@torch.no_grad()
+def evaluate_prior(model: VPoser, poses, *, joints_fn: JointsFn | None = None,
+                   n_samples: int = 0, seed: int = 0) -> dict:
+    """Reconstruction error of held-out poses through the posterior mean.
+
+    Args:
+        model: the prior (evaluated in eval mode; its mode is restored).
+        poses: ``(N, 21, 3)`` axis-angle.
+        joints_fn: optional, adds the joint position error.
+        n_samples: also decode this many ``N(0, I)`` samples and report them (``samples``,
+            ``(n, 21, 3)`` axis-angle numpy) for plausibility checks.
+        seed: of those samples.
+    Returns:
+        ``rot_err_deg`` (mean over poses and joints of the geodesic error), ``rot_err_deg_median``,
+        ``rot_err_deg_p95``, ``per_joint_rot_err_deg`` (21,), ``n``; with ``joints_fn``:
+        ``joint_err_mm`` (mean per-joint position error of the returned joints, model frame).
+    """
+    data = _as_poses(poses)
+    was_training = model.training
+    model.eval()
+    try:
+        R = axis_angle_to_matrix(data)
+        R_rec = model.decode_matrot(model.encode(data).loc)
+        err = torch.rad2deg(geodesic_angle(R, R_rec))  # (N, 21)
+        out = {
+            "n": int(data.shape[0]),
+            "rot_err_deg": err.mean().item(),
+            "rot_err_deg_median": err.median().item(),
+            "rot_err_deg_p95": torch.quantile(err.flatten().double(), 0.95).item(),
+            "per_joint_rot_err_deg": err.mean(0).tolist(),
+        }
+        if joints_fn is not None:
+            d = (joints_fn(R_rec) - joints_fn(R)).norm(dim=-1)
+            out["joint_err_mm"] = 1000.0 * d.mean().item()
+        if n_samples:
+            out["samples"] = model.sample(n_samples, seed=seed)["pose_body"].numpy()
+    finally:
+        model.train(was_training)
+    return out

@@ -1,0 +1,34 @@
+"""Online, decentralised runtime: one OS process per drone, 136-number messages over ZeroMQ.
+
+Modules: ``wire`` (the versioned packet format), ``transport`` (ZeroMQ PUB/SUB, link emulation,
+free ports), ``sync`` (clocks, the frame schedule, camera replay, message matching, peer
+liveness), ``source`` (frame sources: the official-layout sequences of ``airpose_lib.data`` or a
+procedural stand-in; person box and crop), ``backends`` (the staged-model protocol: torch,
+ONNX Runtime or a fast fake), ``node`` (one drone: ``airpose node``), ``launcher`` (N drones on
+loopback: ``airpose launch``), ``results`` (the per-drone record stream and its readers),
+``offline`` (the same frames computed in one process, the reference), ``options`` (CLI).
+
+Names are imported lazily, so ``import airpose_lib.runtime`` is cheap (the CLI builds its parser
+from ``options`` without importing ZeroMQ or torch).
+"""
+from __future__ import annotations
+
+import importlib
+
+_MODULES = ("wire", "transport", "sync", "source", "backends", "node", "launcher", "results", "offline",
+            "options")
+
+
+def __getattr__(name: str):
+    if not name.startswith("_"):
+        for candidate in _MODULES:
+            mod = importlib.import_module(f"{__name__}.{candidate}")
+            if name in getattr(mod, "__all__", ()):
+                value = getattr(mod, name)
+                globals()[name] = value
+                return value
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_MODULES))

@@ -1,0 +1,199 @@
+"""Command-line options of ``airpose node`` and ``airpose launch`` (argparse only at import time,
+so that ``airpose --help`` stays fast; the runtime is imported by the handlers)."""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import time
+
+__all__ = [
+    "parse_peers",
+    "add_node_arguments",
+    "build_node_parser",
+    "add_launch_arguments",
+    "config_from_args",
+    "run_node",
+    "run_launch",
+]
+
+
+def parse_peers(items: list[str], host: str = "127.0.0.1") -> dict[int, str]:
+    """``["2@5002", "3@127.0.0.1:5003", "4@tcp://10.0.0.4:5004"]`` -> ``{2: "tcp://127.0.0.1:5002", ...}``
+    (commas also separate)."""
+    out = {}
+    for item in items:
+        for part in filter(None, item.split(",")):
+            ident, sep, addr = part.partition("@")
+            if not sep:
+                raise ValueError(f"peer {part!r}: expected ID@PORT, ID@HOST:PORT or ID@tcp://HOST:PORT")
+            if addr.startswith("tcp://"):
+                ep = addr
+            elif ":" in addr:
+                ep = "tcp://" + addr
+            else:
+                ep = f"tcp://{host}:{int(addr)}"
+            out[int(ident)] = ep
+    return out
+
+
+def add_node_arguments(p: argparse.ArgumentParser) -> None:
+    """Options shared by ``airpose node`` and ``airpose launch`` (everything but id/port/peers)."""
+    g = p.add_argument_group("schedule")
+    g.add_argument("--mode", choices=("fixed", "pipelined"), default="fixed",
+                   help="fixed: one frame per window, as the paper's test; pipelined: acquisition, "
+                        "inference and exchange overlapped (default: fixed)")
+    g.add_argument("--window-ms", type=float, default=240.0, help="fixed-mode window (default: 240)")
+    g.add_argument("--rate", type=float, default=20.0, help="pipelined frame rate, Hz (default: 20)")
+    g.add_argument("--latency-budget-ms", type=float, default=150.0,
+                   help="pipelined per-frame deadline (default: 150)")
+    g.add_argument("--tolerance-ms", type=float, default=None,
+                   help="stamp matching tolerance (default: half the camera frame period)")
+    g.add_argument("--margin-ms", type=float, default=0.0, help="wake this long after a slot's target time")
+    g.add_argument("--fallback", choices=("mean", "last"), default="mean",
+                   help="a missing message is replaced by the mean parameters (the Fullcam "
+                        "behaviour) or by that drone's last message (default: mean)")
+    g.add_argument("--comm-timeout-ms", type=float, default=None,
+                   help="wait at most this long per exchange (default: as long as the deadline allows)")
+    g.add_argument("--peer-timeout-ms", type=float, default=1000.0,
+                   help="silence after which a drone is no longer waited for (default: 1000)")
+    g.add_argument("--heartbeat-ms", type=float, default=200.0)
+    g.add_argument("--frames", type=int, default=None, help="schedule slots to run (default: the whole sequence)")
+    g.add_argument("--start-s", type=float, default=None, help="sequence time of the first slot")
+    g.add_argument("--max-runtime-s", type=float, default=None, help="stop after this long whatever happens")
+    s = p.add_argument_group("camera and data")
+    s.add_argument("--source", default="synthetic",
+                   help="sequence folder (official layout), or synthetic[:views=2,frames=300,fps=30,"
+                        "size=960x540,seed=0] (default: synthetic)")
+    s.add_argument("--detector", default="openpose", help="detections used for the box (default: openpose)")
+    s.add_argument("--min-confidence", type=float, default=0.2)
+    s.add_argument("--box-margin-px", type=float, default=20.0)
+    s.add_argument("--preload", action="store_true",
+                   help="decode the replayed frames into memory before the start (a camera delivers "
+                        "raw frames; without it JPEG decoding counts as acquisition)")
+    m = p.add_argument_group("network")
+    m.add_argument("--backend", choices=("torch", "onnx", "fake"), default="torch")
+    m.add_argument("--variant", default="airpose")
+    m.add_argument("--backbone", default="resnet18", help="resnet18 | resnet34 | resnet50 (default: resnet18)")
+    m.add_argument("--input-size", type=int, default=128, help="crop side S in pixels (default: 128)")
+    m.add_argument("--seed", type=int, default=0, help="seed of the random weights when no checkpoint is given")
+    m.add_argument("--checkpoint", default=None, help="model state_dict (torch backend)")
+    m.add_argument("--onnx-dir", default=None, help="folder written by model.onnx_export.export_onnx")
+    m.add_argument("--threads", type=int, default=1, help="intra-op threads per drone (default: 1)")
+    m.add_argument("--message-dtype", choices=("float32", "float16"), default="float32")
+    m.add_argument("--fake-compute-ms", type=float, default=0.0, help=argparse.SUPPRESS)
+    n = p.add_argument_group("link emulation (applied to received packets)")
+    n.add_argument("--link-latency-ms", type=float, default=0.0)
+    n.add_argument("--link-jitter-ms", type=float, default=0.0)
+    n.add_argument("--link-bandwidth-mbps", type=float, default=None, help="e.g. 50 (the paper's Wi-Fi)")
+    n.add_argument("--link-loss", type=float, default=0.0, help="packet loss probability")
+    n.add_argument("--link-seed", type=int, default=0)
+    p.add_argument("--out", default="runs/online", help="result folder (default: runs/online)")
+
+
+def build_node_parser(p: argparse.ArgumentParser | None = None) -> argparse.ArgumentParser:
+    """Parser of ``airpose node`` (or fill ``p``)."""
+    p = p or argparse.ArgumentParser(prog="airpose node", description="Run one drone of the online runtime.")
+    p.add_argument("--id", type=int, required=True, help="this drone's id (1..255); camera view = id - 1")
+    p.add_argument("--port", type=int, required=True, help="port this drone publishes on")
+    p.add_argument("--host", default="127.0.0.1", help="address to bind (default: loopback)")
+    p.add_argument("--peers", nargs="*", default=[], help="the other drones: ID@PORT or ID@HOST:PORT")
+    p.add_argument("--view", type=int, default=None, help="camera of the source (default: id - 1)")
+    p.add_argument("--t0", default=None,
+                   help="start time (epoch s, this drone's clock); 'stdin' = wait for 'START <t0>' "
+                        "(the launcher); default: the next multiple of 10 s at least 5 s away")
+    p.add_argument("--clock-offset-ms", type=float, default=0.0, help="emulated clock error of this drone")
+    add_node_arguments(p)
+    return p
+
+
+def config_from_args(args: argparse.Namespace, drone_id: int, port: int, peers: dict[int, str],
+                     t0: float | None, clock_offset_ms: float = 0.0, host: str = "127.0.0.1",
+                     view: int | None = None):
+    """A :class:`~.node.NodeConfig` from parsed options."""
+    from .backends import BackendSpec
+    from .node import NodeConfig
+    from .transport import LinkConfig
+
+    backend = BackendSpec(kind=args.backend, variant=args.variant, backbone=args.backbone,
+                          input_size=args.input_size, seed=args.seed, checkpoint=args.checkpoint,
+                          onnx_dir=args.onnx_dir, threads=args.threads, message_dtype=args.message_dtype,
+                          fake_compute_ms=args.fake_compute_ms)
+    link = LinkConfig(args.link_latency_ms, args.link_jitter_ms, args.link_bandwidth_mbps, args.link_loss,
+                      args.link_seed + drone_id)
+    return NodeConfig(drone_id=drone_id, port=port, peers=peers, source=args.source, view=view,
+                      backend=backend, mode=args.mode, window_ms=args.window_ms, rate_hz=args.rate,
+                      latency_budget_ms=args.latency_budget_ms, tolerance_ms=args.tolerance_ms,
+                      margin_ms=args.margin_ms, clock_offset_ms=clock_offset_ms, fallback=args.fallback,
+                      comm_timeout_ms=args.comm_timeout_ms, peer_timeout_ms=args.peer_timeout_ms,
+                      heartbeat_ms=args.heartbeat_ms, frames=args.frames, start_s=args.start_s, t0=t0,
+                      out_dir=args.out, link=link, host=host, max_runtime_s=args.max_runtime_s,
+                      detector=args.detector, min_confidence=args.min_confidence,
+                      box_margin_px=args.box_margin_px, preload=args.preload)
+
+
+def run_node(args: argparse.Namespace) -> int:
+    """Handler of ``airpose node``."""
+    from .node import DroneProcess
+
+    if args.t0 == "stdin":
+        t0 = None
+    elif args.t0 is None:
+        t0 = math.ceil((time.time() + 5.0) / 10.0) * 10.0  # drones started by hand meet there
+        print(f"t0 = {t0!r} (start all drones before then)", flush=True)
+    else:
+        t0 = float(args.t0)
+    cfg = config_from_args(args, args.id, args.port, parse_peers(args.peers, args.host), t0,
+                           args.clock_offset_ms, args.host, args.view)
+    DroneProcess(cfg).run()
+    return 0
+
+
+# -- launch ------------------------------------------------------------------------------------
+_LAUNCH_OWN = ("drones", "clock_offsets_ms", "lead_s", "timeout_s")
+
+
+def add_launch_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--drones", type=int, default=2, help="number of drone processes (default: 2)")
+    p.add_argument("--clock-offsets-ms", type=float, nargs="*", default=None,
+                   help="per-drone clock errors, e.g. 0 3 (default: all 0)")
+    p.add_argument("--lead-s", type=float, default=1.0, help="start this long after all drones are ready")
+    p.add_argument("--timeout-s", type=float, default=3600.0, help="kill the drones after this long")
+    add_node_arguments(p)
+
+
+def run_launch(args: argparse.Namespace) -> int:
+    """Handler of ``airpose launch``: start the drones on loopback, wait, print their summaries."""
+    from .launcher import launch
+
+    # Every node option that differs from its default is passed on to the drones.
+    node_defaults = vars(add_node_defaults())
+    options = {k: v for k, v in vars(args).items()
+               if k in node_defaults and k not in (*_LAUNCH_OWN, "out") and v != node_defaults[k]}
+    fleet = launch(args.drones, args.out, options, clock_offsets_ms=args.clock_offsets_ms, lead_s=args.lead_s,
+                   threads=args.threads)
+    summaries = fleet.wait(args.timeout_s)
+    print(format_summaries(summaries))
+    missing = sorted(set(range(1, args.drones + 1)) - set(summaries))
+    if missing:
+        print(f"drone(s) {missing} ended without a summary; see {args.out}/node_<id>.log")
+        return 1
+    return 0
+
+
+def add_node_defaults() -> argparse.Namespace:
+    p = argparse.ArgumentParser(add_help=False)
+    add_node_arguments(p)
+    return p.parse_args([])
+
+
+def format_summaries(summaries: dict[int, dict]) -> str:
+    """One line per drone: fps, latency, drops, bytes."""
+    rows = ["drone  slots  valid  fps    drop%  p50 ms  p95 ms  fallback  bytes/frame  rejected"]
+    for d in sorted(summaries):
+        s = summaries[d]
+        ms = (lambda x: f"{1000 * x:6.1f}" if x is not None else "     -")  # noqa: E731
+        rows.append(f"{d:<6} {s['slots']:<6} {s['valid']:<6} {s['fps']:<6.2f} {100 * (s['drop_rate'] or 0):5.1f}  "
+                    f"{ms(s['latency_p50'])}  {ms(s['latency_p95'])}  {s['fallback_frames']:<8}  "
+                    f"{s['bytes_per_frame'] or 0:<11.0f}  {json.dumps(s['rejected'])}")
+    return "\n".join(rows)

@@ -1,0 +1,213 @@
+"""Real drone processes on loopback (ports chosen free at run time): the results equal the same
+frames computed in one process, and lost messages, a killed and restarted drone and malformed
+packets are survived. Every run is bounded (frames, ``max_runtime_s``, launcher time-outs)."""
+from __future__ import annotations
+
+import json
+import struct
+import time
+import zlib
+
+import numpy as np
+import zmq
+
+from airpose_lib.runtime import results as R
+from airpose_lib.runtime.backends import BackendSpec
+from airpose_lib.runtime.launcher import launch
+from airpose_lib.runtime.offline import offline_batched, offline_inputs, offline_staged
+from airpose_lib.runtime.transport import free_ports
+
+SYN = "synthetic:frames=400,size=480x270,seed=1"
+
+
+def _run(tmp_path, n, options, **kw):
+    options = {"source": SYN, "max_runtime_s": 30, **options}
+    fleet = launch(n, tmp_path, options, lead_s=0.5, **kw)
+    try:
+        summaries = fleet.wait(60)
+    finally:
+        fleet.stop()
+    assert fleet.returncodes() == {d: 0 for d in range(1, n + 1)}, (tmp_path / "node_1.log").read_text()[-2000:]
+    return summaries, [R.load_node_results(tmp_path / f"node_{d}.npz") for d in range(1, n + 1)]
+
+
+def _offline(merged, spec, used=True):
+    src = f"{SYN},views={merged['frame_index'].shape[1]}"
+    crops, P, _ = offline_inputs(src, merged["frame_index"], spec.input_size)
+    np.testing.assert_array_equal(P, merged["P"])  # the same crop vectors
+    masks = np.stack([merged["used_s2"], merged["used_s3"]], -1) if used else None
+    return crops, P, offline_staged(spec, crops, P, used=masks)
+
+
+def _full_exchange(merged):
+    """(F,) frames where every view used every other view's messages."""
+    V = merged["flags"].shape[1]
+    everyone = sum(1 << v for v in range(V))
+    want = np.array([everyone & ~(1 << v) for v in range(V)])
+    return ((merged["used_s2"] == want) & (merged["used_s3"] == want)).all(1)
+
+
+def _assert_equal(online, offline, rows=slice(None)):
+    for key in ("phi6d", "theta6d", "beta", "tau"):
+        np.testing.assert_array_equal(online[key][rows], offline[key][rows], err_msg=key)
+
+
+def test_three_drones_pipelined_equal_offline(tmp_path):
+    summaries, res = _run(tmp_path, 3, {"backend": "fake", "mode": "pipelined", "rate": 20, "frames": 30})
+    m = R.merge_views(res)
+    assert len(m["slot"]) >= 20
+    assert (m["frame_index"] == m["frame_index"][:, :1]).all()  # same frame on every drone
+    full = _full_exchange(m)
+    assert full.mean() >= 0.7, m["flags"]
+    _, _, off = _offline(m, BackendSpec(kind="fake"))
+    _assert_equal(m, off)  # bit for bit, fallbacks included (replayed from the records)
+    # frames with the full exchange equal the perfect-exchange computation (mean of 2 others)
+    _, _, perfect = _offline(m, BackendSpec(kind="fake"), used=False)
+    _assert_equal(m, perfect, full)
+    for s in summaries.values():
+        assert s["bytes_per_frame"] == 2 * (40 + 544) and s["rejected"] == {}
+        assert s["nominal_fps"] == 20.0
+
+
+def test_two_drones_float16_clock_offset_and_lost_messages(tmp_path):
+    """Fixed windows, half-precision messages, clocks 4 ms apart and 15 % of the packets lost."""
+    summaries, res = _run(tmp_path, 2, {"backend": "fake", "window_ms": 80, "frames": 24,
+                                        "message_dtype": "float16", "link_loss": 0.15},
+                          clock_offsets_ms=(0.0, 4.0))
+    m = R.merge_views(res)
+    assert len(m["slot"]) >= 18
+    assert np.all(np.abs(np.diff(m["stamp"], axis=1) - 0.004) < 0.0025)  # offset + the camera jitter
+    spec = BackendSpec(kind="fake", message_dtype="float16")
+    _, _, off = _offline(m, spec)
+    _assert_equal(m, off)  # bit for bit, the fallbacks (mean parameters) included
+    fallback = (m["flags"] & (R.FALLBACK_S2 | R.FALLBACK_S3)) != 0
+    assert fallback.any() and sum(s["link_lost"] for s in summaries.values()) > 0
+    _, _, perfect = _offline(m, spec, used=False)
+    rows = fallback.any(1)
+    assert not np.array_equal(m["theta6d"][rows], perfect["theta6d"][rows])
+    full = _full_exchange(m)
+    assert full.sum() >= 3
+    _assert_equal(m, perfect, full)
+    _, _, f32 = _offline(m, BackendSpec(kind="fake"), used=False)
+    d = np.abs(m["theta6d"][full] - f32["theta6d"][full]).max()
+    assert 0 < d < 1e-2  # half-precision messages: a small, non-zero change
+    for s in summaries.values():
+        assert s["bytes_per_frame"] == 2 * (40 + 272)
+
+
+def test_torch_drones_equal_offline(tmp_path):
+    opts = {"backend": "torch", "backbone": "resnet18", "input_size": 64, "frames": 4}
+    summaries, res = _run(tmp_path, 2, opts)
+    m = R.merge_views(res)
+    assert len(m["slot"]) >= 3
+    spec = BackendSpec(kind="torch", backbone="resnet18", input_size=64)
+    crops, P, off = _offline(m, spec)
+    _assert_equal(m, off)  # same kernels, same thread count: bit for bit
+    full = _full_exchange(m)
+    assert full.any()
+    batched = offline_batched(spec, crops[full], P[full])
+    for key in ("phi6d", "theta6d", "beta", "tau"):
+        np.testing.assert_allclose(m[key][full], batched[key], rtol=1e-4, atol=1e-4, err_msg=key)
+
+
+def _frames(path):
+    try:
+        return R.read_jsonl(path)[1]
+    except FileNotFoundError:
+        return []
+
+
+def test_killed_drone_restarts_and_rejoins(tmp_path):
+    options = {"backend": "fake", "source": SYN, "mode": "pipelined", "rate": 20, "frames": 200,
+               "peer_timeout_ms": 300, "max_runtime_s": 40}
+    fleet = launch(2, tmp_path, options)
+    try:
+        path1 = tmp_path / "node_1.jsonl"
+        t_end = time.time() + 20
+        while len(_frames(path1)) < 20 and time.time() < t_end:
+            time.sleep(0.1)
+        fleet.kill(2)
+        t_kill = time.time()
+        while time.time() < t_end:  # drone 1 carries on alone
+            if sum(r["flags"] & R.NO_PEERS != 0 for r in _frames(path1)) >= 5:
+                break
+            time.sleep(0.1)
+        fleet.restart(2)
+        summaries = fleet.wait(60)
+    finally:
+        fleet.stop()
+    assert fleet.returncodes() == {1: 0, 2: 0}
+    one = R.load_node_results(tmp_path / "node_1.npz")
+    assert one.summary["slots"] == 200
+    f = one.frames
+    alone = (f["flags"] & R.NO_PEERS) != 0
+    with_two = f["used_s2"] == 2
+    first_alone = np.argmax(alone)
+    assert alone.sum() >= 5 and with_two[:first_alone].sum() >= 15
+    assert with_two[first_alone:].sum() >= 10, "drone 2 did not rejoin"  # after the restart
+    assert time.time() - t_kill < 60
+    # drone 2's stream: two runs (meta records), the second a restart joining mid-schedule
+    records = [json.loads(line) for line in open(tmp_path / "node_2.jsonl")]
+    metas = [i for i, r in enumerate(records) if r["kind"] == "meta"]
+    assert [records[i]["restart"] for i in metas] == [False, True]
+    before = [r["slot"] for r in records[:metas[1]] if r["kind"] == "frame"]
+    after = [r["slot"] for r in records[metas[1]:] if r["kind"] == "frame"]
+    assert before and after and min(after) > max(before) and after[-1] == 199  # joined mid-schedule
+    two = R.load_node_results(tmp_path / "node_2.npz")
+    assert two.summary["valid"] >= 10
+    m = R.merge_views([one, R.load_node_results(tmp_path / "node_2.jsonl")])
+    _, _, off = _offline(m, BackendSpec(kind="fake"))
+    _assert_equal(m, off)
+    assert 1 in summaries and 2 in summaries
+
+
+def _packet(kind, drone, stage=0, slot=0, stamp=0.0, payload=b"", version=1, dtype=0):
+    """A packet built independently of runtime.wire (the documented layout)."""
+    head = struct.pack("<4sBBBBBBHIIddI", b"APZ\x00", version, kind, drone, stage, dtype, 0, len(payload), 0,
+                       slot, stamp, time.time(), 0)
+    crc = zlib.crc32(payload, zlib.crc32(head))
+    return head[:-4] + struct.pack("<I", crc) + payload
+
+
+def test_malformed_packets_are_logged_not_fatal(tmp_path):
+    """The test poses as drone 2: it answers drone 1's stage messages (so drone 1 uses them) and
+    sends junk in between."""
+    (port,) = free_ports(1)
+    ctx = zmq.Context()
+    pub, sub = ctx.socket(zmq.PUB), ctx.socket(zmq.SUB)
+    pub.setsockopt(zmq.LINGER, 0)
+    sub.setsockopt(zmq.LINGER, 0)
+    pub.bind(f"tcp://127.0.0.1:{port}")
+    options = {"backend": "fake", "source": SYN, "window_ms": 100, "frames": 20, "max_runtime_s": 30}
+    fleet = launch(1, tmp_path, options, extra_peers={2: f"tcp://127.0.0.1:{port}"}, start=False)
+    try:
+        fleet.start()
+        sub.connect(f"tcp://127.0.0.1:{fleet.ports[1]}")
+        sub.setsockopt(zmq.SUBSCRIBE, b"")
+        junk = [b"hello", b"\x00" * 60, _packet(2, 2, version=2), _packet(2, 2)[:-1] + b"\x00",
+                _packet(1, 2, stage=1, payload=b"\x00" * 100), _packet(2, 9), _packet(7, 2)]
+        answered, n, t_end = 0, 0, time.time() + 25
+        while fleet.procs[1].poll() is None and time.time() < t_end:
+            pub.send(_packet(2, 2, stamp=time.time()))  # HELLO: drone 2 is alive
+            pub.send(junk[n % len(junk)])
+            n += 1
+            if sub.poll(20):
+                buf = sub.recv()
+                kind, drone, stage = buf[5], buf[6], buf[7]
+                if kind == 1 and drone == 1:  # DATA: answer with the same stamp, our own numbers
+                    slot, stamp = struct.unpack_from("<Id", buf, 16)
+                    payload = np.full(136, 0.01 * stage, "<f4").tobytes()
+                    pub.send(_packet(1, 2, stage=stage, slot=slot, stamp=stamp, payload=payload))
+                    answered += 1
+        summaries = fleet.wait(30)
+    finally:
+        fleet.stop()
+        ctx.destroy(linger=0)
+    assert fleet.returncodes() == {1: 0}
+    s = summaries[1]
+    assert s["valid"] >= 15
+    assert set(s["rejected"]) == {"magic", "short", "version", "crc", "payload_size", "unknown_drone", "kind"}
+    log = (tmp_path / "node_1.log").read_text()
+    assert "rejected a" in log and "CRC mismatch" in log
+    res = R.load_node_results(tmp_path / "node_1.npz")
+    assert (res.frames["used_s2"][res.valid] == 2).mean() >= 0.7  # drone 2's answers were used

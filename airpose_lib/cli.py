@@ -1,6 +1,7 @@
 """The ``airpose`` command. Subcommands mirror the kit's packages.
 
-Implemented: ``body build``, ``body info``, ``reproduce``. The other packages (``data``,
+Implemented: ``body build``, ``body info``, ``data generate``, ``data sequence``, ``train``, ``eval``,
+``prior train``, ``prior info``, ``fit``, ``node``, ``launch``, ``reproduce``. The other packages (``data``,
 ``train``, ``eval``, ``fit``, ``node``) get their subcommands when they exist; until then the
 parser does not offer them. Heavy imports (torch, smplx, papermill) happen inside the handlers so
 that ``airpose --help`` stays fast.
@@ -74,6 +75,434 @@ def _add_body(sub) -> None:
     info.set_defaults(func=_cmd_body_info)
 
 
+# -- data -----------------------------------------------------------------------------------------
+def _cmd_data_sequence(args: argparse.Namespace) -> int:
+    from airpose_lib.data.sequences import default_sequence_root, ensure_sequences, profile_sequences
+
+    try:
+        configs = profile_sequences(args.profile)
+    except ValueError as e:
+        raise CLIError(str(e)) from None
+    root = args.out if args.out is not None else default_sequence_root(args.profile)
+    try:
+        paths = ensure_sequences(args.profile, root, configs=configs, only=args.only, force=args.force,
+                                 progress=True)
+    except ValueError as e:
+        raise CLIError(str(e)) from None
+    for name, path in paths.items():
+        print(f"{name:<10} {path}")
+    return 0
+
+
+def _add_data_sequence(dsub) -> None:
+    seq = dsub.add_parser(
+        "sequence", help="generate the simulated two-drone recordings of a profile",
+        description="Simulate the profile's recordings (a person moving, one hovering and one circling "
+                    "drone, the paper's two camera calibrations), render the frames, simulate OpenPose- "
+                    "and AlphaPose-like keypoints and store each recording in the official real-data "
+                    "layout (machine_1/, machine_2/, ground_truth.npz). Complete identical recordings are "
+                    "kept.")
+    seq.add_argument("--profile", choices=PROFILES, default="smoke",
+                     help="sizes from the profile's `sequences:` section (default: smoke)")
+    seq.add_argument("--out", type=Path, default=None,
+                     help="parent folder of the recordings (default: <cache>/data/sequences_<profile>)")
+    seq.add_argument("--only", nargs="+", metavar="NAME", help="only these recordings (e.g. person1)")
+    seq.add_argument("--force", action="store_true", help="regenerate even if a complete copy exists")
+    seq.set_defaults(func=_cmd_data_sequence)
+
+
+def _cmd_data_generate(args: argparse.Namespace) -> int:
+    import os
+
+    from airpose_lib.data.generate import default_root, generate_still_dataset, profile_config
+    from airpose_lib.data.manifest import DatasetError
+
+    try:
+        config = profile_config(args.profile)
+        root = args.out if args.out is not None else default_root(args.profile)
+        workers = args.workers if args.workers is not None else (os.cpu_count() or 1)
+        manifest = generate_still_dataset(config, root, workers=workers, profile=args.profile,
+                                          progress=True, record=True)
+    except DatasetError as e:
+        raise CLIError(str(e)) from None
+    t = manifest["totals"]
+    print(f"{root}: {t['train_samples']} train + {t['test_samples']} test samples "
+          f"({config.scene.num_views} views, {config.crop_size} px), {t['dropped']} of "
+          f"{t['attempts']} attempts dropped (person left a frame), {len(manifest['shards'])} shards, "
+          f"{t['bytes'] / 1e6:.1f} MB")
+    return 0
+
+
+def _add_data_generate(dsub) -> None:
+    gen = dsub.add_parser(
+        "generate", help="generate (or resume, or verify) the still-frame dataset of a profile",
+        description="Render the synthetic two-drone still-frame dataset (the paper's protocol with "
+                    "the open body model): person crops of every view plus ground truth, in shards "
+                    "with a manifest (SHA-256 per shard). Same profile, same bytes; an interrupted "
+                    "run resumes, finished shards are verified and kept, damaged ones rebuilt.")
+    gen.add_argument("--profile", choices=PROFILES, default="smoke",
+                     help="sizes from the profile's `data: still:` section (default: smoke)")
+    gen.add_argument("--out", type=Path, default=None,
+                     help="dataset folder (default: <cache>/data/still_<profile>)")
+    gen.add_argument("--workers", type=int, default=None,
+                     help="parallel rendering processes (default: number of CPU cores); the result "
+                          "does not depend on it")
+    gen.set_defaults(func=_cmd_data_generate)
+
+
+# Builders of the `airpose data ...` subcommands, in help order; each adds its parser to the group.
+_DATA_SUBCOMMANDS: tuple[Callable, ...] = (_add_data_generate, _add_data_sequence)
+
+
+def _add_data(sub) -> None:
+    data = sub.add_parser("data", help="generate and inspect datasets",
+                          description="Generate the kit's datasets (still frames, sequences).")
+    dsub = data.add_subparsers(dest="data_command", metavar="COMMAND", required=True)
+    for add in _DATA_SUBCOMMANDS:
+        add(dsub)
+
+
+# -- train ----------------------------------------------------------------------------------------
+VARIANTS = ("baseline", "multiview", "fullcam", "airpose")
+
+
+def _parse_sets(items) -> dict:
+    """``KEY=VALUE`` pairs (VALUE parsed as YAML; ``model.dropout=0`` sets a key of a dict field)."""
+    import yaml
+
+    out: dict = {}
+    for item in items or ():
+        key, sep, value = item.partition("=")
+        if not sep or not key:
+            raise CLIError(f"--set expects KEY=VALUE, got {item!r}")
+        parsed = yaml.safe_load(value)
+        if isinstance(parsed, str):  # YAML 1.1 reads "1e-4" as a string
+            try:
+                parsed = float(parsed)
+            except ValueError:
+                pass
+        if "." in key:
+            field_name, sub = key.split(".", 1)
+            out.setdefault(field_name, {})[sub] = parsed
+        else:
+            out[key] = parsed
+    return out
+
+
+def _cmd_train(args: argparse.Namespace) -> int:
+    from airpose_lib.train import load_train_config, train
+
+    overrides = _parse_sets(args.set)
+    for name in ("steps", "batch_size", "world_size", "num_workers", "device"):
+        if getattr(args, name) is not None:
+            overrides[name] = getattr(args, name)
+    try:
+        cfg = load_train_config(args.profile, args.variant, args.seed, **{
+            k: v for k, v in overrides.items() if not isinstance(v, dict)})
+    except ValueError as e:
+        raise CLIError(str(e)) from None
+    for k, v in overrides.items():  # dict fields: merge into the profile's dicts
+        if isinstance(v, dict):
+            cfg = cfg.replace(**{k: {**getattr(cfg, k), **v}})
+    from airpose_lib.data.manifest import DatasetError
+
+    try:
+        result = train(args.variant, args.profile, out_dir=args.out, resume=args.resume, config=cfg)
+    except (ValueError, DatasetError) as e:
+        raise CLIError(str(e)) from None
+    print(f"step {result.step}  train loss {result.train_loss}  checkpoint {result.checkpoint}")
+    if result.val_losses:
+        print(f"validation loss {result.val_losses.get('total')}")
+    return 0
+
+
+def _add_train(sub) -> None:
+    tr = sub.add_parser(
+        "train", help="train a network variant with a profile's sizes",
+        description="Train one of the four variants (Table I) on the still-frame dataset with the "
+                    "profile's `train:` section: Adam (AMSGrad), deterministic seeds, checkpoints "
+                    "every N steps in <out>/checkpoints/ (resumed automatically), <out>/log.csv. "
+                    "--world-size N trains with N processes (PyTorch DDP).")
+    tr.add_argument("--variant", choices=VARIANTS, required=True)
+    tr.add_argument("--profile", choices=PROFILES, default="smoke", help="(default: smoke)")
+    tr.add_argument("--seed", type=int, default=None, help="(default: the profile's)")
+    tr.add_argument("--out", type=Path, default=None,
+                    help="run folder (default: runs/train/<profile>/<variant>/seed<seed>)")
+    tr.add_argument("--resume", action=argparse.BooleanOptionalAction, default=True,
+                    help="continue from <out>/checkpoints/last.pt if present (default: yes)")
+    tr.add_argument("--steps", type=int, default=None, help="override the profile's step count")
+    tr.add_argument("--batch-size", type=int, default=None, help="override the global batch size")
+    tr.add_argument("--world-size", type=int, default=None, help="training processes (DDP)")
+    tr.add_argument("--num-workers", type=int, default=None, help="DataLoader workers per process")
+    tr.add_argument("--device", default=None, help="auto, cpu or cuda")
+    tr.add_argument("--set", nargs="+", metavar="KEY=VALUE",
+                    help="any other training option, e.g. lr=1e-4 model.dropout=0 loss.vertex_subsample=2000")
+    tr.set_defaults(func=_cmd_train)
+
+
+# -- eval -----------------------------------------------------------------------------------------
+def _cmd_eval(args: argparse.Namespace) -> int:
+    from airpose_lib.eval import paper_table
+    from airpose_lib.train import evaluate_checkpoint
+
+    from airpose_lib.data.manifest import DatasetError
+
+    if not Path(args.checkpoint).is_file():
+        raise CLIError(f"no checkpoint at {args.checkpoint}")
+    try:
+        tables = evaluate_checkpoint(args.checkpoint, split=args.split, method=args.method,
+                                     batch_size=args.batch_size, device=args.device, max_samples=args.max_samples)
+    except (ValueError, DatasetError) as e:
+        raise CLIError(str(e)) from None
+    out = args.out if args.out is not None else Path(args.checkpoint).resolve().parent.parent / f"eval_{args.split}"
+    out.mkdir(parents=True, exist_ok=True)
+    for name, table in tables.items():
+        table.to_csv(out / f"{name}.csv", index=False)
+    print(paper_table(tables["per_view"]).to_string(float_format=lambda x: f"{x:.3f}"))
+    print(f"tables written to {out}")
+    return 0
+
+
+def _add_eval(sub) -> None:
+    ev = sub.add_parser(
+        "eval", help="evaluate a trained checkpoint (MPE, MPJPE, PA-MPJPE ...)",
+        description="Run a training checkpoint over a split of its still-frame dataset and write tidy "
+                    "tables (per_view.csv, per_joint.csv, relative_camera.csv); prints Table I's columns.")
+    ev.add_argument("--checkpoint", type=Path, required=True, help="a checkpoints/*.pt of `airpose train`")
+    ev.add_argument("--split", default="test", help="(default: test)")
+    ev.add_argument("--method", default=None, help="name in the tables (default: the variant)")
+    ev.add_argument("--out", type=Path, default=None, help="(default: <run>/eval_<split>/)")
+    ev.add_argument("--batch-size", type=int, default=8)
+    ev.add_argument("--max-samples", type=int, default=None)
+    ev.add_argument("--device", default="cpu")
+    ev.set_defaults(func=_cmd_eval)
+
+
+# -- prior ----------------------------------------------------------------------------------------
+def _prior_corpus(corpus, stream: int, n_still: int, n_motion: int):
+    """Poses of the kit's generators: ``n_still`` still poses + ~``n_motion`` motion poses, (N, 21, 3)."""
+    import numpy as np
+
+    from airpose_lib.data.motions import evaluate_motion, sample_script
+    from airpose_lib.data.poses import sample_body_pose
+
+    rng = np.random.default_rng([corpus.seed, stream])
+    parts = [sample_body_pose(rng, n_still)] if n_still else []
+    got = 0
+    while got < n_motion:
+        script = sample_script(rng, 60.0)
+        times = np.arange(0.0, script.duration, 1.0 / corpus.motion_fps)
+        theta = evaluate_motion(script, times).theta[: n_motion - got]
+        parts.append(theta)
+        got += len(theta)
+    return np.concatenate(parts).astype(np.float32)
+
+
+def _cmd_prior_train(args: argparse.Namespace) -> int:
+    import time
+
+    import numpy as np
+    import torch
+
+    from airpose_lib.body import load_body_model
+    from airpose_lib.body.fast import JointsOnly
+    from airpose_lib.data.poses import within_limits
+    from airpose_lib.fitting import KeypointBody
+    from airpose_lib.prior import evaluate_prior, kit_prior_path, prior_profile, save_prior, train_prior
+
+    try:
+        cfg, corpus = prior_profile(args.profile)
+    except ValueError as e:
+        raise CLIError(str(e)) from None
+    if args.steps is not None:
+        cfg.steps = args.steps
+    if args.seed is not None:
+        cfg.seed = corpus.seed = args.seed
+    if args.threads:
+        torch.set_num_threads(args.threads)
+    t0 = time.perf_counter()
+    share = corpus.n_poses / max(corpus.n_poses + corpus.n_motion_poses, 1)
+    train_poses = _prior_corpus(corpus, 0, corpus.n_poses, corpus.n_motion_poses)
+    val_still = round(corpus.n_val * share)
+    val_poses = _prior_corpus(corpus, 1, val_still, corpus.n_val - val_still)
+    print(f"corpus: {len(train_poses)} training poses, {len(val_poses)} held out "
+          f"({time.perf_counter() - t0:.1f} s)")
+    joints_fn = None
+    if cfg.w_joints > 0:
+        body = KeypointBody(JointsOnly(load_body_model("open", "neutral")), range(22))
+        zero_beta = torch.zeros(1, body.num_betas)
+        joints_fn = lambda R: body(R, zero_beta)  # noqa: E731 - 22 body joints of the mean shape
+    model, hist = train_prior(train_poses, cfg, joints_fn=joints_fn, progress=not args.quiet)
+    val = evaluate_prior(model, val_poses, joints_fn=joints_fn, n_samples=1000, seed=cfg.seed)
+    samples = val.pop("samples")
+    tol = np.deg2rad(5.0)
+    val["samples_within_joint_limits"] = float(within_limits(samples, tol=tol).mean())
+    out = args.out or kit_prior_path(args.profile)
+    save_prior(model, out, {"profile": args.profile, "train": cfg.to_dict(), "corpus": corpus.to_dict(),
+                            "train_seconds": hist["seconds"], "final_train_loss": hist["loss"][-1],
+                            "validation": val})
+    print(f"trained {cfg.steps} steps in {hist['seconds']:.0f} s")
+    print(f"held-out reconstruction: mean {val['rot_err_deg']:.2f} deg per joint "
+          f"(median {val['rot_err_deg_median']:.2f}, p95 {val['rot_err_deg_p95']:.2f})"
+          + (f", joints {val['joint_err_mm']:.1f} mm" if "joint_err_mm" in val else ""))
+    print(f"N(0, I) samples within the joint limits (+5 deg): {100 * val['samples_within_joint_limits']:.1f} %")
+    print(f"saved {out}")
+    return 0
+
+
+def _cmd_prior_info(args: argparse.Namespace) -> int:
+    import json
+
+    from airpose_lib.prior import PriorError, load_prior
+
+    try:
+        _, prov = load_prior(args.source, args.path, tag=args.tag, return_provenance=True)
+    except PriorError as e:
+        raise CLIError(str(e)) from None
+    print(json.dumps(prov, indent=1, default=str))
+    return 0
+
+
+def _add_prior(sub) -> None:
+    pr = sub.add_parser("prior", help="train and inspect the pose prior (VPoser architecture)",
+                        description="The pose prior of fine-tuning and AirPose+: a VPoser-v2 VAE trained "
+                                    "on the kit's pose generators, or the official V02_05 weights.")
+    psub = pr.add_subparsers(dest="prior_command", metavar="COMMAND", required=True)
+    tr = psub.add_parser(
+        "train", help="train the kit's prior with a profile's `prior:` sizes",
+        description="Train the prior on poses of airpose_lib.data.poses and data.motions, report the "
+                    "held-out reconstruction error and the share of N(0, I) samples inside the joint "
+                    "limits, and save <cache>/prior/<profile>/vposer.pt (atomic, with provenance).")
+    tr.add_argument("--profile", choices=PROFILES, default="cpu",
+                    help="smoke: seconds; cpu: a few minutes; paper: longer (default: cpu)")
+    tr.add_argument("--steps", type=int, default=None, help="override the profile's step count")
+    tr.add_argument("--seed", type=int, default=None, help="(default: the profile's)")
+    tr.add_argument("--threads", type=int, default=None,
+                    help="torch threads; 1 is faster when other jobs share the CPU cores")
+    tr.add_argument("--out", type=Path, default=None, help="checkpoint file (default: the kit cache)")
+    tr.add_argument("--quiet", action="store_true", help="no progress bar")
+    tr.set_defaults(func=_cmd_prior_train)
+    info = psub.add_parser("info", help="load a prior and print its provenance")
+    info.add_argument("--source", choices=("kit", "vposer"), default="kit",
+                      help="kit: trained by `airpose prior train`; vposer: the official V02_05 weights "
+                           "from $AIRPOSE_VPOSER_DIR (default: kit)")
+    info.add_argument("--tag", default=None, help="kit prior of this profile (default: the best present)")
+    info.add_argument("--path", type=Path, default=None, help="a checkpoint file or folder")
+    info.set_defaults(func=_cmd_prior_info)
+
+
+# -- fit ------------------------------------------------------------------------------------------
+def _cmd_fit(args: argparse.Namespace) -> int:
+    import json
+
+    import numpy as np
+
+    from airpose_lib.body.cache import atomic_path
+    from airpose_lib.data.official_layout import load_sequence
+    from airpose_lib.fitting import AirPosePlusConfig, airpose_plus, fitting_profile
+    from airpose_lib.prior import PriorError, load_prior
+
+    frames = None
+    if args.frames:
+        start, _, stop = args.frames.partition(":")
+        frames = slice(int(start) if start else None, int(stop) if stop else None)
+    seq = load_sequence(args.sequence, frames=frames, ground_truth=False)
+    pred = np.load(args.init)
+    missing = {"phi", "tau", "theta", "beta"} - set(pred.files)
+    if missing:
+        raise CLIError(f"{args.init}: missing arrays {sorted(missing)} (need phi, tau, theta, beta)")
+    init = {k: pred[k] for k in ("phi", "tau", "theta", "beta")}
+    if "frames" in pred.files:
+        pf = np.asarray(pred["frames"])
+        sel = np.searchsorted(pf, seq.frames)
+        if np.any(sel >= len(pf)) or np.any(pf[np.minimum(sel, len(pf) - 1)] != seq.frames):
+            raise CLIError(f"{args.init}: its `frames` do not cover the sequence's frames")
+        init = {k: v[sel] if v.ndim and v.shape[0] == len(pf) else v for k, v in init.items()}
+    try:
+        cfg = fitting_profile(args.profile)
+    except ValueError as e:
+        raise CLIError(str(e)) from None
+    if args.official_temporal:
+        cfg = AirPosePlusConfig.official_code(**{k: v for k, v in cfg.to_dict().items()
+                                                  if k not in ("temp_pose", "temp_root", "temp_transl")})
+    if args.iterations is not None:
+        cfg.iterations = args.iterations
+    if args.threads:
+        cfg.num_threads = args.threads
+    try:
+        prior, prior_prov = load_prior(args.prior, args.prior_path, return_provenance=True)
+    except PriorError as e:
+        raise CLIError(str(e)) from None
+    try:
+        res = airpose_plus(seq.keypoints, seq.K, init, prior=prior, config=cfg, progress=not args.quiet)
+    except ValueError as e:
+        raise CLIError(str(e)) from None
+    out = args.out or Path(args.init).with_name(Path(args.init).stem + "_airpose_plus.npz")
+    prov = {"sequence": str(args.sequence), "init": str(args.init), "profile": args.profile,
+            "config": cfg.to_dict(), "prior": prior_prov, "seconds": res.seconds,
+            "final_loss": res.history["loss"][-1], "skipped_frames": res.skipped_frames}
+    with atomic_path(Path(out)) as tmp:
+        with open(tmp, "wb") as fh:
+            np.savez(fh, frames=seq.frames, provenance=np.array(json.dumps(prov, default=str)),
+                     **res.to_numpy())
+    print(f"{len(seq.frames)} frames, {int(res.kept.sum())} fitted, {len(res.skipped_frames)} skipped "
+          f"(confidence < {cfg.min_frame_confidence}); {cfg.iterations} iterations in {res.seconds:.1f} s")
+    print(f"written {out}")
+    return 0
+
+
+def _add_fit(sub) -> None:
+    fit = sub.add_parser(
+        "fit", help="AirPose+: refine a sequence offline",
+        description="Run AirPose+ (paper Sec. III-D) on a sequence in the official layout "
+                    "(machine_k/ with openpose_res.pkl and alphapose_res.json), starting from per-frame "
+                    "network outputs in an .npz with phi (F,V,3,3), tau (F,V,3), theta (F,V,21,3,3) or "
+                    "axis-angle (F,V,21,3), beta (F,V,10), and optionally frames (F,) image numbers. "
+                    "Writes the refined parameters, camera poses and UAV2-in-UAV1 poses to an .npz.")
+    fit.add_argument("--sequence", type=Path, required=True, help="sequence folder (official layout)")
+    fit.add_argument("--init", type=Path, required=True, help="network outputs (.npz, see above)")
+    fit.add_argument("--out", type=Path, default=None, help="(default: <init>_airpose_plus.npz)")
+    fit.add_argument("--profile", choices=PROFILES, default="cpu",
+                     help="iterations/weights from the profile's `fitting:` section (default: cpu)")
+    fit.add_argument("--frames", default=None, metavar="START:STOP",
+                     help="a slice of the sequence's frames (positions, e.g. 0:1000)")
+    fit.add_argument("--prior", choices=("kit", "vposer"), default="kit",
+                     help="kit: trained by `airpose prior train`; vposer: official V02_05 (default: kit)")
+    fit.add_argument("--prior-path", type=Path, default=None, help="a prior checkpoint file or folder")
+    fit.add_argument("--iterations", type=int, default=None, help="override the profile's iterations")
+    fit.add_argument("--official-temporal", action="store_true",
+                     help="the official code's temporal weights (10 x pose, 100 x root/translation)")
+    fit.add_argument("--threads", type=int, default=None,
+                     help="torch threads; 1 is faster when other jobs share the CPU cores")
+    fit.add_argument("--quiet", action="store_true", help="no progress bar")
+    fit.set_defaults(func=_cmd_fit)
+
+
+# -- node / launch (online runtime) ----------------------------------------------------------------
+def _add_node(sub) -> None:
+    from airpose_lib.runtime.options import build_node_parser, run_node
+
+    node = sub.add_parser(
+        "node", help="run one drone of the online runtime (one process per drone)",
+        description="One drone: replays its camera of a sequence in real time, runs the staged "
+                    "network and exchanges the 136-number messages with the other drones over "
+                    "ZeroMQ (fixed 240 ms windows as the paper, or pipelined). Writes "
+                    "<out>/node_<id>.{jsonl,npz,summary.json}.")
+    build_node_parser(node)
+    node.set_defaults(func=run_node)
+
+
+def _add_launch(sub) -> None:
+    from airpose_lib.runtime.options import add_launch_arguments, run_launch
+
+    launch = sub.add_parser(
+        "launch", help="start N drone processes on loopback and print what they achieved",
+        description="Start --drones drone processes (airpose node) on 127.0.0.1 with free ports and a "
+                    "common start time, wait for them and print fps, latency, drops and bytes per drone.")
+    add_launch_arguments(launch)
+    launch.set_defaults(func=run_launch)
+
+
 # -- reproduce ------------------------------------------------------------------------------------
 def _cmd_reproduce(args: argparse.Namespace) -> int:
     from airpose_lib.reproduce import ReproductionError, load_catalog, load_profile, run_profile
@@ -127,7 +556,8 @@ def _add_reproduce(sub) -> None:
 # -- entry point ----------------------------------------------------------------------------------
 # Registered subcommand builders, in help order. data, train, eval, fit and node join here as
 # their packages land.
-_SUBCOMMANDS: tuple[Callable, ...] = (_add_body, _add_reproduce)
+_SUBCOMMANDS: tuple[Callable, ...] = (_add_body, _add_data, _add_train, _add_eval, _add_prior, _add_fit,
+                                       _add_node, _add_launch, _add_reproduce)
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -26,9 +26,23 @@ class BodyModelError(RuntimeError):
 
 
 def smplx_dir() -> Path | None:
-    """Folder of the licensed SMPL-X v1.1 files, from ``AIRPOSE_SMPLX_DIR`` (None if unset)."""
+    """Folder of the licensed SMPL-X v1.1 files: ``AIRPOSE_SMPLX_DIR``, else the folder the asset
+    config file or the kit cache default names for ``smplx_v1_1`` if it exists (None otherwise)."""
     value = os.environ.get("AIRPOSE_SMPLX_DIR")
-    return Path(value).expanduser() if value else None
+    if value:
+        return Path(value).expanduser()
+    return _located("smplx_v1_1")
+
+
+def _located(asset: str) -> Path | None:
+    """An existing folder for ``asset`` from data_manifests/ + the asset config (None if none)."""
+    try:
+        from airpose_lib.assets import locate
+
+        path = locate(asset).path
+    except Exception:  # no manifests folder (non-editable install) or an unreadable config
+        return None
+    return path if path.is_dir() else None
 
 
 def resolve_model_file(source: str = "open", gender: str = "neutral", build: bool = True) -> Path:

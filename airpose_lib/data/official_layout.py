@@ -519,7 +519,12 @@ def load_sequence(root: str | Path, frames: Iterable[int] | slice | None = None,
         per_view, stats = [], {"missing_frames": 0, "nan_keypoints": 0}
         for m in machines:
             path = m / DETECTOR_FILES[name][0]
-            if name == "openpose":
+            # The real-data release stores per-frame dicts; the kit's generator writes arrays.
+            from .official_real import detector_file_format, read_official_alphapose, read_official_openpose
+
+            if path.is_file() and detector_file_format(path) == "official":
+                kp, st = (read_official_openpose if name == "openpose" else read_official_alphapose)(path, sel)
+            elif name == "openpose":
                 kp, st = _read_openpose(path, sel, missing_detections)
             else:
                 kp, st = _read_alphapose(path, sel, last_image, missing_detections, tail_tolerance)

@@ -129,6 +129,10 @@ def find_vposer_checkpoint(root: str | Path | None = None) -> Path:
     if root is None:
         env = os.environ.get(VPOSER_ENV)
         if not env:
+            from airpose_lib.body.loader import _located
+
+            env = _located("vposer_v02_05")  # the asset config file or the kit cache default
+        if not env:
             raise _vposer_missing(f"${VPOSER_ENV} is not set")
         root = env
     root = Path(root).expanduser()

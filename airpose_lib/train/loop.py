@@ -81,6 +81,16 @@ def prepare_data(cfg: TrainConfig, progress: bool | None = None) -> TrainConfig:
     process opens the data.
     """
     data = dict(cfg.data)
+    if data.get("source", "generated") == "official_synthetic":
+        # The official release (data_manifests/official_synthetic.yaml): nothing to generate.
+        if data.get("root") is None:
+            from airpose_lib.assets import locate
+
+            data["root"] = str(locate("official_synthetic").path)
+        if cfg.body_source != "smplx":
+            raise ValueError("training on the official synthetic data needs body_source='smplx' (its betas "
+                             "are SMPL-X v1.1 shape coefficients; see data_manifests/smplx_v1_1.yaml)")
+        return cfg.replace(data=data)
     if data.get("root") is None:
         source = data.pop("profile", None) or cfg.profile
         if source is None:
@@ -93,12 +103,17 @@ def prepare_data(cfg: TrainConfig, progress: bool | None = None) -> TrainConfig:
 
 
 def default_dataset_factory(cfg: TrainConfig, split: str):
-    """``StillFrameDataset(cfg.data["root"], split, **other data keys)`` (after :func:`prepare_data`)."""
+    """``StillFrameDataset(cfg.data["root"], split, **other data keys)`` (after :func:`prepare_data`),
+    or ``OfficialSyntheticDataset`` when ``cfg.data["source"] == "official_synthetic"``."""
     from airpose_lib.data.dataset import StillFrameDataset
 
-    kwargs = {k: v for k, v in cfg.data.items() if k not in ("root", "profile")}
+    kwargs = {k: v for k, v in cfg.data.items() if k not in ("root", "profile", "source")}
     if cfg.data.get("root") is None:
         raise ValueError("cfg.data has no root; call prepare_data(cfg) first")
+    if cfg.data.get("source", "generated") == "official_synthetic":
+        from airpose_lib.data.official_synthetic import OfficialSyntheticDataset
+
+        return OfficialSyntheticDataset(cfg.data["root"], split=split, **kwargs)
     return StillFrameDataset(cfg.data["root"], split=split, **kwargs)
 
 

@@ -1,0 +1,367 @@
+"""The official AirPose real-data release (``copenet_dji``): splits, detections, marker poses.
+
+Layout (learned from the official repository robot-perception-group/AirPose,
+``copenet_real/src/copenet_real/dsets/copenet_real.py``, which reads it, and
+``copenet_real_data/scripts/prepare_copenet_dataset.py`` / ``dji_data_aruco_detecion.py``, which
+made the calibration and the marker poses). One folder holds both drones' recordings::
+
+    <root>/machine_{1,2}/images/%06d.jpg                frames, numbered alike on both drones
+    <root>/machine_{1,2}/camera_calib.yml               OpenCV FileStorage, 3x3 matrix ``K``
+    <root>/machine_{1,2}/openpose_res.pkl               see below
+    <root>/machine_{1,2}/alphapose_res.json             see below
+    <root>/machine_{1,2}/markerposes_corrected_all.pkl  ArUco board pose per frame
+
+Splits: the official loader (``get_copenet_real_traintest``) trains on frames 0-6999 and tests
+on frames 8000-14999 of that folder. The paper fine-tunes on person 1 and tests on person 2, so
+person 1 is frames 0-6999 and person 2 frames 8000-14999 (:data:`REAL_DATA_SPLITS`,
+:data:`PERSON_SPLITS`); frames 7000-7999 belong to neither.
+
+Detection files in the release differ from the ones the kit's generator writes
+(:mod:`airpose_lib.data.official_layout`), so :func:`load_official_real` reads both:
+
+* ``openpose_res.pkl``: a dict ``"%06d" -> {"pose": (persons, 25, 3)}`` (BODY_25 ``[x, y, c]``;
+  person 0 is the subject). The kit's files map the frame to the array directly.
+* ``alphapose_res.json``: a dict ``"%06d" -> {"people": [{"pose_keypoints_2d": [x, y, c] * 18},
+  ...]}`` (COCO-18, person 0). The kit's files are AlphaPose's own list format.
+
+A frame without an entry is "not detected" (zeros), as the official loader treats it; the counts
+are in ``Sequence.info``.
+
+Marker poses (``markerposes_corrected_all.pkl``): a dict ``"%06d" -> {marker id (str) ->
+{"rvec": (3,), "tvec": (3,)}}`` holding OpenCV's ``estimatePoseSingleMarkers`` output, i.e. the
+marker -> camera transform ``x_cam = R(rvec) x_marker + tvec`` (metres). The official loader uses
+marker ``"0"`` as the world frame of both drones; frames where it was not detected get the
+identity rotation and zero translation there. (Its rotation is read by the position of the frame
+in the sorted key list while its translation is read by frame number, which differ as soon as a
+frame lacks a detection; :func:`read_marker_poses` reads both by frame number and returns a
+validity mask instead.) The "corrected" values are the authors' post-processed ones; how they were
+corrected is not in the repository.
+"""
+from __future__ import annotations
+
+import json
+import pickle
+from collections.abc import Iterable, Mapping, Sequence as SequenceABC
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from .official_layout import DETECTOR_FILES, LazyImages, Sequence, SequenceFormatError, load_sequence
+
+__all__ = [
+    "REAL_DATA_SPLITS",
+    "PERSON_SPLITS",
+    "MARKER_POSES_FILE",
+    "real_split_frames",
+    "detector_file_format",
+    "read_official_openpose",
+    "read_official_alphapose",
+    "read_marker_poses",
+    "MarkerPoses",
+    "load_marker_poses",
+    "load_official_real",
+]
+
+#: Frame ranges of the paper's real-data splits (official ``get_copenet_real_traintest``).
+REAL_DATA_SPLITS: dict[str, range] = {"train": range(0, 7000), "test": range(8000, 15000)}
+#: Person -> split: the paper fine-tunes on person 1 and tests on person 2.
+PERSON_SPLITS: dict[int, str] = {1: "train", 2: "test"}
+#: File of the ArUco board poses in each ``machine_k`` folder.
+MARKER_POSES_FILE = "markerposes_corrected_all.pkl"
+
+
+def real_split_frames(split: str | None = None, person: int | None = None) -> range | None:
+    """Frame range of a split (``"train"``, ``"test"``, ``"all"``/None) or a person (1, 2).
+
+    Raises:
+        ValueError: unknown split or person, or a person that contradicts the split.
+    """
+    if person is not None:
+        if person not in PERSON_SPLITS:
+            raise ValueError(f"person must be 1 or 2 (the release's two subjects), got {person!r}")
+        if split not in (None, "all", PERSON_SPLITS[person]):
+            raise ValueError(f"person {person} is the {PERSON_SPLITS[person]!r} split, not {split!r}")
+        split = PERSON_SPLITS[person]
+    if split in (None, "all"):
+        return None
+    if split not in REAL_DATA_SPLITS:
+        raise ValueError(f"split must be 'train', 'test' or 'all', got {split!r}")
+    return REAL_DATA_SPLITS[split]
+
+
+# -- detection files ----------------------------------------------------------------------------
+def _frame_name(i: int) -> str:
+    return f"{int(i):06d}"
+
+
+def _lookup(table: Mapping, i: int):
+    """Entry of frame ``i`` keyed ``"000123"``, ``"000123.jpg"`` or ``123``; None if absent."""
+    for key in (_frame_name(i), f"{_frame_name(i)}.jpg", int(i), str(int(i))):
+        if key in table:
+            return table[key]
+    return None
+
+
+def _load_pickle(path: Path):
+    try:
+        with open(path, "rb") as fh:  # read-only
+            return pickle.load(fh, encoding="latin1")
+    except FileNotFoundError:
+        raise SequenceFormatError(f"missing file {path}") from None
+    except Exception as e:  # noqa: BLE001 - any broken pickle
+        raise SequenceFormatError(f"cannot read {path} (truncated or corrupted: {type(e).__name__}: {e})") from None
+
+
+def _load_json(path: Path):
+    try:
+        return json.loads(Path(path).read_text())
+    except FileNotFoundError:
+        raise SequenceFormatError(f"missing file {path}") from None
+    except (json.JSONDecodeError, UnicodeDecodeError) as e:
+        raise SequenceFormatError(f"cannot parse {path}: {e}") from None
+
+
+def detector_file_format(path: Path | str) -> str:
+    """``"official"`` (the release's dict formats) or ``"kit"`` (the generator's formats) of a
+    detection file, from its content. Raises :class:`SequenceFormatError` if unreadable."""
+    path = Path(path)
+    if path.suffix == ".json":
+        data = _load_json(path)
+        return "official" if isinstance(data, Mapping) else "kit"
+    data = _load_pickle(path)
+    if isinstance(data, Mapping):
+        first = next(iter(data.values()), None)
+        if isinstance(first, Mapping):
+            return "official"
+    return "kit"
+
+
+def _zero_bad(out: np.ndarray) -> int:
+    bad = ~np.isfinite(out).all(-1)
+    out[bad] = 0.0
+    return int(bad.sum())
+
+
+def read_official_openpose(path: Path | str, frames: Iterable[int]) -> tuple[np.ndarray, dict]:
+    """BODY_25 keypoints of person 0 from a release ``openpose_res.pkl``.
+
+    Args:
+        path: the file (dict ``"%06d" -> {"pose": (persons, 25, 3)}``).
+        frames: frame numbers to read.
+
+    Returns:
+        ``(F, 25, 3)`` float64 ``[x, y, conf]`` (zeros: not detected) and
+        ``{"missing_frames": n, "nan_keypoints": n}``.
+    """
+    path = Path(path)
+    res = _load_pickle(path)
+    if not isinstance(res, Mapping):
+        raise SequenceFormatError(f"{path}: expected a dict '%06d' -> {{'pose': (persons, 25, 3)}}")
+    frames = [int(i) for i in frames]
+    out = np.zeros((len(frames), 25, 3))
+    missing = 0
+    for n, i in enumerate(frames):
+        e = _lookup(res, i)
+        pose = e.get("pose") if isinstance(e, Mapping) else e
+        if pose is None:
+            missing += 1
+            continue
+        arr = np.asarray(pose, dtype=np.float64)
+        if arr.size == 0:
+            missing += 1
+            continue
+        arr = arr[None] if arr.ndim == 2 else arr
+        if arr.ndim != 3 or arr.shape[1:] != (25, 3):
+            raise SequenceFormatError(f"{path}: frame {_frame_name(i)} has 'pose' of shape {arr.shape}, "
+                                      f"expected (persons, 25, 3)")
+        out[n] = arr[0]
+    return out, {"missing_frames": missing, "nan_keypoints": _zero_bad(out)}
+
+
+def read_official_alphapose(path: Path | str, frames: Iterable[int]) -> tuple[np.ndarray, dict]:
+    """COCO-18 keypoints of person 0 from a release ``alphapose_res.json``.
+
+    Args:
+        path: the file (dict ``"%06d" -> {"people": [{"pose_keypoints_2d": 54 numbers}, ...]}``).
+        frames: frame numbers to read.
+
+    Returns:
+        ``(F, 18, 3)`` float64 (zeros: not detected) and the counts as
+        :func:`read_official_openpose`.
+    """
+    path = Path(path)
+    res = _load_json(path)
+    if not isinstance(res, Mapping):
+        raise SequenceFormatError(f"{path}: expected a dict '%06d' -> {{'people': [...]}}")
+    frames = [int(i) for i in frames]
+    out = np.zeros((len(frames), 18, 3))
+    missing = 0
+    for n, i in enumerate(frames):
+        e = _lookup(res, i)
+        people = e.get("people") if isinstance(e, Mapping) else None
+        if not people:
+            missing += 1
+            continue
+        try:
+            kp = np.asarray(people[0]["pose_keypoints_2d"], dtype=np.float64)
+        except (KeyError, TypeError, ValueError):
+            raise SequenceFormatError(f"{path}: frame {_frame_name(i)} has no numeric "
+                                      f"people[0]['pose_keypoints_2d']") from None
+        if kp.size != 18 * 3:
+            raise SequenceFormatError(f"{path}: frame {_frame_name(i)} has {kp.size} keypoint values, "
+                                      f"expected 54 (COCO-18)")
+        out[n] = kp.reshape(18, 3)
+    return out, {"missing_frames": missing, "nan_keypoints": _zero_bad(out)}
+
+
+_OFFICIAL_READERS = {"openpose": read_official_openpose, "alphapose": read_official_alphapose}
+
+
+# -- marker poses -------------------------------------------------------------------------------
+def read_marker_poses(path: Path | str, frames: Iterable[int], marker: str = "0"
+                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The ArUco marker -> camera pose per frame from ``markerposes_corrected_all.pkl``.
+
+    Args:
+        path: the file (see the module docstring).
+        frames: frame numbers.
+        marker: marker id (the official code uses ``"0"``).
+
+    Returns:
+        ``R (F, 3, 3)``, ``t (F, 3)`` (``x_cam = R x_marker + t``, metres; identity / zero where
+        the marker was not detected) and ``valid (F,)`` bool.
+    """
+    import cv2
+
+    path = Path(path)
+    res = _load_pickle(path)
+    if not isinstance(res, Mapping):
+        raise SequenceFormatError(f"{path}: expected a dict '%06d' -> {{marker id: {{'rvec', 'tvec'}}}}")
+    frames = [int(i) for i in frames]
+    R = np.tile(np.eye(3), (len(frames), 1, 1))
+    t = np.zeros((len(frames), 3))
+    valid = np.zeros(len(frames), bool)
+    for n, i in enumerate(frames):
+        e = _lookup(res, i)
+        m = e.get(str(marker), e.get(marker)) if isinstance(e, Mapping) else None
+        if m is None:
+            continue
+        try:
+            rvec = np.asarray(m["rvec"], dtype=np.float64).reshape(3)
+            tvec = np.asarray(m["tvec"], dtype=np.float64).reshape(3)
+        except (KeyError, TypeError, ValueError):
+            raise SequenceFormatError(f"{path}: frame {_frame_name(i)} marker {marker!r} lacks 3-vectors "
+                                      f"'rvec' and 'tvec'") from None
+        if not (np.isfinite(rvec).all() and np.isfinite(tvec).all()):
+            continue
+        R[n] = cv2.Rodrigues(rvec)[0]
+        t[n] = tvec
+        valid[n] = True
+    return R, t, valid
+
+
+@dataclass
+class MarkerPoses:
+    """The ArUco board seen by each drone.
+
+    Attributes:
+        frames: ``(F,)`` frame numbers.
+        R_cm: ``(F, V, 3, 3)`` marker -> camera rotation of each view.
+        t_cm: ``(F, V, 3)`` marker -> camera translation (metres).
+        valid: ``(F, V)`` bool, marker detected.
+    """
+
+    frames: np.ndarray
+    R_cm: np.ndarray
+    t_cm: np.ndarray
+    valid: np.ndarray
+
+
+def load_marker_poses(root: Path | str, frames: Iterable[int], marker: str = "0",
+                      num_views: int = 2) -> MarkerPoses:
+    """Marker poses of ``machine_1 .. machine_<num_views>`` for ``frames``."""
+    root = Path(root)
+    frames = np.asarray([int(i) for i in frames], dtype=np.int64)
+    parts = [read_marker_poses(root / f"machine_{v + 1}" / MARKER_POSES_FILE, frames, marker)
+             for v in range(num_views)]
+    return MarkerPoses(frames, np.stack([p[0] for p in parts], 1), np.stack([p[1] for p in parts], 1),
+                       np.stack([p[2] for p in parts], 1))
+
+
+# -- the recording ------------------------------------------------------------------------------
+def load_official_real(root: Path | str, person: int | None = None, split: str | None = None, *,
+                       frames: Iterable[int] | None = None,
+                       detectors: SequenceABC[str] = ("openpose", "alphapose"),
+                       missing_detections: str = "zero", strict: bool = True) -> Sequence:
+    """A split of the real-data release as a :class:`~airpose_lib.data.official_layout.Sequence`.
+
+    Images, calibration and time stamps come from
+    :func:`~airpose_lib.data.official_layout.load_sequence`; detection files in the release's
+    formats are read here, files in the kit's formats by ``load_sequence`` (either works).
+
+    Args:
+        root: the release folder (``machine_1``, ``machine_2``).
+        person: 1 (frames 0-6999) or 2 (frames 8000-14999), or None.
+        split: ``"train"``, ``"test"`` or ``"all"``/None (overridden by ``person``; they must agree).
+        frames: explicit frame numbers instead of a split.
+        detectors: which detection files to read.
+        missing_detections: for kit-format files (``load_sequence``); release-format files always
+            treat an absent frame as not detected.
+        strict: both machines must hold the same frames.
+
+    Returns:
+        The Sequence of the split's frames present on disk; ``meta`` records ``source``,
+        ``split``, ``person`` and each detector file's format; ``info[detector]`` counts the
+        zero-filled frames and keypoints; ``info["missing_images"]`` counts frames of the range
+        without an image.
+
+    Raises:
+        SequenceFormatError: no frame of the range on disk, or a malformed file (names it).
+    """
+    root = Path(root)
+    rng = real_split_frames(split, person)
+    fmt: dict[str, str] = {}
+    for name in detectors:
+        if name not in DETECTOR_FILES:
+            raise ValueError(f"unknown detector {name!r}; known: {tuple(DETECTOR_FILES)}")
+        kinds = {detector_file_format(root / f"machine_{v}" / DETECTOR_FILES[name][0]) for v in (1, 2)}
+        if len(kinds) != 1:
+            raise SequenceFormatError(f"{root}: the {DETECTOR_FILES[name][0]} files of machine_1 and machine_2 "
+                                      f"are in different formats")
+        fmt[name] = kinds.pop()
+    kit = [n for n in detectors if fmt[n] == "kit"]
+    seq = load_sequence(root, None, detectors=kit, missing_detections=missing_detections, strict=strict,
+                        ground_truth=False)
+    wanted = set(int(i) for i in frames) if frames is not None else (set(rng) if rng is not None else None)
+    if wanted is not None:
+        keep = np.isin(seq.frames, np.fromiter(wanted, dtype=np.int64, count=len(wanted)))
+        if not keep.any():
+            span = (f"frames {rng.start}-{rng.stop - 1}" if rng is not None and frames is None
+                    else "the requested frames")
+            raise SequenceFormatError(f"{root}: none of {span} is on disk (images go from {int(seq.frames[0])} to "
+                                      f"{int(seq.frames[-1])})")
+        idx = np.flatnonzero(keep)
+        seq.frames = seq.frames[idx]
+        seq.images = [LazyImages([im.paths[k] for k in idx]) for im in seq.images]
+        seq.keypoints = {k: v[idx] for k, v in seq.keypoints.items()}
+        if seq.timestamps is not None:
+            seq.timestamps = seq.timestamps[idx]
+        seq.info["missing_images"] = len(wanted) - int(keep.sum())
+    else:
+        seq.info["missing_images"] = 0
+    for name in detectors:
+        if fmt[name] != "official":
+            continue
+        per_view, stats = [], {"missing_frames": 0, "nan_keypoints": 0}
+        for v in range(seq.num_views):
+            kp, st = _OFFICIAL_READERS[name](root / f"machine_{v + 1}" / DETECTOR_FILES[name][0], seq.frames)
+            per_view.append(kp)
+            for k in stats:
+                stats[k] += st[k]
+        seq.keypoints[name] = np.stack(per_view, axis=1)
+        seq.info[name] = stats
+    seq.keypoints = {n: seq.keypoints[n] for n in detectors}
+    seq.meta = {**seq.meta, "source": "official_real", "split": split if person is None else PERSON_SPLITS[person],
+                "person": person, "detector_formats": fmt}
+    return seq

@@ -1,0 +1,65 @@
+"""Table I from the official assets: the authors' four synthetic-data checkpoints evaluated on the
+official synthetic test split, through the same evaluation as the kit's own runs.
+
+Needs ``official_checkpoints`` (hmr_synthetic/, muhmr_synthetic/, copenet_singleview_ckpt/,
+copenet_twoview_synthetic_ckpt/), ``official_synthetic`` and the licensed SMPL-X v1.1 files (the
+release's betas are SMPL-X coefficients); see ``data_manifests/``.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+from .ablation import VARIANT_LABELS, AblationRun
+
+__all__ = ["OFFICIAL_CHECKPOINT_FOLDERS", "find_official_checkpoint", "official_ablation"]
+
+#: Kit variant -> folder of the official synthetic-data checkpoint (data_manifests/official_checkpoints.yaml).
+OFFICIAL_CHECKPOINT_FOLDERS = {
+    "baseline": "hmr_synthetic",
+    "multiview": "muhmr_synthetic",
+    "fullcam": "copenet_singleview_ckpt",
+    "airpose": "copenet_twoview_synthetic_ckpt",
+}
+
+
+def find_official_checkpoint(root: str | Path, variant: str) -> Path:
+    """The ``.ckpt`` of a variant under the official checkpoints folder (the last by name if several)."""
+    if variant not in OFFICIAL_CHECKPOINT_FOLDERS:
+        raise ValueError(f"unknown variant {variant!r}; known: {list(OFFICIAL_CHECKPOINT_FOLDERS)}")
+    folder = Path(root) / OFFICIAL_CHECKPOINT_FOLDERS[variant]
+    found = sorted(folder.glob("**/*.ckpt"))
+    if not found:
+        raise FileNotFoundError(
+            f"no .ckpt under {folder}; unpack {OFFICIAL_CHECKPOINT_FOLDERS[variant]} of the official release there "
+            "(data_manifests/official_checkpoints.yaml; `airpose data verify official_checkpoints`)")
+    return found[-1]
+
+
+def official_ablation(checkpoints_root: str | Path, data_root: str | Path, variants=tuple(VARIANT_LABELS),
+                      max_samples: int | None = None, batch_size: int = 8, backbone: str | None = "resnet50",
+                      split_by: str = "auto", body: str = "smplx", input_size: int = 224
+                      ) -> dict[tuple[str, int], AblationRun]:
+    """Evaluate the official checkpoints on the official synthetic test split.
+
+    ``body`` is the body model of the predictions' joints (the paper's: licensed SMPL-X; "open"
+    only for fixtures); ``backbone=None`` detects it from the checkpoint.
+
+    Returns:
+        (variant, 0) -> :class:`AblationRun` (same tables as :func:`~.ablation.run_ablation`), so
+        :func:`airpose_lib.eval.ablation.ablation_table` builds Table I from it unchanged.
+    """
+    from airpose_lib.data.official_synthetic import OfficialSyntheticDataset
+    from airpose_lib.model.official import load_official_checkpoint
+
+    from .evaluate import evaluate
+
+    test = OfficialSyntheticDataset(data_root, split="test", split_by=split_by, input_size=input_size,
+                                    body_source=body)
+    runs = {}
+    for variant in variants:
+        ckpt = find_official_checkpoint(checkpoints_root, variant)
+        model = load_official_checkpoint(ckpt, variant=variant, backbone=backbone).eval()
+        tables = evaluate(model, test, VARIANT_LABELS[variant], batch_size=batch_size, max_samples=max_samples,
+                          body=body)
+        runs[variant, 0] = AblationRun(variant, 0, ckpt, tables)
+    return runs

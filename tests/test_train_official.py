@@ -1,0 +1,64 @@
+"""Table I from official-format assets (airpose_lib.train.official) on fixtures the kit writes."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+
+
+@pytest.fixture(scope="module")
+def official_assets(tmp_path_factory, open_model_files):
+    from airpose_lib.data.official_fixtures import write_official_synthetic_fixture
+    from airpose_lib.model import build_model, write_official_checkpoint
+    from airpose_lib.train.official import OFFICIAL_CHECKPOINT_FOLDERS
+
+    data = tmp_path_factory.mktemp("official_synthetic")
+    write_official_synthetic_fixture(data, n_subjects=2, n_positions=2, num_test_subjects=1)
+    ckpts = tmp_path_factory.mktemp("official_checkpoints")
+    models = {}
+    for variant, folder in OFFICIAL_CHECKPOINT_FOLDERS.items():
+        torch.manual_seed(0)
+        models[variant] = build_model(variant, backbone="resnet18").eval()
+        write_official_checkpoint(models[variant], ckpts / folder / "checkpoints" / "epoch=1.ckpt")
+    return data, ckpts, models
+
+
+def test_official_ablation_evaluates_each_official_checkpoint_like_the_kit(official_assets):
+    from airpose_lib.data.official_synthetic import OfficialSyntheticDataset
+    from airpose_lib.eval.ablation import ablation_table
+    from airpose_lib.train.evaluate import evaluate
+    from airpose_lib.train.official import official_ablation
+
+    data, ckpts, models = official_assets
+    runs = official_ablation(ckpts, data, backbone="resnet18", body="open", input_size=64)
+    assert set(runs) == {(v, 0) for v in models}
+    # the same numbers as evaluating the in-memory kit model on the same split
+    test = OfficialSyntheticDataset(data, split="test", input_size=64, body_source="open")
+    ref = evaluate(models["airpose"], test, "AirPose", body="open")["per_view"]
+    got = runs["airpose", 0].tables["per_view"]
+    np.testing.assert_allclose(got["mpjpe_m"].to_numpy(), ref["mpjpe_m"].to_numpy(), rtol=1e-6)
+    np.testing.assert_allclose(got["mpe_m"].to_numpy(), ref["mpe_m"].to_numpy(), rtol=1e-6)
+    table = ablation_table({k: r.tables["per_view"] for k, r in runs.items()})
+    assert list(table.index) == ["Baseline", "Baseline + Multi-view", "Baseline + Fullcam", "AirPose"]
+
+
+def test_missing_checkpoint_names_the_folder_and_the_manifest(tmp_path):
+    from airpose_lib.train.official import find_official_checkpoint
+
+    with pytest.raises(FileNotFoundError, match="copenet_twoview_synthetic_ckpt.*official_checkpoints.yaml"):
+        find_official_checkpoint(tmp_path, "airpose")
+
+
+def test_training_config_switches_to_the_official_dataset(official_assets):
+    from airpose_lib.data.official_synthetic import OfficialSyntheticDataset
+    from airpose_lib.train.config import load_train_config
+    from airpose_lib.train.loop import default_dataset_factory, prepare_data
+
+    data, _, _ = official_assets
+    cfg = load_train_config("smoke", "airpose")
+    official = cfg.replace(data={"source": "official_synthetic", "root": str(data), "input_size": 64,
+                                 "body_source": "open"})
+    with pytest.raises(ValueError, match="body_source='smplx'"):
+        prepare_data(official)
+    ds = default_dataset_factory(official.replace(body_source="smplx"), "test")
+    assert isinstance(ds, OfficialSyntheticDataset) and len(ds) == 2

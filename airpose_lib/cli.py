@@ -1,7 +1,8 @@
 """The ``airpose`` command. Subcommands mirror the kit's packages.
 
-Implemented: ``body build``, ``body info``, ``data generate``, ``data sequence``, ``train``, ``eval``,
-``prior train``, ``prior info``, ``fit``, ``node``, ``launch``, ``reproduce``. The other packages (``data``,
+Implemented: ``body build``, ``body info``, ``data generate|sequence|list|verify|fetch``, ``train``,
+``eval``, ``prior train``, ``prior info``, ``fit``, ``finetune``, ``predict``, ``node``, ``launch``,
+``reproduce``. The other packages (``data``,
 ``train``, ``eval``, ``fit``, ``node``) get their subcommands when they exist; until then the
 parser does not offer them. Heavy imports (torch, smplx, papermill) happen inside the handlers so
 that ``airpose --help`` stays fast.
@@ -151,7 +152,13 @@ def _add_data_generate(dsub) -> None:
 
 
 # Builders of the `airpose data ...` subcommands, in help order; each adds its parser to the group.
-_DATA_SUBCOMMANDS: tuple[Callable, ...] = (_add_data_generate, _add_data_sequence)
+def _add_data_assets(dsub) -> None:
+    from airpose_lib.assets.cli import add_asset_commands  # list / verify / fetch
+
+    add_asset_commands(dsub)
+
+
+_DATA_SUBCOMMANDS: tuple[Callable, ...] = (_add_data_generate, _add_data_sequence, _add_data_assets)
 
 
 def _add_data(sub) -> None:
@@ -279,69 +286,20 @@ def _add_eval(sub) -> None:
 
 
 # -- prior ----------------------------------------------------------------------------------------
-def _prior_corpus(corpus, stream: int, n_still: int, n_motion: int):
-    """Poses of the kit's generators: ``n_still`` still poses + ~``n_motion`` motion poses, (N, 21, 3)."""
-    import numpy as np
-
-    from airpose_lib.data.motions import evaluate_motion, sample_script
-    from airpose_lib.data.poses import sample_body_pose
-
-    rng = np.random.default_rng([corpus.seed, stream])
-    parts = [sample_body_pose(rng, n_still)] if n_still else []
-    got = 0
-    while got < n_motion:
-        script = sample_script(rng, 60.0)
-        times = np.arange(0.0, script.duration, 1.0 / corpus.motion_fps)
-        theta = evaluate_motion(script, times).theta[: n_motion - got]
-        parts.append(theta)
-        got += len(theta)
-    return np.concatenate(parts).astype(np.float32)
-
-
 def _cmd_prior_train(args: argparse.Namespace) -> int:
-    import time
-
-    import numpy as np
     import torch
 
-    from airpose_lib.body import load_body_model
-    from airpose_lib.body.fast import JointsOnly
-    from airpose_lib.data.poses import within_limits
-    from airpose_lib.fitting import KeypointBody
-    from airpose_lib.prior import evaluate_prior, kit_prior_path, prior_profile, save_prior, train_prior
+    from airpose_lib.prior.build import train_and_save_prior
 
-    try:
-        cfg, corpus = prior_profile(args.profile)
-    except ValueError as e:
-        raise CLIError(str(e)) from None
-    if args.steps is not None:
-        cfg.steps = args.steps
-    if args.seed is not None:
-        cfg.seed = corpus.seed = args.seed
     if args.threads:
         torch.set_num_threads(args.threads)
-    t0 = time.perf_counter()
-    share = corpus.n_poses / max(corpus.n_poses + corpus.n_motion_poses, 1)
-    train_poses = _prior_corpus(corpus, 0, corpus.n_poses, corpus.n_motion_poses)
-    val_still = round(corpus.n_val * share)
-    val_poses = _prior_corpus(corpus, 1, val_still, corpus.n_val - val_still)
-    print(f"corpus: {len(train_poses)} training poses, {len(val_poses)} held out "
-          f"({time.perf_counter() - t0:.1f} s)")
-    joints_fn = None
-    if cfg.w_joints > 0:
-        body = KeypointBody(JointsOnly(load_body_model("open", "neutral")), range(22))
-        zero_beta = torch.zeros(1, body.num_betas)
-        joints_fn = lambda R: body(R, zero_beta)  # noqa: E731 - 22 body joints of the mean shape
-    model, hist = train_prior(train_poses, cfg, joints_fn=joints_fn, progress=not args.quiet)
-    val = evaluate_prior(model, val_poses, joints_fn=joints_fn, n_samples=1000, seed=cfg.seed)
-    samples = val.pop("samples")
-    tol = np.deg2rad(5.0)
-    val["samples_within_joint_limits"] = float(within_limits(samples, tol=tol).mean())
-    out = args.out or kit_prior_path(args.profile)
-    save_prior(model, out, {"profile": args.profile, "train": cfg.to_dict(), "corpus": corpus.to_dict(),
-                            "train_seconds": hist["seconds"], "final_train_loss": hist["loss"][-1],
-                            "validation": val})
-    print(f"trained {cfg.steps} steps in {hist['seconds']:.0f} s")
+    try:
+        out, val = train_and_save_prior(args.profile, args.out, steps=args.steps, seed=args.seed,
+                                        progress=not args.quiet)
+    except ValueError as e:
+        raise CLIError(str(e)) from None
+    print(f"corpus: {val['train_poses']} training poses, {val['val_poses']} held out")
+    print(f"trained {val['steps']} steps in {val['seconds']:.0f} s")
     print(f"held-out reconstruction: mean {val['rot_err_deg']:.2f} deg per joint "
           f"(median {val['rot_err_deg_median']:.2f}, p95 {val['rot_err_deg_p95']:.2f})"
           + (f", joints {val['joint_err_mm']:.1f} mm" if "joint_err_mm" in val else ""))
@@ -556,8 +514,10 @@ def _add_reproduce(sub) -> None:
 # -- entry point ----------------------------------------------------------------------------------
 # Registered subcommand builders, in help order. data, train, eval, fit and node join here as
 # their packages land.
+from airpose_lib.finetune.cli import _add_finetune, _add_predict  # noqa: E402 - argparse only
+
 _SUBCOMMANDS: tuple[Callable, ...] = (_add_body, _add_data, _add_train, _add_eval, _add_prior, _add_fit,
-                                       _add_node, _add_launch, _add_reproduce)
+                                       _add_finetune, _add_predict, _add_node, _add_launch, _add_reproduce)
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -13,7 +13,7 @@ from .config import load_train_config
 from .evaluate import evaluate_checkpoint
 from .loop import TrainResult, default_out_dir, train
 
-__all__ = ["AblationRun", "run_ablation"]
+__all__ = ["AblationRun", "run_ablation", "trained_checkpoint"]
 
 
 @dataclass
@@ -46,18 +46,29 @@ def run_ablation(profile: str, variants: Sequence[str] = tuple(VARIANT_LABELS), 
         on the test split).
     """
     results = {}
-    for variant in variants:
-        for seed in seeds:
-            out = (Path(out_root) / variant / f"seed{seed}") if out_root is not None \
-                else default_out_dir(profile, variant, seed)
-            run = _finished_run(out, profile, variant, seed) or train(
-                variant, profile, seed=seed, out_dir=out, resume=True, overrides={"progress": progress})
-            if run.checkpoint is None:
-                raise RuntimeError(f"training {variant} (seed {seed}) wrote no checkpoint in {out}")
-            tables = evaluate_checkpoint(run.checkpoint, split="test", method=VARIANT_LABELS[variant],
+    # Seed-major: the first seed's four variants are ready first (the real-data notebooks need them).
+    for seed in seeds:
+        for variant in variants:
+            checkpoint = trained_checkpoint(profile, variant, seed, out_root, progress)
+            tables = evaluate_checkpoint(checkpoint, split="test", method=VARIANT_LABELS[variant],
                                          max_samples=eval_max_samples)
-            results[variant, seed] = AblationRun(variant, seed, Path(run.checkpoint), tables)
+            results[variant, seed] = AblationRun(variant, seed, checkpoint, tables)
     return results
+
+
+def trained_checkpoint(profile: str, variant: str, seed: int, out_root: str | Path | None = None,
+                       progress: bool = False) -> Path:
+    """The final checkpoint of a profile's run of ``variant`` (trained, or resumed, first if needed).
+
+    Same run folders as :func:`run_ablation`, so the real-data notebooks reuse Table I's networks.
+    """
+    out = (Path(out_root) / variant / f"seed{seed}") if out_root is not None \
+        else default_out_dir(profile, variant, seed)
+    run = _finished_run(out, profile, variant, seed) or train(
+        variant, profile, seed=seed, out_dir=out, resume=True, overrides={"progress": progress})
+    if run.checkpoint is None:
+        raise RuntimeError(f"training {variant} (seed {seed}) wrote no checkpoint in {out}")
+    return Path(run.checkpoint)
 
 
 def _finished_run(out: Path, profile: str, variant: str, seed: int) -> TrainResult | None:

@@ -31,6 +31,7 @@ METHOD_COLORS: dict[str, str] = {
     "Baseline+Fullcam": "#CC79A7",     # reddish purple
     "AirPose": "#0072B2",              # blue
     "AirPose+": "#D55E00",             # vermillion
+    "SPIN-style": "#000000",           # black: the crop-only weak-perspective regressor
     "Ground truth": "#009E73",         # bluish green
 }
 

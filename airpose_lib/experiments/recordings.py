@@ -1,0 +1,380 @@
+"""The paper's real-data section on two-drone recordings, measured against ground truth.
+
+Steps (each cached under ``out_dir``, so notebooks 03, 04 and 05 share one run):
+
+1. the recordings: the profile's generated persons (``airpose data sequence``), or user-given
+   folders in the official real-data layout;
+2. Table I's Baseline and AirPose networks of the profile (:func:`~airpose_lib.train.ablation.trained_checkpoint`);
+3. fine-tuning of both on person 1's 2D detections (:mod:`airpose_lib.finetune`);
+4. per-frame estimates on every person, before and after fine-tuning;
+5. AirPose+ on every person, initialised from the fine-tuned AirPose;
+6. camera-frame joints of every estimate and, where ground truth exists, the error tables.
+
+Methods (keys of :attr:`RecordingExperiment.estimates`):
+
+- ``"Baseline (pre-trained)"``: the Baseline network trained on still frames only. It is the
+  HMR/SPIN architecture (crop only, weak-perspective camera), so it also stands in for the
+  paper's "vanilla SPIN" in the depth comparison (SPIN's weights cannot be used here).
+- ``"AirPose (pre-trained)"``, ``"Baseline"``, ``"AirPose"`` (fine-tuned on person 1),
+  ``"AirPose+"`` (AirPose's estimates refined offline).
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+__all__ = ["METHODS", "RecordingExperiment", "default_experiment_dir", "run_recording_experiment",
+           "body_vertices", "official_recordings", "recordings_for", "depth_summary", "overlay_inputs", "airpose_plus_checks", "markdown_table"]
+
+#: Estimate names in plotting order.
+METHODS = ("Baseline (pre-trained)", "AirPose (pre-trained)", "Baseline", "AirPose", "AirPose+")
+_NETWORKS = {"Baseline (pre-trained)": ("baseline", False), "AirPose (pre-trained)": ("airpose", False),
+             "Baseline": ("baseline", True), "AirPose": ("airpose", True)}
+
+
+def default_experiment_dir(profile: str) -> Path:
+    """``runs/recordings/<profile>`` (relative to the working directory, like training runs)."""
+    return Path("runs") / "recordings" / profile
+
+
+@dataclass
+class RecordingExperiment:
+    """Everything the real-data notebooks plot and tabulate.
+
+    Attributes:
+        profile: the reproduction profile.
+        out_dir: cache folder.
+        sequences: person -> :class:`airpose_lib.data.official_layout.Sequence`.
+        estimates: person -> method -> per-view parameters ``phi (F, V, 3, 3)``, ``tau (F, V, 3)``,
+            ``theta (F, V, 21, 3, 3)``, ``beta (F, V, 10)`` (numpy), plus ``valid (F, V)``.
+        joints: person -> method -> ``(F, V, 22, 3)`` camera-frame joints.
+        tables: one row per (person, method) of :func:`airpose_lib.eval.recordings.recording_table`
+            (empty without ground truth).
+        checkpoints: method -> network checkpoint used.
+        fit_info: person -> AirPose+ run summary (seconds, skipped frames, loss).
+        finetune_info: variant -> fine-tuning summary.
+    """
+
+    profile: str
+    out_dir: Path
+    sequences: dict
+    estimates: dict
+    joints: dict
+    tables: pd.DataFrame
+    checkpoints: dict
+    fit_info: dict = field(default_factory=dict)
+    finetune_info: dict = field(default_factory=dict)
+
+    @property
+    def persons(self) -> list[str]:
+        return list(self.sequences)
+
+    def time_s(self, person: str) -> np.ndarray:
+        """``(F,)`` seconds since the first frame (UAV1's timestamps, else frame / fps)."""
+        seq = self.sequences[person]
+        if seq.timestamps is not None:
+            return seq.timestamps[:, 0] - seq.timestamps[0, 0]
+        fps = float(seq.meta.get("fps", 30.0)) if seq.meta else 30.0
+        return (seq.frames - seq.frames[0]) / fps
+
+    def has_ground_truth(self, person: str) -> bool:
+        return self.sequences[person].ground_truth is not None
+
+
+def _stamp(path: Path) -> str:
+    st = Path(path).stat()
+    return f"{Path(path).resolve()}:{st.st_size}:{st.st_mtime_ns}"
+
+
+def _key(*parts) -> str:
+    return hashlib.sha256(json.dumps(parts, sort_keys=True, default=str).encode()).hexdigest()[:16]
+
+
+def _slug(method: str) -> str:
+    return "".join(c if c.isalnum() else "_" for c in method.lower()).strip("_").replace("__", "_")
+
+
+def _cached_npz(path: Path, key: str):
+    if not path.is_file():
+        return None
+    try:
+        with np.load(path, allow_pickle=False) as d:
+            if str(d["cache_key"]) != key:
+                return None
+            return {k: d[k] for k in d.files if k != "cache_key"}
+    except (OSError, ValueError, KeyError):
+        return None
+
+
+def _save_npz(path: Path, key: str, arrays: dict) -> None:
+    from airpose_lib.body.cache import atomic_path
+
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with atomic_path(path) as tmp:
+        with open(tmp, "wb") as fh:
+            np.savez(fh, cache_key=np.array(key), **{k: np.asarray(v) for k, v in arrays.items()})
+
+
+def _network_estimate(checkpoint: Path, sequence, out: Path) -> dict:
+    from airpose_lib.finetune import predict_sequence
+    from airpose_lib.finetune.network import load_network
+
+    key = _key("predict", _stamp(checkpoint), str(sequence.root), sequence.frames.tolist())
+    cached = _cached_npz(out, key)
+    if cached is not None:
+        return cached
+    model, _, size = load_network(checkpoint)
+    pred = predict_sequence(model, sequence, input_size=size)
+    arrays = {k: np.asarray(v) for k, v in pred.items() if k != "provenance"}
+    _save_npz(out, key, arrays)
+    return arrays
+
+
+def _airpose_plus(sequence, init: dict, profile: str, out: Path, progress: bool) -> tuple[dict, dict]:
+    import torch
+
+    from airpose_lib.fitting import airpose_plus, fitting_profile
+    from airpose_lib.prior import load_prior
+    from airpose_lib.prior.build import ensure_prior
+
+    cfg = fitting_profile(profile)
+    prior_path = ensure_prior(profile, progress=progress)
+    key = _key("airpose+", cfg.to_dict(), _stamp(prior_path), str(sequence.root),
+               hashlib.sha256(np.ascontiguousarray(init["tau"]).tobytes()).hexdigest())
+    cached = _cached_npz(out, key)
+    if cached is not None:
+        info = json.loads(str(cached.pop("info")))
+        return cached, info
+    prior = load_prior("kit", prior_path)
+    with torch.no_grad():
+        start = {k: init[k] for k in ("phi", "tau", "theta", "beta")}
+    res = airpose_plus(sequence.keypoints, sequence.K, start, prior=prior, config=cfg, progress=progress)
+    arrays = res.to_numpy()
+    info = {"seconds": res.seconds, "iterations": cfg.iterations, "frames": int(len(arrays["kept"])),
+            "skipped_frames": len(res.skipped_frames), "final_loss": float(res.history["loss"][-1])}
+    _save_npz(out, key, {**arrays, "info": np.array(json.dumps(info))})
+    return arrays, info
+
+
+def body_vertices(params: dict, body_model, index, view: int) -> np.ndarray:
+    """Camera-frame vertices of an estimate at some frames of one view.
+
+    Args:
+        params: per-view parameters (see :class:`RecordingExperiment`).
+        body_model: a neutral ``smplx.SMPLX``.
+        index: frame positions (n,).
+        view: the view.
+
+    Returns:
+        ``(n, N, 3)`` vertices, ``V = phi V0(theta, beta) + tau``.
+    """
+    import torch
+
+    from airpose_lib.eval.recordings import per_view_params
+    from airpose_lib.model.smplx_params import posed_joints_and_vertices
+
+    p = per_view_params(params)
+    idx = np.asarray(index)
+    part = {k: torch.as_tensor(np.ascontiguousarray(v[idx, view]), dtype=body_model.v_template.dtype)
+            for k, v in p.items()}
+    with torch.no_grad():
+        return posed_joints_and_vertices(body_model, part)["vertices"].double().numpy()
+
+
+def official_recordings(root: str | Path) -> dict:
+    """The official real-data release as the experiment's recordings: person 1 (frames 0-6999,
+    fine-tuning) and person 2 (frames 8000-14999, test), without ground truth."""
+    from airpose_lib.data.official_real import load_official_real
+
+    return {"person1": load_official_real(root, person=1), "person2": load_official_real(root, person=2)}
+
+
+def recordings_for(source, profile: str) -> dict | None:
+    """Recordings for a resolved data source (:func:`airpose_lib.assets.resolve_data_source`):
+    None (the profile's generated recordings) or the official release's two persons."""
+    if getattr(source, "source", "generated") != "official":
+        return None
+    return official_recordings(source.roots["official_real"])
+
+
+def run_recording_experiment(profile: str = "smoke", out_dir: str | Path | None = None, *,
+                             sequences: dict | None = None, seed: int | None = None,
+                             fine_tune_on: str = "person1", progress: bool = False) -> RecordingExperiment:
+    """Run (or load the cached steps of) the real-data experiment.
+
+    Args:
+        profile: sizes of the recordings, networks, fine-tuning and AirPose+ (profile YAML).
+        out_dir: cache folder (default :func:`default_experiment_dir`).
+        sequences: person -> recording folder in the official layout, or a loaded
+            :class:`~airpose_lib.data.official_layout.Sequence` (default: the profile's generated
+            recordings, made if missing).
+        seed: training seed of the networks (default: the profile's).
+        fine_tune_on: the person whose detections fine-tune the networks (paper: person 1).
+    """
+    import dataclasses
+
+    import torch
+
+    from airpose_lib.body import load_body_model
+    from airpose_lib.data.official_layout import load_sequence
+    from airpose_lib.eval.recordings import body_joints, recording_table
+    from airpose_lib.finetune import finetune, finetune_config
+    from airpose_lib.prior import load_prior
+    from airpose_lib.prior.build import ensure_prior
+    from airpose_lib.train.ablation import trained_checkpoint
+    from airpose_lib.train.config import load_train_config
+
+    out = Path(out_dir) if out_dir is not None else default_experiment_dir(profile)
+    if sequences is None:
+        from airpose_lib.data.sequences import ensure_sequences
+
+        sequences = ensure_sequences(profile, progress=progress)
+    seqs = {name: s if hasattr(s, "keypoints") else load_sequence(s) for name, s in sequences.items()}
+    if fine_tune_on not in seqs:
+        raise ValueError(f"fine_tune_on={fine_tune_on!r} is not one of the recordings {list(seqs)}")
+    if seed is None:
+        seed = load_train_config(profile, "airpose").seed
+
+    checkpoints, finetune_info = {}, {}
+    ft_cfg = finetune_config(profile)
+    tuning = seqs[fine_tune_on]
+    if ft_cfg.frames is None and "person" in tuning.meta:  # an official split: fine-tune on its frames only
+        ft_cfg = dataclasses.replace(ft_cfg, frames=[int(tuning.frames[0]), int(tuning.frames[-1]) + 1])
+    prior = load_prior("kit", ensure_prior(profile, progress=progress))
+    for variant, label in (("baseline", "Baseline"), ("airpose", "AirPose")):
+        pre = trained_checkpoint(profile, variant, seed, progress=progress)
+        checkpoints[f"{label} (pre-trained)"] = pre
+        res = finetune(pre, tuning.root, out / "finetune" / variant, ft_cfg, progress=progress, prior=prior)
+        checkpoints[label] = Path(res.checkpoint)
+        finetune_info[label] = {"steps": res.step, "frames": res.num_frames,
+                                "j2d_before": res.initial.get("j2d"),
+                                "j2d_after": (res.final or {}).get("j2d")}
+
+    estimates, joints, fit_info, tables = {}, {}, {}, []
+    body = load_body_model("open", "neutral", dtype=torch.float32)
+    for person, seq in seqs.items():
+        est = {}
+        for method in _NETWORKS:
+            est[method] = _network_estimate(checkpoints[method], seq,
+                                            out / "estimates" / person / f"{_slug(method)}.npz")
+        plus, info = _airpose_plus(seq, est["AirPose"], profile, out / "estimates" / person / "airpose_plus.npz",
+                                   progress)
+        F, V = est["AirPose"]["phi"].shape[:2]
+        plus = dict(plus)
+        plus["theta"] = np.broadcast_to(plus["theta"][:, None], (F, V, 21, 3, 3))
+        plus["beta"] = np.broadcast_to(plus["beta"], (F, V, plus["beta"].shape[-1]))
+        plus["valid"] = np.broadcast_to(plus["kept"][:, None], (F, V))
+        est["AirPose+"] = plus
+        fit_info[person] = info
+        estimates[person] = est
+        joints[person] = {m: body_joints(e, body) for m, e in est.items()}
+        if seq.ground_truth is not None:
+            mask = np.all([np.all(e["valid"], axis=1) for m, e in est.items() if m in _NETWORKS], axis=0)
+            fps = float(seq.ground_truth.get("fps", 30.0))
+            t = recording_table(est, seq.ground_truth, joints[person], fps=fps, sequence=person, mask=mask)
+            tables.append(t)
+    table = pd.concat(tables, ignore_index=True) if tables else pd.DataFrame()
+    return RecordingExperiment(profile=profile, out_dir=out, sequences=seqs, estimates=estimates, joints=joints,
+                               tables=table, checkpoints=checkpoints, fit_info=fit_info,
+                               finetune_info=finetune_info)
+
+
+# -- what the notebooks show ------------------------------------------------------------------------
+def depth_summary(exp: RecordingExperiment, methods: dict[str, str]) -> pd.DataFrame:
+    """Depth (z of the person in each camera frame) per person, method and UAV.
+
+    Args:
+        exp: the experiment.
+        methods: label -> estimate name (e.g. ``{"SPIN-style": "Baseline (pre-trained)"}``).
+
+    Returns:
+        columns ``sequence, method, view, z_mean_m, z_err_m`` (mean |z error|, NaN without ground
+        truth), ``z_err_std_m`` and ``dz_per_frame_m`` (mean |z_t - z_{t-1}|: the smoothness the
+        paper's figure shows), and ``dz_per_frame_gt_m``.
+    """
+    rows = []
+    for person in exp.persons:
+        gt = exp.sequences[person].ground_truth
+        for label, name in methods.items():
+            z = exp.estimates[person][name]["tau"][..., 2]  # (F, V)
+            for v in range(z.shape[1]):
+                row = {"sequence": person, "method": label, "view": f"UAV{v + 1}",
+                       "z_mean_m": float(z[:, v].mean()),
+                       "dz_per_frame_m": float(np.abs(np.diff(z[:, v])).mean())}
+                if gt is not None:
+                    zg = gt["tau"][:, v, 2]
+                    row.update(z_err_m=float(np.abs(z[:, v] - zg).mean()),
+                               z_err_std_m=float(np.std(z[:, v] - zg)),
+                               dz_per_frame_gt_m=float(np.abs(np.diff(zg)).mean()))
+                rows.append(row)
+    return pd.DataFrame(rows)
+
+
+def overlay_inputs(exp: RecordingExperiment, person: str, methods, n_frames: int = 3):
+    """Frames, camera-frame vertices and zoom points for :func:`airpose_lib.viz.trajectories.plot_mesh_overlays`.
+
+    Frames are spread evenly over the recording (first and last excluded).
+
+    Returns:
+        ``images (n, V, H, W, 3)``, ``vertices {method: (n, V, N, 3)}``, ``faces (M, 3)``,
+        ``K (V, 3, 3)``, frame labels, ``zoom (n, V, J, 2)`` (the detections' confident joints).
+    """
+    from airpose_lib.body import load_body_model
+
+    seq = exp.sequences[person]
+    F, V = seq.num_frames, seq.num_views
+    idx = np.linspace(0, F - 1, n_frames + 2).round().astype(int)[1:-1]
+    images = np.stack([np.stack([seq.image(int(i), v) for v in range(V)]) for i in idx])
+    body = load_body_model("open", "neutral")
+    vertices = {m: np.stack([body_vertices(exp.estimates[person][m], body, idx, v) for v in range(V)], axis=1)
+                for m in methods}
+    kp = seq.keypoints["openpose"][idx].copy()  # (n, V, 25, 3)
+    zoom = np.where(kp[..., 2:3] > 0.2, kp[..., :2], np.nan)
+    for i in range(len(idx)):  # no confident joint: zoom on the first method's projected mesh
+        for v in range(V):
+            if np.all(np.isnan(zoom[i, v])):
+                vv = vertices[methods[0]][i, v]
+                uv = (vv @ seq.K[v].T)[:, :2] / vv[:, 2:3]
+                zoom[i, v, :2] = [uv.min(0), uv.max(0)]
+    labels = [f"frame {int(seq.frames[i])}" for i in idx]
+    return images, vertices, np.asarray(body.faces, dtype=np.int64), seq.K, labels, zoom
+
+
+def airpose_plus_checks(table: pd.DataFrame, person: str | None = None) -> pd.DataFrame:
+    """The paper's expectations about AirPose+, as measured (one row per claim and person).
+
+    AirPose+ vs AirPose: lower MPJPE, lower relative-camera translation and rotation errors, lower
+    jitter; fine-tuning: lower MPJPE than the pre-trained network on the test person.
+    """
+    rows = []
+    persons = [person] if person else list(table["sequence"].unique())
+    claims = [("AirPose+ MPJPE < AirPose", "AirPose+", "AirPose", "mpjpe_m"),
+              ("AirPose+ relative-camera translation error < AirPose", "AirPose+", "AirPose", "rel_t_err_m"),
+              ("AirPose+ relative-camera rotation error < AirPose", "AirPose+", "AirPose", "rel_rot_deg"),
+              ("AirPose+ jitter < AirPose", "AirPose+", "AirPose", "jitter_mps2"),
+              ("fine-tuned AirPose MPJPE < pre-trained", "AirPose", "AirPose (pre-trained)", "mpjpe_m"),
+              ("fine-tuned Baseline MPJPE < pre-trained", "Baseline", "Baseline (pre-trained)", "mpjpe_m"),
+              ("AirPose position error < Baseline (UAV1)", "AirPose", "Baseline", "mpe_uav1_m")]
+    for p in persons:
+        t = table[table["sequence"] == p].set_index("method")
+        for claim, a, b, col in claims:
+            if a in t.index and b in t.index and col in t:
+                va, vb = float(t.loc[a, col]), float(t.loc[b, col])
+                rows.append({"sequence": p, "claim": claim, "value": va, "reference": vb,
+                             "holds": bool(va < vb)})
+    out = pd.DataFrame(rows)
+    return out[["sequence", "claim", "value", "reference", "holds"]] if not out.empty else out
+
+
+def markdown_table(table: pd.DataFrame, digits: int = 3) -> str:
+    """A GitHub-flavoured Markdown table of a flat DataFrame (no ``tabulate`` needed)."""
+    def fmt(v):
+        return f"{v:.{digits}f}" if isinstance(v, float) else str(v)
+    lines = ["| " + " | ".join(map(str, table.columns)) + " |", "|" + "---|" * len(table.columns)]
+    lines += ["| " + " | ".join(fmt(v) for v in row) + " |" for row in table.astype(object).itertuples(index=False)]
+    return "\n".join(lines) + "\n"

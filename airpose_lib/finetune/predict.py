@@ -1,0 +1,440 @@
+r"""Run a network over a recording: detections -> boxes -> crops -> per-view SMPL-X parameters.
+
+:func:`predict_sequence` builds every view's crop exactly as a drone does
+(:func:`airpose_lib.runtime.source.person_box` on the detections, then
+:func:`airpose_lib.runtime.offline.offline_inputs` / ``crop_input``), runs the backbone on all
+views of a batch of frames and the regressor on all views jointly (so the multi-view variants
+exchange their messages, as :meth:`AirPoseNet.forward`), and returns camera-frame parameters per
+view (:func:`airpose_lib.model.to_smplx_params`).
+
+Frames without a usable detection in a view (fewer than 4 keypoints above the box confidence)
+reuse that view's previous box, as a drone does; leading frames take the first box the view
+has. Their outputs are computed from that stale crop and flagged ``valid[f, v] = False``; a view
+without any detection in the selection is an error.
+
+The predictions file (:func:`save_predictions`, :func:`load_predictions`) is an ``.npz``:
+
+==============  =====================  ===========================================================
+key             shape                  meaning
+==============  =====================  ===========================================================
+``phi``         (F, V, 3, 3) float32   root rotation, body -> camera v
+``tau``         (F, V, 3) float32      translation of the model origin, camera v, metres
+``theta``       (F, V, 21, 3, 3)       body joint rotations predicted by view v
+``beta``        (F, V, 10) float32     shape predicted by view v
+``frames``      (F,) int64             image numbers of the recording (strictly increasing)
+``P``           (F, V, 3) float32      crop vectors ``[bx, by, s]``
+``boxes``       (F, V, 4) float32      person boxes ``[x0, y0, x1, y1]``, full-image pixels
+``valid``       (F, V) bool            the box came from this frame's detections
+``provenance``  () str                 JSON: kit version, sequence, detector, input size, ...
+==============  =====================  ===========================================================
+
+It is what ``airpose fit --init`` and :func:`airpose_lib.fitting.init_from_views` read (the first
+five keys). Parameters follow the paper's convention ``X_cam = phi X0(theta, beta) + tau``.
+"""
+from __future__ import annotations
+
+import json
+from collections.abc import Mapping, Sequence as SequenceABC
+from pathlib import Path
+
+import numpy as np
+import torch
+from torch import Tensor, nn
+
+from airpose_lib.body.cache import atomic_path
+
+__all__ = [
+    "PREDICTION_KEYS",
+    "REQUIRED_PREDICTION_KEYS",
+    "PredictionFormatError",
+    "regress_features",
+    "detection_boxes",
+    "frames_in_range",
+    "sequence_features",
+    "predict_sequence",
+    "validate_predictions",
+    "save_predictions",
+    "load_predictions",
+]
+
+REQUIRED_PREDICTION_KEYS = ("phi", "tau", "theta", "beta", "frames")
+PREDICTION_KEYS = REQUIRED_PREDICTION_KEYS + ("P", "boxes", "valid", "provenance")
+
+
+class PredictionFormatError(ValueError):
+    """A predictions file or dict does not follow the contract; the message names the file."""
+
+
+# -- the network after the backbone ---------------------------------------------------------------
+def regress_features(model: nn.Module, feat: Tensor, P: Tensor | None = None,
+                     input_size: int | None = None) -> dict:
+    """The regressor part of :meth:`AirPoseNet.forward` on given backbone features.
+
+    All views of a sample iterate together; the multi-view variants fuse the other views'
+    messages after each iteration exactly as the batched forward does (the same calls in the
+    same order, so eval-mode outputs equal ``model(images, P)``).
+
+    Args:
+        model: an :class:`~airpose_lib.model.AirPoseNet`.
+        feat: ``(B, V, C)`` backbone features (:meth:`AirPoseNet.features`).
+        P: ``(B, V, 3)`` crop vectors (needed by Fullcam and AirPose).
+        input_size: crop side S (stored as ``out["input_size"]`` for ``to_smplx_params``).
+
+    Returns:
+        the dict of :meth:`AirPoseNet.forward`: phi6d (B, V, 6), theta6d (B, V, 21, 6),
+        beta (B, V, 10), tau (B, V, 3) or cam (B, V, 3), messages, and input_size if given.
+    """
+    from airpose_lib.model import fuse_messages
+
+    if feat.dim() != 3:
+        raise ValueError(f"features must be (B, V, C), got {tuple(feat.shape)}")
+    B, V = feat.shape[:2]
+    state = model.initial_state((B, V))
+    other = model.mean_message((B, V)) if model.spec.multiview else None
+    messages = []
+    for k in range(model.num_iterations):
+        if k > 0 and model.spec.multiview and V > 1:
+            other = fuse_messages(messages[-1])
+        state = model.iterate(feat, P, state, other)
+        messages.append(model.message(state))
+    out = model.decode(state)
+    out["messages"] = messages
+    if input_size is not None:
+        out["input_size"] = int(input_size)
+    return out
+
+
+# -- detections -> boxes ----------------------------------------------------------------------------
+def detection_boxes(keypoints: np.ndarray, image_sizes: SequenceABC[tuple[int, int]], *,
+                    min_confidence: float = 0.2, margin_px: float = 20.0,
+                    where: str = "the sequence") -> tuple[np.ndarray, np.ndarray]:
+    """Person boxes of every frame and view from one detector's keypoints.
+
+    Args:
+        keypoints: ``(F, V, J, 3)`` ``[x, y, confidence]`` full-image pixels.
+        image_sizes: ``(W, H)`` of each of the V views.
+        min_confidence, margin_px: as :func:`airpose_lib.runtime.source.person_box`.
+        where: named in the error message (e.g. the sequence folder).
+
+    Returns:
+        ``boxes (F, V, 4)`` float64 ``[x0, y0, x1, y1]`` and ``valid (F, V)`` bool (False: no
+        detection, the box is the view's previous one, or for leading frames its first one).
+
+    Raises:
+        ValueError: a view has no usable detection in any frame.
+    """
+    from airpose_lib.runtime.source import person_box
+
+    kp = np.asarray(keypoints, np.float64)
+    if kp.ndim != 4 or kp.shape[-1] != 3:
+        raise ValueError(f"keypoints must be (F, V, J, 3), got {kp.shape}")
+    F, V = kp.shape[:2]
+    if len(image_sizes) != V:
+        raise ValueError(f"{len(image_sizes)} image sizes for {V} views")
+    boxes = np.zeros((F, V, 4))
+    valid = np.zeros((F, V), bool)
+    for v in range(V):
+        last = None
+        for f in range(F):
+            box = person_box(kp[f, v], image_sizes[v], min_confidence, margin_px)
+            if box is not None:
+                valid[f, v] = True
+                last = box
+            if last is not None:
+                boxes[f, v] = last
+        if not valid[:, v].any():
+            raise ValueError(f"{where}: view {v} has no frame with at least 4 keypoints of confidence >= "
+                             f"{min_confidence}; check the detector files or lower the box confidence")
+        first = int(np.argmax(valid[:, v]))
+        boxes[:first, v] = boxes[first, v]  # leading frames: the first box the view has
+    return boxes, valid
+
+
+class _Views:
+    """The views of a loaded sequence as the runtime's frame sources (only ``image`` and ``K`` are
+    used: the boxes are always given to ``offline_inputs``)."""
+
+    class _View:
+        def __init__(self, seq, v: int) -> None:
+            self._seq, self._v = seq, v
+            self.K = np.asarray(seq.K[v], np.float64)
+
+        def image(self, i: int) -> np.ndarray:
+            return self._seq.image(i, self._v)
+
+        def keypoints(self, i: int):  # pragma: no cover - offline_inputs gets the boxes
+            return None
+
+    def __init__(self, seq) -> None:
+        self.views = [self._View(seq, v) for v in range(seq.num_views)]
+
+    @property
+    def num_views(self) -> int:
+        return len(self.views)
+
+    def view(self, v: int):
+        return self.views[v]
+
+
+def frames_in_range(root: str | Path, start: int | None, stop: int | None) -> np.ndarray:
+    """Image numbers ``start <= n < stop`` present in every view of the recording at ``root``
+    (None: open end), for ``load_sequence(root, frames=...)``. Raises ``ValueError`` if none."""
+    from airpose_lib.data.official_layout import load_sequence
+
+    numbers = np.asarray(load_sequence(root, detectors=(), ground_truth=False).frames)  # image numbers only
+    lo = numbers[0] if start is None else start
+    hi = numbers[-1] + 1 if stop is None else stop
+    sel = numbers[(numbers >= lo) & (numbers < hi)]
+    if sel.size == 0:
+        raise ValueError(f"{root}: no image numbered in [{lo}, {hi}) (the recording has {numbers[0]}..{numbers[-1]})")
+    return sel
+
+
+def _positions(sequence, frames) -> np.ndarray:
+    """Positions in ``sequence.frames`` of the requested image numbers (None: all)."""
+    numbers = np.asarray(sequence.frames)
+    if frames is None:
+        return np.arange(len(numbers))
+    want = np.asarray(list(frames), np.int64).reshape(-1)
+    pos = {int(n): i for i, n in enumerate(numbers)}
+    missing = [int(n) for n in want if int(n) not in pos]
+    if missing:
+        raise ValueError(f"{sequence.root}: frames {missing[:5]} are not in the loaded sequence "
+                         f"(it has {len(numbers)} frames, {numbers[0]}..{numbers[-1]})")
+    out = np.array([pos[int(n)] for n in want], np.int64)
+    if len(out) == 0:
+        raise ValueError(f"{sequence.root}: empty frame selection")
+    if np.any(np.diff(numbers[out]) <= 0):
+        raise ValueError("frames must be strictly increasing image numbers")
+    return out
+
+
+def _model_device(model: nn.Module) -> torch.device:
+    return next(model.parameters()).device
+
+
+def _resolve_input_size(model: nn.Module, input_size: int | None) -> int:
+    size = input_size if input_size is not None else getattr(model, "input_size", None)
+    if size is None:
+        raise ValueError("input_size unknown: pass the crop size the network was trained with "
+                         "(airpose_lib.finetune.load_network returns it from a checkpoint)")
+    return int(size)
+
+
+# -- the sequence pass ----------------------------------------------------------------------------
+@torch.no_grad()
+def sequence_features(model: nn.Module, sequence, *, input_size: int, detector: str = "openpose",
+                      frames=None, batch_size: int = 16, box_min_confidence: float = 0.2,
+                      margin_px: float = 20.0, progress: bool = False) -> dict[str, np.ndarray]:
+    """Backbone features of every frame and view (eval mode, no gradients).
+
+    Args: as :func:`predict_sequence`.
+
+    Returns:
+        ``features (F, V, C)`` float32, ``P (F, V, 3)`` float32, ``boxes (F, V, 4)`` float32,
+        ``valid (F, V)`` bool, ``frames (F,)`` int64 image numbers, ``positions (F,)`` int64 rows
+        of ``sequence``.
+    """
+    from airpose_lib.runtime.offline import offline_inputs
+
+    if detector not in sequence.keypoints:
+        raise ValueError(f"{sequence.root}: no {detector!r} detections loaded (have {sorted(sequence.keypoints)})")
+    if batch_size < 1:
+        raise ValueError("batch_size must be >= 1")
+    pos = _positions(sequence, frames)
+    V = sequence.num_views
+    sizes = []
+    for v in range(V):
+        h, w = sequence.image(int(pos[0]), v).shape[:2]
+        sizes.append((w, h))
+    boxes, valid = detection_boxes(np.asarray(sequence.keypoints[detector])[pos], sizes,
+                                   min_confidence=box_min_confidence, margin_px=margin_px,
+                                   where=f"{sequence.root} ({detector})")
+    was_training = model.training
+    model.eval()
+    device = _model_device(model)
+    dtype = model.init_beta.dtype
+    source = _Views(sequence)
+    feats, Ps = [], []
+    chunks = range(0, len(pos), batch_size)
+    if progress:
+        from tqdm.auto import tqdm
+
+        chunks = tqdm(chunks, desc="features", unit="batch")
+    try:
+        for a in chunks:
+            rows = pos[a:a + batch_size]
+            index = np.repeat(rows[:, None], V, axis=1)
+            crops, P, _ = offline_inputs(source, index, input_size, boxes=boxes[a:a + batch_size])
+            x = torch.from_numpy(crops).to(device=device, dtype=dtype)
+            f = model.features(x.flatten(0, 1)).unflatten(0, (len(rows), V))
+            feats.append(f.float().cpu())
+            Ps.append(torch.from_numpy(P))
+    finally:
+        model.train(was_training)
+    return {"features": torch.cat(feats).numpy(), "P": torch.cat(Ps).numpy().astype(np.float32),
+            "boxes": boxes.astype(np.float32), "valid": valid,
+            "frames": np.asarray(sequence.frames, np.int64)[pos], "positions": pos}
+
+
+@torch.no_grad()
+def predict_sequence(model: nn.Module, sequence, *, input_size: int | None = None, detector: str = "openpose",
+                     frames=None, batch_size: int = 16, features_only: bool = False,
+                     box_min_confidence: float = 0.2, margin_px: float = 20.0,
+                     provenance: Mapping | None = None, progress: bool = False) -> dict:
+    """Run a network over a recording.
+
+    Args:
+        model: an :class:`~airpose_lib.model.AirPoseNet` (any variant; run in eval mode, its
+            training flag is restored afterwards).
+        sequence: a :class:`~airpose_lib.data.official_layout.Sequence` (``load_sequence``).
+        input_size: crop side S the network was trained with (default: ``model.input_size``).
+        detector: keypoints the boxes come from (``openpose`` or ``alphapose``).
+        frames: image numbers to run (a subset of ``sequence.frames``, increasing); None: all.
+        batch_size: frames per backbone batch (each holds V crops).
+        features_only: return the backbone features instead of parameters (see
+            :func:`sequence_features`; what fine-tuning caches).
+        box_min_confidence, margin_px: :func:`airpose_lib.runtime.source.person_box` settings
+            (the runtime's defaults: 0.2 and 20 px).
+        provenance: extra JSON-able facts stored in the ``provenance`` string (e.g. the checkpoint).
+        progress: tqdm bar over the batches.
+
+    Returns:
+        the predictions contract (module docstring): numpy arrays ``phi``, ``tau``, ``theta``,
+        ``beta``, ``frames``, ``P``, ``boxes``, ``valid`` and the ``provenance`` JSON string.
+    """
+    from airpose_lib import __version__
+    from airpose_lib.model import to_smplx_params
+
+    size = _resolve_input_size(model, input_size)
+    cache = sequence_features(model, sequence, input_size=size, detector=detector, frames=frames,
+                              batch_size=batch_size, box_min_confidence=box_min_confidence,
+                              margin_px=margin_px, progress=progress)
+    if features_only:
+        return cache
+    was_training = model.training
+    model.eval()
+    device = _model_device(model)
+    dtype = model.init_beta.dtype
+    K = torch.as_tensor(np.asarray(sequence.K), dtype=dtype, device=device)  # (V, 3, 3)
+    parts: dict[str, list[Tensor]] = {k: [] for k in ("phi", "tau", "theta", "beta")}
+    F = len(cache["frames"])
+    try:
+        for a in range(0, F, max(batch_size, 1) * 8):  # the regressor is cheap: larger batches
+            sl = slice(a, a + max(batch_size, 1) * 8)
+            feat = torch.from_numpy(cache["features"][sl]).to(device=device, dtype=dtype)
+            P = torch.from_numpy(cache["P"][sl]).to(device=device, dtype=dtype)
+            out = regress_features(model, feat, P, size)
+            params = to_smplx_params(out, P, K.expand(feat.shape[0], -1, -1, -1), size)
+            for k in parts:
+                parts[k].append(params[k].float().cpu())
+    finally:
+        model.train(was_training)
+    pred = {k: torch.cat(v).numpy() for k, v in parts.items()}
+    info = {"kit_version": __version__, "sequence": str(sequence.root), "detector": detector, "input_size": size,
+            "variant": getattr(model, "variant", None), "num_frames": F,
+            "frames": [int(cache["frames"][0]), int(cache["frames"][-1])],
+            "views_without_detection": int((~cache["valid"]).sum()),
+            "box": {"min_confidence": box_min_confidence, "margin_px": margin_px,
+                    "missing": "previous box (leading frames: the first box), valid=False"},
+            **dict(provenance or {})}
+    pred.update(frames=cache["frames"], P=cache["P"], boxes=cache["boxes"], valid=cache["valid"],
+                provenance=json.dumps(info, default=str))
+    return validate_predictions(pred, "predict_sequence output")
+
+
+# -- the file -------------------------------------------------------------------------------------
+_SHAPES = {"phi": (3, 3), "tau": (3,), "theta": (21, 3, 3), "beta": (10,), "P": (3,), "boxes": (4,)}
+
+
+def validate_predictions(pred: Mapping, where: str = "predictions") -> dict:
+    """Check the contract; returns a dict of numpy arrays (float32 parameters, int64 frames, bool
+    valid, provenance as a JSON string). Raises :class:`PredictionFormatError` naming ``where``."""
+    missing = [k for k in REQUIRED_PREDICTION_KEYS if k not in pred]
+    if missing:
+        raise PredictionFormatError(f"{where}: missing arrays {missing} (a predictions file needs "
+                                    f"{list(REQUIRED_PREDICTION_KEYS)}; see airpose_lib.finetune.predict)")
+    out: dict = {}
+    phi = np.asarray(pred["phi"])
+    if phi.ndim != 4 or phi.shape[2:] != (3, 3):
+        raise PredictionFormatError(f"{where}: phi must be (F, V, 3, 3), got {phi.shape}")
+    F, V = phi.shape[:2]
+    if F == 0:
+        raise PredictionFormatError(f"{where}: no frames")
+    for key, tail in _SHAPES.items():
+        if key not in pred:
+            continue
+        arr = np.asarray(pred[key])
+        if arr.shape != (F, V, *tail):
+            raise PredictionFormatError(f"{where}: {key} must be {(F, V, *tail)} (F={F} frames, V={V} views), "
+                                        f"got {arr.shape}")
+        if not np.issubdtype(arr.dtype, np.floating):
+            raise PredictionFormatError(f"{where}: {key} must be floating point, got {arr.dtype}")
+        if not np.isfinite(arr).all():
+            bad = np.argwhere(~np.isfinite(arr.reshape(F, -1)).all(-1)).ravel()
+            raise PredictionFormatError(f"{where}: {key} contains NaN or inf (first bad frame position "
+                                        f"{int(bad[0])} of {F})")
+        out[key] = arr.astype(np.float32)
+    frames = np.asarray(pred["frames"])
+    if frames.shape != (F,) or not np.issubdtype(frames.dtype, np.integer):
+        raise PredictionFormatError(f"{where}: frames must be ({F},) integers (one image number per frame), "
+                                    f"got {frames.shape} {frames.dtype}")
+    if np.any(np.diff(frames) <= 0):
+        raise PredictionFormatError(f"{where}: frames must be strictly increasing image numbers")
+    out["frames"] = frames.astype(np.int64)
+    if "valid" in pred:
+        valid = np.asarray(pred["valid"])
+        if valid.shape != (F, V) or valid.dtype != np.bool_:
+            raise PredictionFormatError(f"{where}: valid must be ({F}, {V}) bool, got {valid.shape} {valid.dtype}")
+        out["valid"] = valid
+    if "provenance" in pred:
+        prov = pred["provenance"]
+        prov = prov.item() if isinstance(prov, np.ndarray) else prov
+        if isinstance(prov, Mapping):
+            prov = json.dumps(prov, default=str)
+        if not isinstance(prov, str):
+            raise PredictionFormatError(f"{where}: provenance must be a JSON string or a dict")
+        try:
+            json.loads(prov)
+        except json.JSONDecodeError as e:
+            raise PredictionFormatError(f"{where}: provenance is not valid JSON: {e}") from None
+        out["provenance"] = prov
+    return out
+
+
+def save_predictions(path: str | Path, pred: Mapping) -> Path:
+    """Write predictions (the contract of the module docstring) to an ``.npz``, atomically.
+
+    The dict is validated first, so a bad prediction never reaches the disk. Returns ``path``.
+    """
+    path = Path(path)
+    arrays = validate_predictions(pred, f"predictions for {path}")
+    if "provenance" in arrays:
+        arrays["provenance"] = np.array(arrays["provenance"])
+    with atomic_path(path) as tmp:
+        with open(tmp, "wb") as fh:  # a file object: np.savez would append ".npz" to a name
+            np.savez(fh, **arrays)
+    return path
+
+
+def load_predictions(path: str | Path) -> dict:
+    """Read and validate a predictions ``.npz``.
+
+    Returns:
+        numpy arrays (see the module docstring) and ``provenance`` as a dict (empty if absent).
+
+    Raises:
+        PredictionFormatError: missing file, unreadable file, missing keys, wrong shapes, NaN.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise PredictionFormatError(f"no predictions file {path}; make one with `airpose predict` "
+                                    "(airpose_lib.finetune.predict_sequence + save_predictions)")
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            raw = {k: data[k] for k in data.files}
+    except Exception as e:  # noqa: BLE001 - zip/npy errors of many kinds
+        raise PredictionFormatError(f"cannot read predictions file {path}: {e}") from None
+    out = validate_predictions(raw, str(path))
+    out["provenance"] = json.loads(out["provenance"]) if "provenance" in out else {}
+    return out

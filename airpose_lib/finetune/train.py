@@ -1,0 +1,508 @@
+r"""Fine-tuning a trained network on the 2D detections of a recording (paper Sec. IV, real data).
+
+``finetune(checkpoint, sequence_root, out_dir, config)``:
+
+1. loads the network of a kit checkpoint and the recording (``data.load_sequence``), optionally
+   restricted to a range of image numbers (the paper trains on frames 0-6999 of its real data);
+2. builds the 2D targets with the two-detector agreement filter
+   (:func:`~airpose_lib.finetune.keypoints.agreement_targets`);
+3. runs the **frozen** backbone once over every frame and view, crops made from the detections as
+   the drones make them, and caches the features (``<out>/feature_cache.pt``, reused while the
+   backbone, crop settings and recording are unchanged). The backbone is never run again and
+   never in training mode, so its weights and BatchNorm statistics stay bit-identical; training
+   then costs only the regressor, the joints-only body and the prior -- cheap enough for a CPU;
+4. trains the regressor (fc1, fc2 and the decoder heads; dropout active as in training) with
+   Adam (AMSGrad, lr 5e-5, paper) on :class:`~airpose_lib.finetune.loss.FineTuneLoss` with the
+   variant's paper weights. A training sample is one frame with all its views (the multi-view
+   variants exchange messages as in the forward); frames whose targets are all dropped are
+   skipped.
+
+Determinism and resume follow ``airpose_lib.train``: the frame order of epoch e is drawn from
+``(seed, e)`` only; dropout and the VPoser sample use torch's global RNG, seeded from the seed and
+saved in every checkpoint (with the optimiser and the position), so an interrupted run resumed
+from its last checkpoint ends with exactly the weights of an uninterrupted one (same machine and
+thread count). The caller's RNG states and torch thread count are restored on return.
+
+Output folder: ``checkpoints/last.pt`` (+ ``step_<n>.pt``) in the kit checkpoint format (read by
+``airpose_lib.train.load_trained_model`` and :func:`~airpose_lib.finetune.network.load_network`;
+the base ``config`` is kept and a ``finetune`` entry records this run), ``log.csv``,
+``config.json``, ``result.json`` and the feature cache.
+"""
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+import math
+import time
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+from torch import nn
+
+from airpose_lib.body.cache import atomic_path
+
+__all__ = ["FineTuneConfig", "FineTuneResult", "finetune_config", "finetune", "evaluate_finetune_loss"]
+
+
+@dataclass
+class FineTuneConfig:
+    """Everything that determines a fine-tuning run (stored in its checkpoints).
+
+    Attributes:
+        steps: optimiser steps in total.
+        batch_size: frames per step (each with all its views); paper: 30.
+        lr, amsgrad, weight_decay: Adam (paper: lr 5e-5, AMSGrad).
+        seed: frame order, dropout and VPoser samples (paper: 123).
+        loss: :class:`~airpose_lib.finetune.loss.FineTuneLossConfig` overrides (``w_j2d``,
+            ``w_beta``, ``w_vposer``, ``w_theta``, ``cross_view_beta`` ...) on top of the variant's
+            paper weights; ``official_loss`` applies the official code's x60 and depth term first.
+        threshold_px, min_confidence, unmatched: the agreement filter (``agreement_targets``).
+        frames: ``[start, stop)`` image numbers to train on (paper: ``[0, 7000]``); None: all.
+        input_size: crop side S (default: from the checkpoint).
+        detector, box_min_confidence, margin_px: where the crops' boxes come from
+            (``predict_sequence``; the runtime's defaults).
+        feature_batch_size: frames per backbone batch when caching the features.
+        checkpoint_every, keep_checkpoints, log_every: as ``TrainConfig``.
+        prior, prior_path, prior_tag: the pose prior (``airpose_lib.prior.load_prior``).
+        body_source: body model of the loss (``open`` or ``smplx``; the predictions' neutral body).
+        missing_detections: ``load_sequence``'s handling of short detector files.
+        eval_batch_size: frames per batch of the before/after loss evaluation.
+        num_threads: torch threads during the run (None: unchanged).
+        device: ``auto`` (CUDA if available), ``cpu`` or ``cuda``.
+    """
+
+    steps: int = 1000
+    batch_size: int = 30
+    lr: float = 5e-5
+    amsgrad: bool = True
+    weight_decay: float = 0.0
+    seed: int = 123
+    loss: dict = field(default_factory=dict)
+    official_loss: bool = False
+    threshold_px: float = 100.0
+    min_confidence: float = 0.05
+    unmatched: str = "drop"
+    frames: list | None = None
+    input_size: int | None = None
+    detector: str = "openpose"
+    box_min_confidence: float = 0.2
+    margin_px: float = 20.0
+    feature_batch_size: int = 16
+    checkpoint_every: int = 100
+    keep_checkpoints: int = 2
+    log_every: int = 10
+    prior: str = "kit"
+    prior_path: str | None = None
+    prior_tag: str | None = None
+    body_source: str = "open"
+    missing_detections: str = "error"
+    eval_batch_size: int = 256
+    num_threads: int | None = None
+    device: str = "auto"
+
+    # Fields whose change makes a resumed run differ from a straight one.
+    RESUME_KEYS = ("batch_size", "lr", "amsgrad", "weight_decay", "seed", "loss", "official_loss", "threshold_px",
+                   "min_confidence", "unmatched", "frames", "input_size", "detector", "box_min_confidence",
+                   "margin_px", "prior", "prior_path", "prior_tag", "body_source")
+
+    def __post_init__(self) -> None:
+        if self.steps < 0 or self.batch_size < 1:
+            raise ValueError("steps must be >= 0 and batch_size >= 1")
+        if self.checkpoint_every < 1 or self.log_every < 1 or self.feature_batch_size < 1:
+            raise ValueError("checkpoint_every, log_every and feature_batch_size must be >= 1")
+        if self.frames is not None:
+            frames = list(self.frames)
+            if len(frames) != 2 or not all(isinstance(x, (int, np.integer)) for x in frames) or frames[0] >= frames[1]:
+                raise ValueError(f"frames must be [start, stop) image numbers with start < stop, got {self.frames!r}")
+            self.frames = [int(frames[0]), int(frames[1])]
+        self.loss = dict(self.loss or {})
+
+    def to_dict(self) -> dict:
+        return dataclasses.asdict(self)
+
+    def replace(self, **changes: Any) -> "FineTuneConfig":
+        return dataclasses.replace(self, **changes)
+
+
+def finetune_config(profile: str | Path | None, **overrides: Any) -> FineTuneConfig:
+    """:class:`FineTuneConfig` from a profile's ``finetune:`` section (defaults where the profile
+    has none), then ``overrides``. Unknown keys raise ``ValueError`` naming the file."""
+    import yaml
+
+    from airpose_lib.train.config import profile_path
+
+    values: dict[str, Any] = {}
+    if profile is not None:
+        path = profile_path(profile)
+        if not path.is_file():
+            raise ValueError(f"profile file not found: {path}")
+        values.update((yaml.safe_load(path.read_text()) or {}).get("finetune") or {})
+        where = f"{path} `finetune:`"
+    else:
+        where = "fine-tuning options"
+    values.update(overrides)
+    known = {f.name for f in dataclasses.fields(FineTuneConfig)}
+    unknown = sorted(set(values) - known)
+    if unknown:
+        raise ValueError(f"{where}: unknown key(s) {unknown}; known: {sorted(known)}")
+    return FineTuneConfig(**values)
+
+
+@dataclass
+class FineTuneResult:
+    """What a run ended with (also ``<out>/result.json``).
+
+    Attributes:
+        out_dir: the run folder; checkpoint: its ``checkpoints/last.pt``.
+        step: optimiser steps done; stopped_early: ``stop_at`` ended it before ``steps``.
+        num_frames: training frames (frames with at least one kept target).
+        initial, final: mean loss terms over the training frames before and after (eval mode:
+            no dropout, VPoser posterior mean), e.g. ``final["j2d"]``.
+        history: ``log.csv`` as lists (``step``, ``total``, ``j2d``, ...).
+        keypoints: the agreement filter's counts (``kept``, ``disagree``, ...).
+        config: the :class:`FineTuneConfig`; loss: the loss config used; seconds: wall time.
+    """
+
+    out_dir: Path
+    checkpoint: Path | None
+    step: int
+    num_frames: int
+    initial: dict[str, float]
+    final: dict[str, float] | None
+    history: dict[str, list] = field(default_factory=dict)
+    keypoints: dict[str, int] = field(default_factory=dict)
+    config: dict = field(default_factory=dict)
+    loss: dict = field(default_factory=dict)
+    stopped_early: bool = False
+    seconds: float = 0.0
+
+    def to_json(self) -> dict:
+        d = dataclasses.asdict(self)
+        d["out_dir"] = str(self.out_dir)
+        d["checkpoint"] = str(self.checkpoint) if self.checkpoint else None
+        return d
+
+
+# -- pieces ---------------------------------------------------------------------------------------
+def _load_frames(root: Path, cfg: FineTuneConfig):
+    from airpose_lib.data.official_layout import load_sequence
+
+    from .predict import frames_in_range
+
+    detectors = tuple(dict.fromkeys(("openpose", "alphapose", cfg.detector)))
+    frames = None if cfg.frames is None else frames_in_range(root, cfg.frames[0], cfg.frames[1])
+    return load_sequence(root, frames=frames, detectors=detectors, missing_detections=cfg.missing_detections,
+                         ground_truth=False)
+
+
+def _tensor_digest(tensors: Mapping[str, torch.Tensor]) -> str:
+    h = hashlib.sha256()
+    for k in sorted(tensors):
+        t = tensors[k].detach().cpu().contiguous()
+        h.update(k.encode())
+        h.update(str(t.dtype).encode())
+        h.update(t.reshape(-1).view(torch.uint8).numpy().tobytes() if t.numel() else b"")
+    return h.hexdigest()
+
+
+def _feature_fingerprint(model, seq, cfg: FineTuneConfig, input_size: int) -> str:
+    backbone = {k: v for k, v in model.state_dict().items() if k.startswith("backbone.")}
+    h = hashlib.sha256(_tensor_digest(backbone).encode())
+    files = [(str(p), p.stat().st_size, p.stat().st_mtime_ns) for imgs in seq.images for p in imgs.paths]
+    h.update(json.dumps({"input_size": input_size, "detector": cfg.detector, "box": [cfg.box_min_confidence,
+                         cfg.margin_px], "frames": np.asarray(seq.frames).tolist(), "images": files,
+                         "dtype": str(model.init_beta.dtype)}).encode())
+    h.update(np.ascontiguousarray(seq.keypoints[cfg.detector]).tobytes())
+    return h.hexdigest()
+
+
+def _feature_cache(model, seq, cfg: FineTuneConfig, input_size: int, out_dir: Path, progress: bool) -> dict:
+    from .predict import sequence_features
+
+    path = out_dir / "feature_cache.pt"
+    fp = _feature_fingerprint(model, seq, cfg, input_size)
+    if path.is_file():
+        try:
+            cached = torch.load(path, map_location="cpu", weights_only=True)
+            if cached.get("fingerprint") == fp:
+                return {k: v.numpy() if isinstance(v, torch.Tensor) else v for k, v in cached["arrays"].items()}
+        except Exception:  # noqa: BLE001 - a damaged cache is rebuilt
+            pass
+    arrays = sequence_features(model, seq, input_size=input_size, detector=cfg.detector,
+                               batch_size=cfg.feature_batch_size, box_min_confidence=cfg.box_min_confidence,
+                               margin_px=cfg.margin_px, progress=progress)
+    with atomic_path(path) as tmp:
+        torch.save({"fingerprint": fp, "arrays": {k: torch.from_numpy(np.asarray(v)) for k, v in arrays.items()}},
+                   tmp)
+    return arrays
+
+
+def _step_terms(model, loss_fn, feat, P, targets, K, input_size: int) -> dict[str, torch.Tensor]:
+    from airpose_lib.model import to_smplx_params
+
+    from .predict import regress_features
+
+    out = regress_features(model, feat, P, input_size)
+    pred = to_smplx_params(out, P, K.expand(feat.shape[0], -1, -1, -1), input_size)
+    return loss_fn(pred, targets, K)
+
+
+@torch.no_grad()
+def evaluate_finetune_loss(model: nn.Module, loss_fn: nn.Module, features: torch.Tensor, P: torch.Tensor,
+                           targets: torch.Tensor, K: torch.Tensor, input_size: int,
+                           batch_size: int = 256) -> dict[str, float]:
+    """Mean loss terms over frames in eval mode (no dropout), VPoser at the posterior mean.
+
+    Args:
+        features: ``(F, V, C)``; P: ``(F, V, 3)``; targets: ``(F, V, 25, 3)``; K: ``(V, 3, 3)``.
+
+    Returns:
+        term -> frame-weighted mean (the ``FineTuneLoss`` keys).
+    """
+    from .loss import FineTuneLoss
+
+    cfg = dataclasses.replace(loss_fn.config, vposer_latent="mean")
+    det = FineTuneLoss(cfg, body_model=loss_fn.body_model, prior=loss_fn.prior)
+    was_training = model.training
+    model.eval()
+    sums: dict[str, float] = {}
+    n = features.shape[0]
+    try:
+        for a in range(0, n, batch_size):
+            sl = slice(a, a + batch_size)
+            terms = _step_terms(model, det, features[sl], P[sl], targets[sl], K, input_size)
+            k = features[sl].shape[0]
+            for key, v in terms.items():
+                sums[key] = sums.get(key, 0.0) + float(v) * k
+    finally:
+        model.train(was_training)
+    return {k: v / max(n, 1) for k, v in sums.items()}
+
+
+def _stream_seed(seed: int) -> int:
+    """Seed of the random stream of training (dropout, VPoser samples), derived from the run's seed
+    so that it differs from the stream that seeded everything else."""
+    return int(np.random.SeedSequence([int(seed), 2]).generate_state(1, np.uint64)[0] >> np.uint64(1))
+
+
+def _set_train_mode(model: nn.Module) -> None:
+    model.train()
+    model.backbone.eval()  # frozen: never run here anyway, but keep its BatchNorm out of training
+
+
+def _check_resume(saved: Mapping, cfg: FineTuneConfig, base_fp: str) -> None:
+    now = cfg.to_dict()
+    diff = [k for k in FineTuneConfig.RESUME_KEYS if saved["config"].get(k) != now.get(k)]
+    if saved.get("base_fingerprint") != base_fp:
+        diff.append("base checkpoint")
+    if diff:
+        raise ValueError(f"cannot resume: the checkpoint was fine-tuned with different {diff}; use another "
+                         "out_dir or resume=False")
+
+
+def _history(log_path: Path) -> dict[str, list]:
+    from airpose_lib.train.logger import read_log
+
+    hist: dict[str, list] = {}
+    for row in read_log(log_path):
+        if row.get("split") != "train":
+            continue
+        for k, v in row.items():
+            if k in ("split",):
+                continue
+            try:
+                val: Any = int(v) if k in ("step", "epoch") else float(v)
+            except (TypeError, ValueError):
+                val = float("nan")
+            hist.setdefault(k, []).append(val)
+    return hist
+
+
+# -- entry point ----------------------------------------------------------------------------------
+def finetune(checkpoint: str | Path, sequence_root: str | Path, out_dir: str | Path,
+             config: FineTuneConfig | None = None, resume: bool = True, progress: bool = False, *,
+             prior=None, body_model=None, stop_at: int | None = None) -> FineTuneResult:
+    """Fine-tune a trained network on a recording's 2D detections.
+
+    Args:
+        checkpoint: a kit checkpoint (``airpose train``; a fine-tuned one works too).
+        sequence_root: a recording in the official layout (``machine_k/`` with ``openpose_res.pkl``
+            and ``alphapose_res.json``).
+        out_dir: run folder (see the module docstring).
+        config: :class:`FineTuneConfig` (default: its defaults; see :func:`finetune_config`).
+        resume: continue from ``<out_dir>/checkpoints/last.pt`` if present; otherwise (or with
+            False) start afresh, deleting earlier checkpoints there.
+        progress: tqdm bars.
+        prior: a :class:`~airpose_lib.prior.VPoser` to use instead of ``config.prior``.
+        body_model: the neutral ``smplx.SMPLX`` of the loss instead of ``config.body_source``'s.
+        stop_at: stop (with a checkpoint) once this step is reached, as if interrupted there.
+
+    Returns:
+        :class:`FineTuneResult`.
+    """
+    from airpose_lib.train.checkpoint import capture_rng_state, restore_rng_state
+
+    cfg = config if config is not None else FineTuneConfig()
+    caller_rng = capture_rng_state()
+    threads = torch.get_num_threads()
+    if cfg.num_threads:
+        torch.set_num_threads(cfg.num_threads)
+    try:
+        return _finetune(Path(checkpoint), Path(sequence_root), Path(out_dir), cfg, resume, progress, prior,
+                         body_model, stop_at)
+    finally:
+        torch.set_num_threads(threads)
+        restore_rng_state(caller_rng)
+
+
+def _finetune(checkpoint: Path, root: Path, out_dir: Path, cfg: FineTuneConfig, resume: bool, progress: bool,
+              prior, body_model, stop_at) -> FineTuneResult:
+    from airpose_lib.train.checkpoint import (
+        capture_rng_state,
+        checkpoint_dir,
+        last_checkpoint,
+        load_checkpoint,
+        restore_rng_state,
+        save_checkpoint,
+    )
+    from airpose_lib.train.logger import RunLogger
+    from airpose_lib.train.sampling import epoch_permutation, seed_everything
+
+    from .keypoints import agreement_masks, agreement_summary, agreement_targets
+    from .loss import FineTuneLoss, finetune_loss_config
+    from .network import load_network
+
+    t0 = time.time()
+    if cfg.device == "auto":
+        device = torch.device("cuda" if torch.cuda.is_available() else "cpu")
+    else:
+        device = torch.device(cfg.device)
+    seed_everything(cfg.seed)
+    model, train_cfg, input_size = load_network(checkpoint, device, cfg.input_size)
+    base_fp = _tensor_digest(model.state_dict())
+    seq = _load_frames(root, cfg)
+    masks = agreement_masks(seq.keypoints["openpose"], seq.keypoints["alphapose"], threshold_px=cfg.threshold_px,
+                            min_confidence=cfg.min_confidence, unmatched=cfg.unmatched)
+    targets_np = agreement_targets(seq.keypoints["openpose"], seq.keypoints["alphapose"],
+                                   threshold_px=cfg.threshold_px, min_confidence=cfg.min_confidence,
+                                   unmatched=cfg.unmatched)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    cache = _feature_cache(model, seq, cfg, input_size, out_dir, progress)
+    usable = np.flatnonzero(targets_np[..., 2].sum(axis=(1, 2)) > 0)
+    n = len(usable)
+    if n < cfg.batch_size and cfg.steps > 0:
+        raise ValueError(f"{root}: {n} frames have kept 2D targets, fewer than one batch of {cfg.batch_size}; "
+                         "lower batch_size, select more frames or relax the agreement filter")
+
+    dtype = model.init_beta.dtype
+    as_t = lambda a: torch.as_tensor(np.asarray(a)).to(device=device, dtype=dtype)  # noqa: E731
+    feats, P = as_t(cache["features"][usable]), as_t(cache["P"][usable])
+    targets = as_t(targets_np[usable])
+    K = as_t(seq.K)
+
+    for p in model.backbone.parameters():
+        p.requires_grad_(False)
+    params = [p for p in model.regressor.parameters()]
+    for p in params:
+        p.requires_grad_(True)
+    loss_cfg = finetune_loss_config(train_cfg.variant, cfg.official_loss, **cfg.loss)
+    if body_model is None:
+        from airpose_lib.body import load_body_model
+
+        body_model = load_body_model(cfg.body_source, "neutral")
+    if prior is None and loss_cfg.w_vposer != 0:
+        from airpose_lib.prior import load_prior
+
+        prior = load_prior(cfg.prior, cfg.prior_path, tag=cfg.prior_tag)
+    loss_fn = FineTuneLoss(loss_cfg, body_model=body_model, prior=prior).to(device)
+    optimizer = torch.optim.Adam(params, lr=cfg.lr, amsgrad=cfg.amsgrad, weight_decay=cfg.weight_decay)
+
+    step = epoch = batch_in_epoch = 0
+    ckpt_path = last_checkpoint(out_dir) if resume else None
+    if ckpt_path is not None:
+        state = load_checkpoint(ckpt_path)
+        if "finetune" not in state:
+            raise ValueError(f"{ckpt_path} is not a fine-tuning checkpoint; use another out_dir or resume=False")
+        _check_resume(state["finetune"], cfg, base_fp)
+        model.load_state_dict(state["model"])
+        optimizer.load_state_dict(state["optimizer"])
+        step, epoch, batch_in_epoch = state["step"], state["epoch"], state["batch_in_epoch"]
+        initial = state["finetune"]["initial"]
+        restore_rng_state(state["rng"][0])
+    else:
+        for old in checkpoint_dir(out_dir).glob("*.pt"):
+            old.unlink()
+        initial = evaluate_finetune_loss(model, loss_fn, feats, P, targets, K, input_size, cfg.eval_batch_size)
+        seed_everything(_stream_seed(cfg.seed))  # the dropout / VPoser-sample stream
+    (out_dir / "config.json").write_text(json.dumps(cfg.to_dict(), indent=2, sort_keys=True))
+    logger = RunLogger(out_dir, resume_step=step if ckpt_path is not None else None, tensorboard=False)
+    info = {"config": cfg.to_dict(), "loss": loss_cfg.to_dict(), "base_checkpoint": str(checkpoint),
+            "base_fingerprint": base_fp, "sequence": str(root),
+            "frames": [int(seq.frames[0]), int(seq.frames[-1])], "num_frames": n,
+            "keypoints": agreement_summary(masks), "initial": initial}
+
+    def save() -> Path:
+        return save_checkpoint(out_dir, {
+            "model": model.state_dict(), "optimizer": optimizer.state_dict(), "rng": [capture_rng_state()],
+            "step": step, "epoch": epoch, "batch_in_epoch": batch_in_epoch, "config": train_cfg.to_dict(),
+            "world_size": 1, "input_size": input_size, "finetune": info}, keep=cfg.keep_checkpoints)
+
+    bar = None
+    if progress:
+        from tqdm.auto import tqdm
+
+        bar = tqdm(total=cfg.steps, initial=step, desc=f"finetune {train_cfg.variant}", dynamic_ncols=True)
+    checkpoint_out: Path | None = ckpt_path
+    stopped = False
+    B = cfg.batch_size
+    _set_train_mode(model)
+    loss_fn.train()
+    try:
+        while step < cfg.steps and not stopped:
+            order = epoch_permutation(n, cfg.seed, epoch)
+            for b in range(batch_in_epoch, n // B):
+                idx = order[b * B:(b + 1) * B].to(device)
+                terms = _step_terms(model, loss_fn, feats[idx], P[idx], targets[idx], K, input_size)
+                optimizer.zero_grad(set_to_none=True)
+                terms["total"].backward()
+                optimizer.step()
+                step += 1
+                batch_in_epoch += 1
+                values = {k: float(v.detach()) for k, v in terms.items()}
+                if not math.isfinite(values["total"]):
+                    raise FloatingPointError(f"non-finite fine-tuning loss at step {step}: {values}")
+                if step % cfg.log_every == 0 or step == cfg.steps:
+                    logger.log(step, epoch, "train", time.time() - t0, cfg.lr, values)
+                if bar is not None:
+                    bar.update(1)
+                    bar.set_postfix(loss=f"{values['total']:.4g}")
+                done = step >= cfg.steps
+                stopped = stop_at is not None and step >= stop_at and not done
+                if step % cfg.checkpoint_every == 0 or done or stopped:
+                    checkpoint_out = save()
+                if done or stopped:
+                    break
+            else:  # the epoch ran out
+                epoch += 1
+                batch_in_epoch = 0
+        if checkpoint_out is None:  # steps == 0: still leave a loadable checkpoint
+            checkpoint_out = save()
+    finally:
+        if bar is not None:
+            bar.close()
+        logger.close()
+
+    final = None if stopped else evaluate_finetune_loss(model, loss_fn, feats, P, targets, K, input_size,
+                                                        cfg.eval_batch_size)
+    result = FineTuneResult(out_dir=out_dir, checkpoint=checkpoint_out, step=step, num_frames=n, initial=initial,
+                            final=final, history=_history(out_dir / "log.csv"), keypoints=info["keypoints"],
+                            config=cfg.to_dict(), loss=loss_cfg.to_dict(), stopped_early=stopped,
+                            seconds=time.time() - t0)
+    with atomic_path(out_dir / "result.json") as tmp:
+        tmp.write_text(json.dumps(result.to_json(), indent=2, default=str))
+    return result

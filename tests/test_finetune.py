@@ -1,0 +1,472 @@
+"""Fine-tuning on detections: agreement filter, loss, predictions file, frozen-backbone training,
+resume. Tiny: a random ResNet-18 AirPose network at 64 px, the first frames of the smoke recording."""
+from __future__ import annotations
+
+import json
+
+import cv2
+import numpy as np
+import pytest
+import torch
+
+from airpose_lib.body.joint_sets import BODY_25_NAMES, COCO18_NAMES
+from airpose_lib.finetune import (
+    BODY25_FROM_COCO18,
+    UNMATCHED_BODY25,
+    FineTuneConfig,
+    FineTuneLoss,
+    PredictionFormatError,
+    agreement_masks,
+    agreement_targets,
+    detection_boxes,
+    finetune,
+    finetune_config,
+    finetune_loss_config,
+    load_network,
+    load_predictions,
+    predict_sequence,
+    regress_features,
+    save_predictions,
+)
+from airpose_lib.geometry import axis_angle_to_matrix, matrix_to_axis_angle
+
+S = 64  # crop side of the tiny network
+
+
+@pytest.fixture(autouse=True)
+def _one_thread():
+    n = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(n)
+
+
+@pytest.fixture(scope="module")
+def smoke_root():
+    from airpose_lib.data.sequences import ensure_sequences
+
+    return ensure_sequences("smoke", only=["person1"])["person1"]
+
+
+def _save_tiny(folder, variant: str):
+    from airpose_lib.model import build_model
+    from airpose_lib.train import TrainConfig
+    from airpose_lib.train.checkpoint import save_checkpoint
+
+    torch.manual_seed(0)
+    model = build_model(variant, "resnet18")
+    cfg = TrainConfig(variant=variant, backbone="resnet18", steps=0)
+    return save_checkpoint(folder, {"model": model.state_dict(), "optimizer": {}, "rng": [], "step": 0, "epoch": 0,
+                                    "batch_in_epoch": 0, "config": cfg.to_dict(), "world_size": 1, "input_size": S},
+                           keep=0)
+
+
+@pytest.fixture(scope="module")
+def tiny_ckpt(tmp_path_factory):
+    return _save_tiny(tmp_path_factory.mktemp("airpose"), "airpose")
+
+
+@pytest.fixture(scope="module")
+def baseline_ckpt(tmp_path_factory):
+    return _save_tiny(tmp_path_factory.mktemp("baseline"), "baseline")
+
+
+@pytest.fixture(scope="module")
+def body32(open_model_files):
+    from airpose_lib.body import load_body_model
+
+    return load_body_model("open", "neutral")
+
+
+@pytest.fixture()
+def tiny_prior():
+    from airpose_lib.prior import VPoser
+
+    torch.manual_seed(1)
+    return VPoser(num_neurons=32, latent_dim=8).eval()
+
+
+# -- agreement filter ------------------------------------------------------------------------------
+def test_correspondence_follows_the_joint_names():
+    for j, k in enumerate(BODY25_FROM_COCO18):
+        if k >= 0:
+            assert COCO18_NAMES[k] == BODY_25_NAMES[j]
+        else:
+            assert BODY_25_NAMES[j] not in COCO18_NAMES
+    assert [BODY_25_NAMES[j] for j in UNMATCHED_BODY25] == [
+        "MidHip", "LBigToe", "LSmallToe", "LHeel", "RBigToe", "RSmallToe", "RHeel"]
+
+
+def _agreeing_pair():
+    """One frame, one view: OpenPose and AlphaPose at the same spots, distinct confidences."""
+    op = np.zeros((1, 1, 25, 3))
+    op[..., 0] = 300 + 10 * np.arange(25)
+    op[..., 1] = 200 + 7 * np.arange(25)
+    op[..., 2] = 0.3 + 0.02 * np.arange(25)
+    ap = np.zeros((1, 1, 18, 3))
+    for j, k in enumerate(BODY25_FROM_COCO18):
+        if k >= 0:
+            ap[0, 0, k] = (op[0, 0, j, 0], op[0, 0, j, 1], 0.8)
+    return op, ap
+
+
+def _b(name):
+    return BODY_25_NAMES.index(name)
+
+
+def _c(name):
+    return COCO18_NAMES.index(name)
+
+
+def test_agreement_filter_on_hand_made_keypoints():
+    op, ap = _agreeing_pair()
+    ap[0, 0, _c("RWrist"), 0] += 99.0  # kept
+    ap[0, 0, _c("RElbow"), 1] -= 101.0  # dropped
+    ap[0, 0, _c("LWrist"), :2] += (60.0, 80.0)  # exactly 100 px: kept
+    ap[0, 0, _c("LKnee"), :2] += (71.0, 71.0)  # 100.4 px: dropped
+    op[0, 0, _b("Nose"), 0] = np.nan  # OpenPose NaN: dropped
+    ap[0, 0, _c("LEye"), 1] = np.nan  # AlphaPose NaN: unconfirmed, dropped
+    ap[0, 0, _c("REar")] = 0.0  # AlphaPose missed it: dropped
+    op[0, 0, _b("LEar"), 2] = 0.01  # below min_confidence: dropped
+    op[0, 0, _b("RKnee")] = 0.0  # OpenPose missed it
+    t = agreement_targets(op, ap, threshold_px=100.0, min_confidence=0.05)
+    assert t.shape == (1, 1, 25, 3) and t.dtype == np.float32 and np.isfinite(t).all()
+    w = t[0, 0, :, 2]
+    dropped = {"RElbow", "LKnee", "Nose", "LEye", "REar", "LEar", "RKnee",
+               "MidHip", "LBigToe", "LSmallToe", "LHeel", "RBigToe", "RSmallToe", "RHeel"}
+    for j, name in enumerate(BODY_25_NAMES):
+        if name in dropped:
+            assert w[j] == 0 and (t[0, 0, j, :2] == 0).all(), name
+        else:  # weight = OpenPose confidence, position = OpenPose's
+            assert w[j] == pytest.approx(0.3 + 0.02 * j), name
+            np.testing.assert_allclose(t[0, 0, j, :2], op[0, 0, j, :2], rtol=0, atol=1e-4)
+    m = agreement_masks(op, ap)
+    assert m.disagree[0, 0, [_b("RElbow"), _b("LKnee")]].all()
+    assert m.unconfirmed[0, 0, [_b("LEye"), _b("REar"), _b("MidHip")]].all()
+    assert m.low_confidence[0, 0, _b("LEar")] and m.missing[0, 0, _b("Nose")] and m.missing[0, 0, _b("RKnee")]
+
+    # "keep": the joints COCO-18 lacks stay, unchecked; a missed AlphaPose joint is still dropped
+    t_keep = agreement_targets(op, ap, unmatched="keep")
+    for j in UNMATCHED_BODY25:
+        assert t_keep[0, 0, j, 2] == pytest.approx(0.3 + 0.02 * j)
+    assert t_keep[0, 0, _b("REar"), 2] == 0
+    # a tighter threshold drops the 99 px joint too
+    assert agreement_targets(op, ap, threshold_px=98.0)[0, 0, _b("RWrist"), 2] == 0
+
+
+def test_agreement_filter_rejects_bad_input():
+    op, ap = _agreeing_pair()
+    with pytest.raises(ValueError, match="frames, views"):
+        agreement_targets(np.repeat(op, 3, axis=0), np.repeat(ap, 2, axis=0))
+    with pytest.raises(ValueError, match="BODY_25"):
+        agreement_targets(op[..., :18, :], ap)
+    with pytest.raises(ValueError, match="COCO-18"):
+        agreement_targets(op, ap[..., :17, :])
+    bad = op.copy()
+    bad[0, 0, 3, 2] = -0.5
+    with pytest.raises(ValueError, match="negative"):
+        agreement_targets(bad, ap)
+    with pytest.raises(ValueError, match="unmatched"):
+        agreement_targets(op, ap, unmatched="maybe")
+
+
+# -- loss -----------------------------------------------------------------------------------------
+def _random_pred(B=2, V=2, seed=0, dtype=torch.float64):
+    g = torch.Generator().manual_seed(seed)
+    aa_root = torch.tensor([np.pi, 0.0, 0.0], dtype=dtype) + 0.3 * torch.randn(B, V, 3, generator=g, dtype=dtype)
+    theta_aa = 0.3 * torch.randn(B, 1, 21, 3, generator=g, dtype=dtype)
+    return {"phi": axis_angle_to_matrix(aa_root),
+            "theta": axis_angle_to_matrix(theta_aa).expand(B, V, 21, 3, 3).clone(),
+            "beta": torch.randn(B, 1, 10, generator=g, dtype=dtype).expand(B, V, 10).clone(),
+            "tau": torch.tensor([0.2, -0.1, 6.0], dtype=dtype) + 0.3 * torch.randn(B, V, 3, generator=g, dtype=dtype)}
+
+
+def _K(V=2, dtype=torch.float64):
+    return torch.tensor([[[1000.0, 0, 480], [0, 990.0, 270], [0, 0, 1]],
+                         [[900.0, 0, 500], [0, 910.0, 260], [0, 0, 1]]], dtype=dtype)[:V]
+
+
+def test_projection_matches_smplx_forward_and_opencv(open_model):
+    """Independent reference: smplx's forward (identity root, zero translation), then X = phi X0 + tau,
+    projected by cv2.projectPoints, at the BODY_25 joints."""
+    from airpose_lib.body.joint_sets import BODY_25_FROM_SMPLX
+
+    loss = FineTuneLoss(finetune_loss_config("airpose", w_vposer=0.0), body_model=open_model)
+    pred, K = _random_pred(), _K()
+    uv = loss.project(pred, K)
+    for b in range(2):
+        for v in range(2):
+            out = open_model(betas=pred["beta"][b, v][None], body_pose=matrix_to_axis_angle(pred["theta"][b, v])[None]
+                             .reshape(1, 63), global_orient=torch.zeros(1, 3, dtype=torch.float64))
+            J0 = out.joints[0, list(BODY_25_FROM_SMPLX)]
+            X = (J0 @ pred["phi"][b, v].T + pred["tau"][b, v]).detach().numpy()
+            ref, _ = cv2.projectPoints(X, np.zeros(3), np.zeros(3), K[v].numpy(), None)
+            np.testing.assert_allclose(uv[b, v].numpy(), ref[:, 0], atol=1e-3)
+
+
+def test_loss_is_zero_on_its_own_projection_and_cross_view_terms(open_model, tiny_prior):
+    cfg = finetune_loss_config("airpose")  # w_theta 100, cross-view beta
+    loss = FineTuneLoss(cfg, body_model=open_model, prior=tiny_prior.double())
+    pred, K = _random_pred(), _K()
+    uv = loss.project(pred, K)
+    w = torch.rand(2, 2, 25, 1, generator=torch.Generator().manual_seed(3), dtype=torch.float64)
+    terms = loss(pred, torch.cat((uv, w), -1), K)
+    assert terms["j2d"].item() == 0.0
+    # identical views: no cross-view penalty; the beta term is the plain prior sum_c mean(beta^2)
+    assert terms["theta"].item() == 0.0
+    assert terms["beta"].item() == pytest.approx(2 * pred["beta"][:, 0].square().mean().item(), rel=1e-12)
+    # views that differ: positive cross-view terms, and the 2D error shows up with the weights
+    other = dict(pred)
+    other["theta"] = pred["theta"].clone()
+    other["theta"][:, 1, 4] = axis_angle_to_matrix(torch.tensor([0.0, 0.0, 0.5], dtype=torch.float64))
+    other["beta"] = pred["beta"].clone()
+    other["beta"][:, 1, 0] += 1.0
+    t2 = loss(other, torch.cat((uv, w), -1), K)
+    assert t2["theta"].item() > 0 and t2["beta"].item() > terms["beta"].item() and t2["j2d"].item() > 0
+    expected_total = 0.01 * t2["j2d"] + 5 * t2["beta"] + 0.1 * t2["vposer"] + 100 * t2["theta"]
+    assert t2["total"].item() == pytest.approx(expected_total.item(), rel=1e-12)
+    # shifting every target by (3, 4) px gives exactly the weighted mean of 25 = 3^2 + 4^2, summed over views
+    shifted = torch.cat((uv + torch.tensor([3.0, 4.0], dtype=torch.float64), w), -1)
+    j2d = loss(pred, shifted, K)["j2d"].item()
+    assert j2d == pytest.approx(sum((w[:, v] * 25.0).sum().item() / (2 * 25 * 2) for v in range(2)), rel=1e-9)
+
+
+def test_vposer_term_sample_and_mean(open_model, tiny_prior):
+    pred, K = _random_pred(), _K()
+    targets = torch.zeros(2, 2, 25, 3, dtype=torch.float64)
+    prior = tiny_prior.double()
+    mean_loss = FineTuneLoss(finetune_loss_config("baseline", vposer_latent="mean"), open_model, prior)
+    z = prior.encode(matrix_to_axis_angle(pred["theta"]).reshape(-1, 63)).loc.reshape(2, 2, -1)
+    # Baseline: monocular, views averaged
+    assert mean_loss(pred, targets, K)["vposer"].item() == pytest.approx(z.square().mean().item(), rel=1e-12)
+    sample_loss = FineTuneLoss(finetune_loss_config("baseline"), open_model, prior)
+    torch.manual_seed(5)
+    a = sample_loss(pred, targets, K)["vposer"].item()
+    torch.manual_seed(5)
+    assert sample_loss(pred, targets, K)["vposer"].item() == a
+    assert a != pytest.approx(z.square().mean().item(), rel=1e-6)
+
+
+def test_loss_rejects_bad_targets(open_model):
+    loss = FineTuneLoss(finetune_loss_config("airpose", w_vposer=0.0), body_model=open_model)
+    pred, K = _random_pred(), _K()
+    t = torch.zeros(2, 2, 25, 3, dtype=torch.float64)
+    t[0, 1, 3, 0] = float("nan")
+    with pytest.raises(ValueError, match="NaN"):
+        loss(pred, t, K)
+    with pytest.raises(ValueError, match="BODY_25"):
+        loss(pred, torch.zeros(2, 2, 18, 3, dtype=torch.float64), K)
+    with pytest.raises(ValueError, match="unknown"):
+        finetune_loss_config("airpose", w_bogus=1.0)
+
+
+# -- predictions ----------------------------------------------------------------------------------
+def test_regress_features_equals_forward(tiny_ckpt):
+    model, _, size = load_network(tiny_ckpt)
+    assert size == S and model.input_size == S
+    g = torch.Generator().manual_seed(0)
+    images = torch.randn(2, 2, 3, S, S, generator=g)
+    P = torch.tensor([[[0.1, -0.2, 0.3], [-0.3, 0.1, 0.5]]]).expand(2, 2, 3)
+    ref = model(images, P)
+    feat = model.features(images.flatten(0, 1)).unflatten(0, (2, 2))
+    out = regress_features(model, feat, P, S)
+    for k in ("phi6d", "theta6d", "beta", "tau"):
+        assert torch.equal(out[k], ref[k]), k
+
+
+def test_detection_boxes_reuse_and_flag():
+    kp = np.zeros((4, 2, 25, 3))
+    kp[:, :, :5] = [[100.0, 100.0, 0.9]]
+    kp[:, :, 1:5, 0] += np.arange(1, 5) * 20
+    kp[:, :, 1:5, 1] += np.arange(1, 5) * 30
+    kp[1, 0, :, 0] += 50  # another box in frame 1
+    kp[0, 0] = 0.0  # view 0: nothing in frame 0 (take frame 1's box) and frame 2 (keep frame 1's)
+    kp[2, 0] = 0.0
+    boxes, valid = detection_boxes(kp, [(960, 540), (960, 540)])
+    assert valid.tolist() == [[False, True], [True, True], [False, True], [True, True]]
+    np.testing.assert_array_equal(boxes[0, 0], boxes[1, 0])
+    np.testing.assert_array_equal(boxes[2, 0], boxes[1, 0])
+    np.testing.assert_allclose(boxes[1, 1], [80, 80, 200, 240])  # keypoints (100..180, 100..220) +- 20 px
+    kp[:, 1] = 0.0
+    with pytest.raises(ValueError, match="view 1"):
+        detection_boxes(kp, [(960, 540), (960, 540)], where="rec")
+
+
+@pytest.mark.parametrize("variant", ["airpose", "baseline"])
+def test_predict_sequence_roundtrip_and_airpose_plus_init(variant, request, smoke_root, tmp_path):
+    from airpose_lib.data.official_layout import load_sequence
+    from airpose_lib.fitting import init_from_views
+    from airpose_lib.model import to_smplx_params
+    from airpose_lib.runtime.offline import offline_inputs
+    from airpose_lib.runtime.source import open_source
+
+    tiny_ckpt = request.getfixturevalue("tiny_ckpt" if variant == "airpose" else "baseline_ckpt")
+    model, _, _ = load_network(tiny_ckpt)
+    seq = load_sequence(smoke_root, frames=range(4), detectors=("openpose",), ground_truth=False)
+    pred = predict_sequence(model, seq, batch_size=3, provenance={"checkpoint": str(tiny_ckpt)})
+    F, V = 4, 2
+    shapes = {"phi": (F, V, 3, 3), "tau": (F, V, 3), "theta": (F, V, 21, 3, 3), "beta": (F, V, 10),
+              "frames": (F,), "P": (F, V, 3), "boxes": (F, V, 4), "valid": (F, V)}
+    assert {k: pred[k].shape for k in shapes} == shapes
+    assert pred["frames"].tolist() == [0, 1, 2, 3] and pred["valid"].dtype == np.bool_
+    # reference: the runtime's own crops of the same boxes through the batched forward
+    src = open_source(str(smoke_root))
+    crops, P, _ = offline_inputs(src, np.tile(np.arange(4)[:, None], (1, V)), S, boxes=pred["boxes"].astype(np.float64))
+    with torch.no_grad():
+        P_t = torch.from_numpy(P)
+        K = torch.from_numpy(seq.K).float().expand(F, V, 3, 3)
+        ref = to_smplx_params(model(torch.from_numpy(crops), P_t), P_t, K)
+    np.testing.assert_allclose(pred["P"], P, atol=1e-6)
+    for k in ("phi", "tau", "theta", "beta"):
+        np.testing.assert_allclose(pred[k], ref[k].numpy(), atol=1e-5, err_msg=k)
+
+    path = save_predictions(tmp_path / "pred.npz", pred)
+    back = load_predictions(path)
+    for k in shapes:
+        np.testing.assert_array_equal(back[k], pred[k])
+    assert back["provenance"]["input_size"] == S and back["provenance"]["checkpoint"] == str(tiny_ckpt)
+    init = init_from_views(back["phi"], back["tau"], back["theta"], back["beta"], num_frames=F)
+    assert init["theta"].shape == (F, 21, 3, 3) and init["beta"].shape == (10,)
+    # the same file through the `airpose fit --init` reader's key contract
+    with np.load(path) as data:
+        assert {"phi", "tau", "theta", "beta", "frames"} <= set(data.files)
+
+
+def test_predictions_file_errors(tmp_path):
+    F, V = 3, 2
+    good = {"phi": np.tile(np.eye(3, dtype=np.float32), (F, V, 1, 1)), "tau": np.ones((F, V, 3), np.float32),
+            "theta": np.tile(np.eye(3, dtype=np.float32), (F, V, 21, 1, 1)), "beta": np.zeros((F, V, 10), np.float32),
+            "frames": np.arange(F), "valid": np.ones((F, V), bool), "provenance": json.dumps({"a": 1})}
+    save_predictions(tmp_path / "ok.npz", good)
+    bad = dict(good, tau=good["tau"].copy())
+    bad["tau"][1, 0, 2] = np.nan
+    with pytest.raises(PredictionFormatError, match="NaN"):
+        save_predictions(tmp_path / "nan.npz", bad)
+    assert not (tmp_path / "nan.npz").exists()
+    np.savez(tmp_path / "nan2.npz", **{k: v for k, v in bad.items() if k != "provenance"})
+    with pytest.raises(PredictionFormatError, match="nan2.npz.*tau.*NaN"):
+        load_predictions(tmp_path / "nan2.npz")
+    np.savez(tmp_path / "short.npz", **dict({k: v for k, v in good.items() if k != "provenance"},
+                                            beta=np.zeros((F - 1, V, 10), np.float32)))
+    with pytest.raises(PredictionFormatError, match="short.npz: beta"):
+        load_predictions(tmp_path / "short.npz")
+    np.savez(tmp_path / "nokey.npz", phi=good["phi"])
+    with pytest.raises(PredictionFormatError, match="missing arrays"):
+        load_predictions(tmp_path / "nokey.npz")
+    with pytest.raises(PredictionFormatError, match="no predictions file"):
+        load_predictions(tmp_path / "absent.npz")
+
+
+# -- fine-tuning ----------------------------------------------------------------------------------
+def _cfg(**kw):
+    # Checkpoints only when stopping or done (writing them is the slow part here).
+    base = dict(steps=6, batch_size=2, lr=1e-4, frames=[0, 6], checkpoint_every=100, keep_checkpoints=0,
+                log_every=1, seed=0, feature_batch_size=6)
+    return FineTuneConfig(**{**base, **kw})
+
+
+def test_finetune_freezes_backbone_and_lowers_the_2d_loss(tiny_ckpt, smoke_root, tmp_path, body32, tiny_prior):
+    from airpose_lib.train import load_checkpoint, load_trained_model, read_log
+
+    res = finetune(tiny_ckpt, smoke_root, tmp_path / "ft", _cfg(steps=8), prior=tiny_prior, body_model=body32)
+    assert res.step == 8 and res.num_frames == 6 and not res.stopped_early
+    before = load_checkpoint(tiny_ckpt)["model"]
+    after = load_checkpoint(res.checkpoint)["model"]
+    assert set(before) == set(after)
+    for k in before:
+        if not k.startswith("regressor."):  # backbone weights, BatchNorm statistics, mean parameters
+            assert torch.equal(before[k], after[k]), k
+    changed = [k for k in before if k.startswith("regressor.") and not torch.equal(before[k], after[k])]
+    assert "regressor.fc1.weight" in changed and "regressor.decpose.bias" in changed
+    assert res.final["j2d"] < 0.5 * res.initial["j2d"]
+    assert res.keypoints["kept"] > 0 and res.keypoints["disagree"] + res.keypoints["unconfirmed"] > 0
+    model, cfg = load_trained_model(res.checkpoint)  # the kit checkpoint format
+    assert cfg.variant == "airpose" and load_network(res.checkpoint)[2] == S
+    assert [int(r["step"]) for r in read_log(tmp_path / "ft" / "log.csv")] == list(range(1, 9))
+    assert res.history["step"] == list(range(1, 9)) and len(res.history["j2d"]) == 8
+
+
+def test_resume_matches_an_uninterrupted_run(tiny_ckpt, smoke_root, tmp_path, body32, tiny_prior):
+    from airpose_lib.train import load_checkpoint, read_log
+
+    kw = dict(prior=tiny_prior, body_model=body32)
+    straight = finetune(tiny_ckpt, smoke_root, tmp_path / "a", _cfg(), **kw)
+    part = finetune(tiny_ckpt, smoke_root, tmp_path / "b", _cfg(), stop_at=3, **kw)
+    assert part.stopped_early and part.step == 3 and part.final is None
+    resumed = finetune(tiny_ckpt, smoke_root, tmp_path / "b", _cfg(), **kw)
+    assert resumed.step == 6
+    a, b = load_checkpoint(straight.checkpoint), load_checkpoint(resumed.checkpoint)
+    for k in a["model"]:
+        assert torch.equal(a["model"][k], b["model"][k]), k
+    strip = lambda rows: [{k: v for k, v in r.items() if k != "time_s"} for r in rows]  # noqa: E731
+    assert strip(read_log(tmp_path / "a" / "log.csv")) == strip(read_log(tmp_path / "b" / "log.csv"))
+    assert straight.final == resumed.final and straight.initial == resumed.initial
+    with pytest.raises(ValueError, match="cannot resume.*lr"):
+        finetune(tiny_ckpt, smoke_root, tmp_path / "b", _cfg(steps=8, lr=5e-5), **kw)
+
+
+def test_finetune_bad_input(tiny_ckpt, smoke_root, tmp_path, body32, tiny_prior):
+    kw = dict(prior=tiny_prior, body_model=body32)
+    with pytest.raises(ValueError, match="fewer than one batch"):
+        finetune(tiny_ckpt, smoke_root, tmp_path / "x", _cfg(frames=[0, 2], batch_size=4), **kw)
+    with pytest.raises(ValueError, match="no image numbered"):
+        finetune(tiny_ckpt, smoke_root, tmp_path / "y", _cfg(frames=[5000, 5010]), **kw)
+    with pytest.raises(ValueError, match="start < stop"):
+        _cfg(frames=[6, 2])
+
+
+def test_finetune_config_from_profiles(tmp_path):
+    assert finetune_config(None) == FineTuneConfig()
+    cfg = finetune_config("smoke")  # with or without a `finetune:` section
+    assert isinstance(cfg, FineTuneConfig)
+    prof = tmp_path / "p.yaml"
+    prof.write_text("finetune:\n  steps: 5\n  frames: [0, 7000]\n  loss: {w_vposer: 0.5}\n")
+    cfg = finetune_config(prof, seed=7)
+    assert (cfg.steps, cfg.frames, cfg.loss, cfg.seed, cfg.lr) == (5, [0, 7000], {"w_vposer": 0.5}, 7, 5e-5)
+    prof.write_text("finetune:\n  stepz: 5\n")
+    with pytest.raises(ValueError, match="p.yaml.*stepz"):
+        finetune_config(prof)
+
+
+def test_cli_predict_and_finetune(tiny_ckpt, smoke_root, tmp_path, body32, capsys):
+    """The subcommand builders in a parser of their own (airpose_lib.cli registers them)."""
+    import argparse
+
+    from airpose_lib.cli import CLIError
+    from airpose_lib.finetune.cli import _add_finetune, _add_predict
+    from airpose_lib.prior import VPoser, save_prior
+
+    parser = argparse.ArgumentParser(prog="airpose")
+    sub = parser.add_subparsers(dest="command", required=True)
+    _add_finetune(sub)
+    _add_predict(sub)
+    run = lambda argv: (a := parser.parse_args(argv)).func(a)  # noqa: E731
+
+    out = tmp_path / "pred.npz"
+    assert run(["predict", "--checkpoint", str(tiny_ckpt), "--sequence", str(smoke_root), "--out", str(out),
+                "--frames", ":3", "--quiet"]) == 0
+    assert load_predictions(out)["frames"].tolist() == [0, 1, 2]
+    torch.manual_seed(1)
+    prior = save_prior(VPoser(32, 8).eval(), tmp_path / "prior.pt")
+    # the predictions file is what `airpose fit --init` reads (its `--frames` are positions)
+    from airpose_lib import cli
+
+    assert cli.main(["fit", "--sequence", str(smoke_root), "--init", str(out), "--frames", "0:3", "--iterations", "1",
+                     "--prior-path", str(prior), "--profile", "smoke", "--quiet", "--out",
+                     str(tmp_path / "fit.npz")]) == 0
+    with np.load(tmp_path / "fit.npz") as fit:
+        assert fit["frames"].tolist() == [0, 1, 2] and fit["tau"].shape == (3, 2, 3)
+    assert run(["finetune", "--checkpoint", str(tiny_ckpt), "--sequence", str(smoke_root), "--out",
+                str(tmp_path / "ft"), "--profile", "smoke", "--frames", "0:4", "--steps", "2", "--batch-size", "2",
+                "--prior-path", str(prior), "--quiet", "--set", "lr=1e-4", "loss.w_beta=4"]) == 0
+    assert "2D loss" in capsys.readouterr().out
+    cfg = json.loads((tmp_path / "ft" / "config.json").read_text())
+    assert (cfg["steps"], cfg["frames"], cfg["lr"], cfg["loss"]) == (2, [0, 4], 1e-4, {"w_beta": 4})
+    with pytest.raises(CLIError, match="no checkpoint"):
+        run(["predict", "--checkpoint", str(tmp_path / "nope.pt"), "--sequence", str(smoke_root), "--out", str(out)])
+    with pytest.raises(CLIError, match="START:STOP"):
+        run(["finetune", "--checkpoint", str(tiny_ckpt), "--sequence", str(smoke_root), "--out", str(tmp_path / "z"),
+             "--frames", "7"])
+    with pytest.raises(CLIError, match="unknown key"):
+        run(["finetune", "--checkpoint", str(tiny_ckpt), "--sequence", str(smoke_root), "--out", str(tmp_path / "z"),
+             "--set", "bogus=1"])

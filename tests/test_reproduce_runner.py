@@ -194,6 +194,8 @@ def test_real_catalog_profiles_and_notebooks():
             assert prof["description"]
             # Every parameter a profile sets is declared by the notebook's parameters cell.
             check_notebook(path, list(prof["notebooks"].get(entry.name, {})))
+        # Every notebook can be pointed at the official assets (issue: official assets as drop-ins).
+        check_notebook(path, ["profile", "output_dir", "data_source"])
         assert notebook_outputs(path) == [], f"{entry.file} carries outputs; clear them before committing"
     for prof in profiles:
         assert set(prof["notebooks"]) <= {e.name for e in catalog}

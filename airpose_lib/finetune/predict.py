@@ -84,21 +84,9 @@ def regress_features(model: nn.Module, feat: Tensor, P: Tensor | None = None,
         the dict of :meth:`AirPoseNet.forward`: phi6d (B, V, 6), theta6d (B, V, 21, 6),
         beta (B, V, 10), tau (B, V, 3) or cam (B, V, 3), messages, and input_size if given.
     """
-    from airpose_lib.model import fuse_messages
-
     if feat.dim() != 3:
         raise ValueError(f"features must be (B, V, C), got {tuple(feat.shape)}")
-    B, V = feat.shape[:2]
-    state = model.initial_state((B, V))
-    other = model.mean_message((B, V)) if model.spec.multiview else None
-    messages = []
-    for k in range(model.num_iterations):
-        if k > 0 and model.spec.multiview and V > 1:
-            other = fuse_messages(messages[-1])
-        state = model.iterate(feat, P, state, other)
-        messages.append(model.message(state))
-    out = model.decode(state)
-    out["messages"] = messages
+    out = model.regress(feat, P)
     if input_size is not None:
         out["input_size"] = int(input_size)
     return out

@@ -337,6 +337,32 @@ class AirPoseNet(nn.Module):
 
     # -- the batched forward ------------------------------------------------------------------
 
+    def regress(self, feat: Tensor, P: Tensor | None = None) -> dict:
+        """The iterative regressor with the views' exchange, on backbone features.
+
+        Args:
+            feat: ``(B, V, C)`` features of the V views' crops.
+            P: ``(B, V, 3)`` crop vectors (full-camera variants).
+
+        Returns:
+            :meth:`decode` of the final state, plus ``messages``: the (B, V, 136) message of each
+            iteration.
+        """
+        B, V = feat.shape[:2]
+        state = self.initial_state((B, V))
+        other = self.mean_message((B, V)) if self.spec.multiview else None
+        messages = []
+        for k in range(self.num_iterations):
+            if k > 0 and self.spec.multiview and V > 1:
+                other = fuse_messages(messages[-1])
+            # V == 1 with a multi-view variant: the lone view keeps the mean message, as a drone
+            # whose partner never answers.
+            state = self.iterate(feat, P, state, other)
+            messages.append(self.message(state))
+        out = self.decode(state)
+        out["messages"] = messages
+        return out
+
     def forward(self, images: Tensor, P: Tensor | None = None, K: Tensor | None = None) -> dict:
         """All views of a batch at once.
 
@@ -358,18 +384,7 @@ class AirPoseNet(nn.Module):
             raise ValueError(f"images must be (B, V, 3, S, S), got {tuple(images.shape)}")
         B, V = images.shape[:2]
         feat = self.features(images.flatten(0, 1)).unflatten(0, (B, V))
-        state = self.initial_state((B, V))
-        other = self.mean_message((B, V)) if self.spec.multiview else None
-        messages = []
-        for k in range(self.num_iterations):
-            if k > 0 and self.spec.multiview and V > 1:
-                other = fuse_messages(messages[-1])
-            # V == 1 with a multi-view variant: the lone view keeps the mean message, as a drone
-            # whose partner never answers.
-            state = self.iterate(feat, P, state, other)
-            messages.append(self.message(state))
-        out = self.decode(state)
-        out["messages"] = messages
+        out = self.regress(feat, P)
         out["input_size"] = int(images.shape[-1])
         if not self.spec.fullcam and K is not None and P is not None:
             out["tau"] = weak_perspective_to_translation(out["cam"], P.to(out["cam"].dtype),

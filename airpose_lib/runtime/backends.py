@@ -186,15 +186,18 @@ class BackendSpec:
 def checkpoint_settings(path: str | Path) -> dict:
     """Network settings stored in a training checkpoint (``airpose_lib.train``'s ``config``):
     ``variant``, ``backbone``, ``model`` (extra ``build_model`` kwargs) and ``input_size`` (the
-    data's crop size) when present; empty for a bare ``state_dict``."""
+    crop size, :func:`airpose_lib.finetune.network.checkpoint_input_size`) when present; empty for
+    a bare ``state_dict``."""
     import torch
 
     state = torch.load(path, map_location="cpu", weights_only=True)
     cfg = state.get("config") if isinstance(state, dict) else None
     if not isinstance(cfg, dict):
         return {}
+    from airpose_lib.finetune.network import checkpoint_input_size
+
     out = {k: cfg[k] for k in ("variant", "backbone", "model") if cfg.get(k) is not None}
-    size = (cfg.get("data") or {}).get("crop_size") if isinstance(cfg.get("data"), dict) else None
+    size = checkpoint_input_size(state)  # also fine-tuned checkpoints and manifests of the data
     if size:
         out["input_size"] = int(size)
     return out

@@ -74,6 +74,7 @@ def test_mesh_overlay_lands_on_the_projected_mesh(open_model):
     px = np.round(uv[inside]).astype(int)
     assert np.isfinite(depth[px[:, 1], px[:, 0]]).mean() > 0.85  # misses: silhouette edges, fingers
     images = np.zeros((1, 2, 120, 160, 3), np.uint8)
-    fig = plot_mesh_overlays(images, {"AirPose": np.stack([v, v])[None]}, faces, np.stack([K, K]))
-    assert len(fig.axes) == 2
-    plt.close(fig)
+    for Ks in (np.stack([K, K]), np.stack([K, K])[None]):  # per view, or per image (crops)
+        fig = plot_mesh_overlays(images, {"AirPose": np.stack([v, v])[None]}, faces, Ks)
+        assert len(fig.axes) == 2
+        plt.close(fig)

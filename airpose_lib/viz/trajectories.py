@@ -138,7 +138,7 @@ def plot_mesh_overlays(images: np.ndarray, vertices: Mapping[str, np.ndarray], f
         images: ``(n, V, H, W, 3)`` uint8 frames.
         vertices: method -> ``(n, V, N, 3)`` camera-frame vertices of that method's estimate.
         faces: ``(M, 3)`` triangles.
-        K: ``(V, 3, 3)`` intrinsics of the images.
+        K: ``(V, 3, 3)`` intrinsics of the images, or ``(n, V, 3, 3)`` per image (e.g. crops).
         frame_labels: n row titles.
         zoom_points: optional ``(n, V, J, 2)`` pixels to zoom on (e.g. ground-truth joints);
             default: the first method's projected vertices.
@@ -154,18 +154,20 @@ def plot_mesh_overlays(images: np.ndarray, vertices: Mapping[str, np.ndarray], f
     n, V, H, W = images.shape[:4]
     methods = list(vertices)
     fig, ax = plt.subplots(n, V * len(methods), figsize=(2.4 * V * len(methods), 2.5 * n), squeeze=False)
-    with OffscreenRenderer((W, H), K[0]) as renderer:
+    K = np.asarray(K, dtype=np.float64)
+    with OffscreenRenderer((W, H), K.reshape(-1, 3, 3)[0]) as renderer:
         for i in range(n):
             for v in range(V):
+                Kiv = K[i, v] if K.ndim == 4 else K[v]
                 if zoom_points is not None:
                     box = _zoom(zoom_points[i, v], (H, W))
                 else:
                     vv = vertices[methods[0]][i, v]
-                    uv = (vv @ K[v].T)[:, :2] / vv[:, 2:3]
+                    uv = (vv @ Kiv.T)[:, :2] / vv[:, 2:3]
                     box = _zoom(uv, (H, W))
                 x0, y0, x1, y1 = box
                 for m, method in enumerate(methods):
-                    rgb, depth = renderer.render(vertices[method][i, v], faces, MESH_COLOR, K=K[v],
+                    rgb, depth = renderer.render(vertices[method][i, v], faces, MESH_COLOR, K=Kiv,
                                                  return_depth=True)
                     a = ax[i, v * len(methods) + m]
                     a.imshow(overlay_mesh(images[i, v], rgb, depth)[y0:y1, x0:x1])

@@ -29,12 +29,16 @@ import numpy as np
 import pandas as pd
 
 __all__ = ["METHODS", "RecordingExperiment", "default_experiment_dir", "run_recording_experiment",
-           "body_vertices", "official_recordings", "recordings_for", "depth_summary", "overlay_inputs", "airpose_plus_checks", "markdown_table"]
+           "body_vertices", "official_recordings", "official_networks", "networks_for", "recordings_for", "depth_summary", "overlay_inputs", "airpose_plus_checks", "markdown_table"]
 
 #: Estimate names in plotting order.
 METHODS = ("Baseline (pre-trained)", "AirPose (pre-trained)", "Baseline", "AirPose", "AirPose+")
 _NETWORKS = {"Baseline (pre-trained)": ("baseline", False), "AirPose (pre-trained)": ("airpose", False),
              "Baseline": ("baseline", True), "AirPose": ("airpose", True)}
+#: Crop size of the official networks.
+OFFICIAL_INPUT_SIZE = 224
+#: Folders of the official real-data (fine-tuned on person 1) checkpoints (data_manifests/official_checkpoints.yaml).
+OFFICIAL_REAL_CHECKPOINTS = {"Baseline": "hmr_real_ckpt", "AirPose": "copenet_twoview_real_ckpt"}
 
 
 def default_experiment_dir(profile: str) -> Path:
@@ -128,7 +132,12 @@ def _network_estimate(checkpoint: Path, sequence, out: Path) -> dict:
     cached = _cached_npz(out, key)
     if cached is not None:
         return cached
-    model, _, size = load_network(checkpoint)
+    if Path(checkpoint).suffix == ".ckpt":  # an official Lightning checkpoint: ResNet-50 at 224 px
+        from airpose_lib.model.official import load_official_checkpoint
+
+        model, size = load_official_checkpoint(checkpoint, backbone=None), OFFICIAL_INPUT_SIZE
+    else:
+        model, _, size = load_network(checkpoint)
     pred = predict_sequence(model, sequence, input_size=size)
     arrays = {k: np.asarray(v) for k, v in pred.items() if k != "provenance"}
     _save_npz(out, key, arrays)
@@ -194,6 +203,38 @@ def official_recordings(root: str | Path) -> dict:
     return {"person1": load_official_real(root, person=1), "person2": load_official_real(root, person=2)}
 
 
+def official_networks(checkpoints_root: str | Path) -> dict[str, Path]:
+    """The authors' networks for the experiment's methods: the synthetic-data checkpoints of
+    Baseline and AirPose (pre-trained) and their real-data fine-tuned ones (``hmr_real_ckpt``,
+    ``copenet_twoview_real_ckpt``)."""
+    from airpose_lib.train.official import find_official_checkpoint
+
+    root = Path(checkpoints_root)
+    nets = {"Baseline (pre-trained)": find_official_checkpoint(root, "baseline"),
+            "AirPose (pre-trained)": find_official_checkpoint(root, "airpose")}
+    for method, folder in OFFICIAL_REAL_CHECKPOINTS.items():
+        found = sorted((root / folder).glob("**/*.ckpt"))
+        if not found:
+            raise FileNotFoundError(f"no .ckpt under {root / folder}; unpack {folder}.zip of the official release "
+                                    "there (data_manifests/official_checkpoints.yaml)")
+        nets[method] = found[-1]
+    return nets
+
+
+def networks_for(source) -> dict[str, Path] | None:
+    """The official networks when the data source is official and ``official_checkpoints`` is
+    present (see :func:`official_networks`), else None (the kit trains and fine-tunes its own)."""
+    if getattr(source, "source", "generated") != "official":
+        return None
+    from airpose_lib.assets import resolve_data_source
+
+    ckpts = resolve_data_source("official", needs=["official_checkpoints"])
+    if ckpts.source != "official":
+        print(ckpts.message.replace("the kit's generated data", "the kit's own networks, fine-tuned here"))
+        return None
+    return official_networks(ckpts.roots["official_checkpoints"])
+
+
 def recordings_for(source, profile: str) -> dict | None:
     """Recordings for a resolved data source (:func:`airpose_lib.assets.resolve_data_source`):
     None (the profile's generated recordings) or the official release's two persons."""
@@ -202,9 +243,35 @@ def recordings_for(source, profile: str) -> dict | None:
     return official_recordings(source.roots["official_real"])
 
 
+def _kit_networks(profile: str, seed: int, tuning, out: Path, progress: bool) -> tuple[dict, dict]:
+    """Table I's Baseline and AirPose of the profile, and their fine-tuning on ``tuning``."""
+    import dataclasses
+
+    from airpose_lib.finetune import finetune, finetune_config
+    from airpose_lib.prior import load_prior
+    from airpose_lib.prior.build import ensure_prior
+    from airpose_lib.train.ablation import trained_checkpoint
+
+    checkpoints, finetune_info = {}, {}
+    ft_cfg = finetune_config(profile)
+    if ft_cfg.frames is None and "person" in tuning.meta:  # an official split: fine-tune on its frames only
+        ft_cfg = dataclasses.replace(ft_cfg, frames=[int(tuning.frames[0]), int(tuning.frames[-1]) + 1])
+    prior = load_prior("kit", ensure_prior(profile, progress=progress))
+    for variant, label in (("baseline", "Baseline"), ("airpose", "AirPose")):
+        pre = trained_checkpoint(profile, variant, seed, progress=progress)
+        checkpoints[f"{label} (pre-trained)"] = pre
+        res = finetune(pre, tuning.root, out / "finetune" / variant, ft_cfg, progress=progress, prior=prior)
+        checkpoints[label] = Path(res.checkpoint)
+        finetune_info[label] = {"steps": res.step, "frames": res.num_frames,
+                                "j2d_before": res.initial.get("j2d"),
+                                "j2d_after": (res.final or {}).get("j2d")}
+    return checkpoints, finetune_info
+
+
 def run_recording_experiment(profile: str = "smoke", out_dir: str | Path | None = None, *,
                              sequences: dict | None = None, seed: int | None = None,
-                             fine_tune_on: str = "person1", progress: bool = False) -> RecordingExperiment:
+                             fine_tune_on: str = "person1", networks: dict[str, str | Path] | None = None,
+                             progress: bool = False) -> RecordingExperiment:
     """Run (or load the cached steps of) the real-data experiment.
 
     Args:
@@ -215,18 +282,15 @@ def run_recording_experiment(profile: str = "smoke", out_dir: str | Path | None 
             recordings, made if missing).
         seed: training seed of the networks (default: the profile's).
         fine_tune_on: the person whose detections fine-tune the networks (paper: person 1).
+        networks: method -> checkpoint for every network method (``Baseline (pre-trained)``,
+            ``AirPose (pre-trained)``, ``Baseline``, ``AirPose``), kit ``.pt`` or official
+            ``.ckpt`` (:func:`official_networks`); then nothing is trained or fine-tuned.
     """
-    import dataclasses
-
     import torch
 
     from airpose_lib.body import load_body_model
     from airpose_lib.data.official_layout import load_sequence
     from airpose_lib.eval.recordings import body_joints, recording_table
-    from airpose_lib.finetune import finetune, finetune_config
-    from airpose_lib.prior import load_prior
-    from airpose_lib.prior.build import ensure_prior
-    from airpose_lib.train.ablation import trained_checkpoint
     from airpose_lib.train.config import load_train_config
 
     out = Path(out_dir) if out_dir is not None else default_experiment_dir(profile)
@@ -240,21 +304,14 @@ def run_recording_experiment(profile: str = "smoke", out_dir: str | Path | None 
     if seed is None:
         seed = load_train_config(profile, "airpose").seed
 
-    checkpoints, finetune_info = {}, {}
-    ft_cfg = finetune_config(profile)
-    tuning = seqs[fine_tune_on]
-    if ft_cfg.frames is None and "person" in tuning.meta:  # an official split: fine-tune on its frames only
-        ft_cfg = dataclasses.replace(ft_cfg, frames=[int(tuning.frames[0]), int(tuning.frames[-1]) + 1])
-    prior = load_prior("kit", ensure_prior(profile, progress=progress))
-    for variant, label in (("baseline", "Baseline"), ("airpose", "AirPose")):
-        pre = trained_checkpoint(profile, variant, seed, progress=progress)
-        checkpoints[f"{label} (pre-trained)"] = pre
-        res = finetune(pre, tuning.root, out / "finetune" / variant, ft_cfg, progress=progress, prior=prior)
-        checkpoints[label] = Path(res.checkpoint)
-        finetune_info[label] = {"steps": res.step, "frames": res.num_frames,
-                                "j2d_before": res.initial.get("j2d"),
-                                "j2d_after": (res.final or {}).get("j2d")}
-
+    finetune_info = {}
+    if networks is not None:
+        missing = set(_NETWORKS) - set(networks)
+        if missing:
+            raise ValueError(f"networks lacks {sorted(missing)}")
+        checkpoints = {m: Path(networks[m]) for m in _NETWORKS}
+    else:
+        checkpoints, finetune_info = _kit_networks(profile, seed, seqs[fine_tune_on], out, progress)
     estimates, joints, fit_info, tables = {}, {}, {}, []
     body = load_body_model("open", "neutral", dtype=torch.float32)
     for person, seq in seqs.items():

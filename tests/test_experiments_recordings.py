@@ -1,0 +1,67 @@
+"""The real-data experiment (airpose_lib.experiments.recordings) on the official real-data
+formats with official-format networks: what a user with the official assets runs."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+
+
+@pytest.fixture(scope="module")
+def official(tmp_path_factory, open_model_files):
+    from airpose_lib.data.official_fixtures import write_official_real_fixture
+    from airpose_lib.experiments.recordings import OFFICIAL_REAL_CHECKPOINTS
+    from airpose_lib.model import build_model, write_official_checkpoint
+    from airpose_lib.train.official import OFFICIAL_CHECKPOINT_FOLDERS
+
+    root = tmp_path_factory.mktemp("official")
+    write_official_real_fixture(root / "real", frames=[0, 1, 2, 8000, 8001, 8002], image_size=(192, 108))
+    folders = {"baseline": [OFFICIAL_CHECKPOINT_FOLDERS["baseline"], OFFICIAL_REAL_CHECKPOINTS["Baseline"]],
+               "airpose": [OFFICIAL_CHECKPOINT_FOLDERS["airpose"], OFFICIAL_REAL_CHECKPOINTS["AirPose"]]}
+    for variant, names in folders.items():
+        for k, name in enumerate(names):
+            torch.manual_seed(k)
+            write_official_checkpoint(build_model(variant, backbone="resnet18").eval(),
+                                      root / "ckpt" / name / "epoch=1.ckpt")
+    return root
+
+
+def test_official_recordings_and_networks_run_without_training(official, tmp_path):
+    from airpose_lib.experiments.recordings import (
+        METHODS,
+        official_networks,
+        official_recordings,
+        run_recording_experiment,
+    )
+
+    nets = official_networks(official / "ckpt")
+    assert nets["AirPose"].parent.name == "copenet_twoview_real_ckpt"
+    seqs = official_recordings(official / "real")
+    assert [s.frames.tolist() for s in seqs.values()] == [[0, 1, 2], [8000, 8001, 8002]]
+    exp = run_recording_experiment("smoke", tmp_path / "exp", sequences=seqs, networks=nets)
+    assert exp.tables.empty and not exp.finetune_info  # no ground truth, nothing fine-tuned
+    for person in ("person1", "person2"):
+        assert list(exp.estimates[person]) == list(METHODS)
+        for est in exp.estimates[person].values():
+            assert est["tau"].shape == (3, 2, 3) and np.isfinite(est["tau"]).all()
+        assert exp.joints[person]["AirPose+"].shape == (3, 2, 22, 3)
+    # the two networks of a method differ: the estimates come from the named checkpoints
+    a, b = exp.estimates["person2"]["AirPose"], exp.estimates["person2"]["AirPose (pre-trained)"]
+    assert not np.allclose(a["tau"], b["tau"])
+    cached = sorted((tmp_path / "exp" / "estimates").rglob("*.npz"))
+    stamps = [p.stat().st_mtime_ns for p in cached]
+    again = run_recording_experiment("smoke", tmp_path / "exp", sequences=seqs, networks=nets)
+    assert [p.stat().st_mtime_ns for p in cached] == stamps  # every step came from the cache
+    np.testing.assert_array_equal(again.estimates["person1"]["AirPose+"]["tau"],
+                                  exp.estimates["person1"]["AirPose+"]["tau"])
+
+
+def test_missing_real_checkpoint_names_the_archive(official, tmp_path):
+    import shutil
+
+    from airpose_lib.experiments.recordings import official_networks
+
+    shutil.copytree(official / "ckpt", tmp_path / "ckpt")
+    shutil.rmtree(tmp_path / "ckpt" / "hmr_real_ckpt")
+    with pytest.raises(FileNotFoundError, match="hmr_real_ckpt.zip"):
+        official_networks(tmp_path / "ckpt")

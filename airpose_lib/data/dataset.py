@@ -39,7 +39,7 @@ from .manifest import check_complete, verify_shard
 from .shards import ShardImages, read_shard
 
 __all__ = ["StillFrameDataset", "IMAGENET_MEAN", "IMAGENET_STD", "PER_VIEW_KEYS", "SAMPLE_KEYS", "EXTRA_KEYS",
-           "normalize_images", "denormalize_images", "decode_image"]
+           "normalize_images", "denormalize_images", "decode_image", "swap_views"]
 
 IMAGENET_MEAN = (0.485, 0.456, 0.406)
 IMAGENET_STD = (0.229, 0.224, 0.225)
@@ -57,6 +57,18 @@ EXTRA_KEYS: tuple[str, ...] = ("R_wb", "t_wb", "heading", "cam_centre", "cam_dis
                                "cam_azimuth", "bbox_tight", "attempt", "env_texture", "env_light_dir",
                                "env_light_intensity", "env_num_distractors", "skin_color")
 _LOADED = _FLOAT_KEYS + ("kp_visible", "gender", "index", "image_offsets") + EXTRA_KEYS
+
+
+def swap_views(item: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
+    """The view-swap augmentation, in place: one random permutation of the views applied to every
+    per-view entry (:data:`PER_VIEW_KEYS`, each ``(V, ...)``), so that a network cannot learn which
+    view comes first (torch's RNG, seeded per sample by the training loop)."""
+    V = item["images"].shape[0]
+    if V > 1:
+        perm = torch.randperm(V)
+        for k in PER_VIEW_KEYS:
+            item[k] = item[k][perm]
+    return item
 
 
 def decode_image(data: bytes) -> np.ndarray:
@@ -161,10 +173,8 @@ class StillFrameDataset(Dataset):
         item["kp_visible"] = torch.from_numpy(a["kp_visible"][i].copy())
         item["gender"] = torch.tensor(int(a["gender"][i]), dtype=torch.int64)
         item["index"] = torch.tensor(int(a["index"][i]), dtype=torch.int64)
-        if self.augment and self.num_views > 1:
-            perm = torch.randperm(self.num_views)
-            for k in PER_VIEW_KEYS:
-                item[k] = item[k][perm]
+        if self.augment:
+            swap_views(item)
         return item
 
     def __repr__(self) -> str:

@@ -89,7 +89,7 @@ import numpy as np
 import torch
 from torch.utils.data import Dataset
 
-from .dataset import PER_VIEW_KEYS, normalize_images
+from .dataset import normalize_images, swap_views
 from .manifest import DatasetError
 from .scene import GENDER_CODES, points_in_frame
 
@@ -536,10 +536,8 @@ class OfficialSyntheticDataset(Dataset):
             item[k] = f32(a[k])
         item["gender"] = torch.tensor(int(a["gender"]), dtype=torch.int64)
         item["index"] = torch.tensor(int(a["index"]), dtype=torch.int64)
-        if self.augment and self.num_views > 1:
-            perm = torch.randperm(self.num_views)
-            for k in PER_VIEW_KEYS:
-                item[k] = item[k][perm]
+        if self.augment:
+            swap_views(item)
         return item
 
     def __repr__(self) -> str:

@@ -13,7 +13,7 @@ nor torch until they are used.
 """
 from __future__ import annotations
 
-import importlib
+from airpose_lib._lazy import lazy_namespace
 
 _EXPORTS = {
     # scene
@@ -38,29 +38,9 @@ _EXPORTS = {
 
 # Other modules' public names (their ``__all__``) are found on first use, in this order; the
 # renderer comes last because importing it starts VTK.
-_SEARCHED = ("official_synthetic", "official_real", "official_fixtures", "official_layout", "sequences", "motions", "detections", "poses", "scene", "appearance",
-             "manifest", "shards", "generate", "dataset", "render")
+_SEARCHED = ("official_synthetic", "official_real", "official_fixtures", "official_layout", "sequences",
+             "motions", "detections", "poses", "scene", "appearance", "manifest", "shards", "generate",
+             "dataset", "render")
 
 __all__ = sorted(_EXPORTS)
-
-
-def __getattr__(name: str):
-    module = _EXPORTS.get(name)
-    if module is None and not name.startswith("_"):
-        for candidate in _SEARCHED:
-            try:
-                mod = importlib.import_module(f"{__name__}.{candidate}")
-            except ImportError:
-                continue
-            if name in getattr(mod, "__all__", ()):
-                module = candidate
-                break
-    if module is None:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    value = getattr(importlib.import_module(f"{__name__}.{module}"), name)
-    globals()[name] = value
-    return value
-
-
-def __dir__() -> list[str]:
-    return sorted(set(globals()) | set(_EXPORTS))
+__getattr__, __dir__ = lazy_namespace(__name__, globals(), _SEARCHED, _EXPORTS, skip_failing=True)

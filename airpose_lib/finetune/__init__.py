@@ -12,24 +12,7 @@ build its parser from ``finetune.cli`` without importing torch.
 """
 from __future__ import annotations
 
-import importlib
+from airpose_lib._lazy import lazy_namespace
 
 _MODULES = ("keypoints", "loss", "network", "predict", "train")
-
-
-def __getattr__(name: str):
-    if not name.startswith("_"):
-        for candidate in _MODULES:
-            mod = importlib.import_module(f"{__name__}.{candidate}")
-            if name in getattr(mod, "__all__", ()):
-                value = getattr(mod, name)
-                globals()[name] = value
-                return value
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-
-
-def __dir__() -> list[str]:
-    names = set(globals()) | set(_MODULES)
-    for candidate in _MODULES:
-        names |= set(getattr(importlib.import_module(f"{__name__}.{candidate}"), "__all__", ()))
-    return sorted(names)
+__getattr__, __dir__ = lazy_namespace(__name__, globals(), _MODULES)

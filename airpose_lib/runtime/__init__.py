@@ -13,22 +13,8 @@ from ``options`` without importing ZeroMQ or torch).
 """
 from __future__ import annotations
 
-import importlib
+from airpose_lib._lazy import lazy_namespace
 
 _MODULES = ("wire", "transport", "sync", "source", "backends", "node", "launcher", "results", "offline",
             "options")
-
-
-def __getattr__(name: str):
-    if not name.startswith("_"):
-        for candidate in _MODULES:
-            mod = importlib.import_module(f"{__name__}.{candidate}")
-            if name in getattr(mod, "__all__", ()):
-                value = getattr(mod, name)
-                globals()[name] = value
-                return value
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-
-
-def __dir__() -> list[str]:
-    return sorted(set(globals()) | set(_MODULES))
+__getattr__, __dir__ = lazy_namespace(__name__, globals(), _MODULES)

@@ -1,0 +1,48 @@
+"""Lazy package namespaces: a package's public names are imported from its modules on first use,
+so importing the package stays cheap (no torch, VTK or ZeroMQ until needed)."""
+from __future__ import annotations
+
+import importlib
+from collections.abc import Callable, Mapping, Sequence
+
+__all__ = ["lazy_namespace"]
+
+
+def lazy_namespace(package: str, namespace: dict, modules: Sequence[str],
+                   exports: Mapping[str, str] | None = None,
+                   skip_failing: bool = False) -> tuple[Callable, Callable]:
+    """Module-level ``__getattr__`` and ``__dir__`` for ``package`` (PEP 562).
+
+    Args:
+        package: the package's ``__name__``.
+        namespace: its ``globals()`` (a resolved name is cached there).
+        modules: submodules searched in order for a name in their ``__all__``.
+        exports: name -> submodule for names looked up directly, before the search.
+        skip_failing: a submodule that fails to import is passed over in the search (e.g. the
+            renderer without VTK) instead of raising its ImportError.
+    """
+    exports = dict(exports or {})
+
+    def __getattr__(name: str):
+        module = exports.get(name)
+        if module is None and not name.startswith("_"):
+            for candidate in modules:
+                try:
+                    mod = importlib.import_module(f"{package}.{candidate}")
+                except ImportError:
+                    if not skip_failing:
+                        raise
+                    continue
+                if name in getattr(mod, "__all__", ()):
+                    module = candidate
+                    break
+        if module is None:
+            raise AttributeError(f"module {package!r} has no attribute {name!r}")
+        value = getattr(importlib.import_module(f"{package}.{module}"), name)
+        namespace[name] = value
+        return value
+
+    def __dir__() -> list[str]:
+        return sorted(set(namespace) | set(modules) | set(exports))
+
+    return __getattr__, __dir__

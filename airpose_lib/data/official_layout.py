@@ -284,7 +284,8 @@ class Sequence:
         timestamps: (F, V) seconds, or None (no ``timestamps.csv``).
         ground_truth: arrays of ``ground_truth.npz`` restricted to the F frames, or None.
         meta: ``sequence.json`` contents (empty for real data).
-        info: what was zero-filled: ``{detector: {"missing_frames": n, "nan_keypoints": n}}``.
+        info: per detector, what was zero-filled and the file format:
+            ``{detector: {"missing_frames": n, "nan_keypoints": n, "format": "kit" | "official"}}``.
     """
 
     root: Path
@@ -352,14 +353,23 @@ def _frame_key(key) -> int:
     return int(m.group(1))
 
 
-def _read_openpose(path: Path, frames: np.ndarray, missing: str) -> tuple[np.ndarray, dict]:
+def _load_detector_file(path: Path):
+    """The parsed content of a detector file (JSON for ``.json``, else a pickle), read once."""
     try:
+        if path.suffix == ".json":
+            return json.loads(path.read_text())
         with open(path, "rb") as fh:
-            res = pickle.load(fh)
+            return pickle.load(fh, encoding="latin1")  # latin1: the release's Python-2 era pickles
     except FileNotFoundError:
         raise SequenceFormatError(f"missing detector file {path}") from None
-    except Exception as e:  # a broken pickle
+    except (json.JSONDecodeError, UnicodeDecodeError) as e:
+        raise SequenceFormatError(f"cannot parse {path}: {e}") from None
+    except Exception as e:  # noqa: BLE001 - a broken pickle
         raise SequenceFormatError(f"cannot read {path}: {e}") from None
+
+
+def _read_openpose(path: Path, res, frames: np.ndarray, missing: str) -> tuple[np.ndarray, dict]:
+    """The kit's ``openpose_res.pkl`` (parsed ``res``: frame -> (persons, 25, 3))."""
     if not isinstance(res, Mapping):
         raise SequenceFormatError(f"{path}: expected a dict frame_index -> (persons, 25, 3) array")
     try:
@@ -394,14 +404,9 @@ def _read_openpose(path: Path, frames: np.ndarray, missing: str) -> tuple[np.nda
     return out, {"missing_frames": len(absent), "nan_keypoints": nan}
 
 
-def _read_alphapose(path: Path, frames: np.ndarray, last_image: int, missing: str,
+def _read_alphapose(path: Path, entries, frames: np.ndarray, last_image: int, missing: str,
                     tail_tolerance: int) -> tuple[np.ndarray, dict]:
-    try:
-        entries = json.loads(path.read_text())
-    except FileNotFoundError:
-        raise SequenceFormatError(f"missing detector file {path}") from None
-    except (json.JSONDecodeError, UnicodeDecodeError) as e:
-        raise SequenceFormatError(f"cannot parse {path}: {e}") from None
+    """The kit's ``alphapose_res.json`` (parsed ``entries``: a list of detections)."""
     if not isinstance(entries, list):
         raise SequenceFormatError(f"{path}: expected a JSON list of detections")
     best: dict[int, tuple[float, list]] = {}
@@ -516,23 +521,28 @@ def load_sequence(root: str | Path, frames: Iterable[int] | slice | None = None,
     for name in detectors:
         if name not in DETECTOR_FILES:
             raise ValueError(f"unknown detector {name!r}; known: {tuple(DETECTOR_FILES)}")
-        per_view, stats = [], {"missing_frames": 0, "nan_keypoints": 0}
+        # The real-data release stores per-frame dicts; the kit's generator writes arrays.
+        from .official_real import detections_format, read_official_alphapose, read_official_openpose
+
+        per_view, stats, formats = [], {"missing_frames": 0, "nan_keypoints": 0}, set()
         for m in machines:
             path = m / DETECTOR_FILES[name][0]
-            # The real-data release stores per-frame dicts; the kit's generator writes arrays.
-            from .official_real import detector_file_format, read_official_alphapose, read_official_openpose
-
-            if path.is_file() and detector_file_format(path) == "official":
-                kp, st = (read_official_openpose if name == "openpose" else read_official_alphapose)(path, sel)
+            data = _load_detector_file(path)
+            formats.add(detections_format(data, json_file=path.suffix == ".json"))
+            if len(formats) > 1:
+                raise SequenceFormatError(f"{root}: the {DETECTOR_FILES[name][0]} files of the machines are in "
+                                          "different formats (the release's and the kit's)")
+            if formats == {"official"}:
+                kp, st = (read_official_openpose if name == "openpose" else read_official_alphapose)(path, sel, data)
             elif name == "openpose":
-                kp, st = _read_openpose(path, sel, missing_detections)
+                kp, st = _read_openpose(path, data, sel, missing_detections)
             else:
-                kp, st = _read_alphapose(path, sel, last_image, missing_detections, tail_tolerance)
+                kp, st = _read_alphapose(path, data, sel, last_image, missing_detections, tail_tolerance)
             per_view.append(kp)
             for k in stats:
                 stats[k] += st[k]
         keypoints[name] = np.stack(per_view, axis=1)
-        info[name] = stats
+        info[name] = {**stats, "format": formats.pop()}
     ts = [_read_timestamps(m / "timestamps.csv", sel) for m in machines]
     timestamps = np.stack(ts, axis=1) if all(t is not None for t in ts) else None
 

@@ -47,7 +47,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .official_layout import DETECTOR_FILES, LazyImages, Sequence, SequenceFormatError, load_sequence
+from .official_layout import Sequence, SequenceFormatError, load_sequence
 
 __all__ = [
     "REAL_DATA_SPLITS",
@@ -55,6 +55,7 @@ __all__ = [
     "MARKER_POSES_FILE",
     "real_split_frames",
     "detector_file_format",
+    "detections_format",
     "read_official_openpose",
     "read_official_alphapose",
     "read_marker_poses",
@@ -122,19 +123,25 @@ def _load_json(path: Path):
         raise SequenceFormatError(f"cannot parse {path}: {e}") from None
 
 
-def detector_file_format(path: Path | str) -> str:
-    """``"official"`` (the release's dict formats) or ``"kit"`` (the generator's formats) of a
-    detection file, from its content. Raises :class:`SequenceFormatError` if unreadable."""
-    path = Path(path)
-    if path.suffix == ".json":
-        data = _load_json(path)
-        return "official" if isinstance(data, Mapping) else "kit"
-    data = _load_pickle(path)
+def detections_format(data, json_file: bool = False) -> str:
+    """``"official"`` (the release's per-frame dicts) or ``"kit"`` (the generator's formats) of a
+    parsed detection file: the release keys both files by frame with a dict per frame; the kit
+    writes frame -> array (OpenPose pickle) and a list of detections (AlphaPose JSON)."""
     if isinstance(data, Mapping):
+        if json_file:
+            return "official"
         first = next(iter(data.values()), None)
         if isinstance(first, Mapping):
             return "official"
     return "kit"
+
+
+def detector_file_format(path: Path | str) -> str:
+    """:func:`detections_format` of a file. Raises :class:`SequenceFormatError` if unreadable."""
+    path = Path(path)
+    if path.suffix == ".json":
+        return detections_format(_load_json(path), json_file=True)
+    return detections_format(_load_pickle(path))
 
 
 def _zero_bad(out: np.ndarray) -> int:
@@ -143,19 +150,20 @@ def _zero_bad(out: np.ndarray) -> int:
     return int(bad.sum())
 
 
-def read_official_openpose(path: Path | str, frames: Iterable[int]) -> tuple[np.ndarray, dict]:
+def read_official_openpose(path: Path | str, frames: Iterable[int], data=None) -> tuple[np.ndarray, dict]:
     """BODY_25 keypoints of person 0 from a release ``openpose_res.pkl``.
 
     Args:
         path: the file (dict ``"%06d" -> {"pose": (persons, 25, 3)}``).
         frames: frame numbers to read.
+        data: the file's parsed content, if already read (``path`` then only names it in errors).
 
     Returns:
         ``(F, 25, 3)`` float64 ``[x, y, conf]`` (zeros: not detected) and
         ``{"missing_frames": n, "nan_keypoints": n}``.
     """
     path = Path(path)
-    res = _load_pickle(path)
+    res = _load_pickle(path) if data is None else data
     if not isinstance(res, Mapping):
         raise SequenceFormatError(f"{path}: expected a dict '%06d' -> {{'pose': (persons, 25, 3)}}")
     frames = [int(i) for i in frames]
@@ -179,19 +187,20 @@ def read_official_openpose(path: Path | str, frames: Iterable[int]) -> tuple[np.
     return out, {"missing_frames": missing, "nan_keypoints": _zero_bad(out)}
 
 
-def read_official_alphapose(path: Path | str, frames: Iterable[int]) -> tuple[np.ndarray, dict]:
+def read_official_alphapose(path: Path | str, frames: Iterable[int], data=None) -> tuple[np.ndarray, dict]:
     """COCO-18 keypoints of person 0 from a release ``alphapose_res.json``.
 
     Args:
         path: the file (dict ``"%06d" -> {"people": [{"pose_keypoints_2d": 54 numbers}, ...]}``).
         frames: frame numbers to read.
+        data: the file's parsed content, if already read.
 
     Returns:
         ``(F, 18, 3)`` float64 (zeros: not detected) and the counts as
         :func:`read_official_openpose`.
     """
     path = Path(path)
-    res = _load_json(path)
+    res = _load_json(path) if data is None else data
     if not isinstance(res, Mapping):
         raise SequenceFormatError(f"{path}: expected a dict '%06d' -> {{'people': [...]}}")
     frames = [int(i) for i in frames]
@@ -213,9 +222,6 @@ def read_official_alphapose(path: Path | str, frames: Iterable[int]) -> tuple[np
                                       f"expected 54 (COCO-18)")
         out[n] = kp.reshape(18, 3)
     return out, {"missing_frames": missing, "nan_keypoints": _zero_bad(out)}
-
-
-_OFFICIAL_READERS = {"openpose": read_official_openpose, "alphapose": read_official_alphapose}
 
 
 # -- marker poses -------------------------------------------------------------------------------
@@ -296,9 +302,9 @@ def load_official_real(root: Path | str, person: int | None = None, split: str |
                        missing_detections: str = "zero", strict: bool = True) -> Sequence:
     """A split of the real-data release as a :class:`~airpose_lib.data.official_layout.Sequence`.
 
-    Images, calibration and time stamps come from
-    :func:`~airpose_lib.data.official_layout.load_sequence`; detection files in the release's
-    formats are read here, files in the kit's formats by ``load_sequence`` (either works).
+    Images, calibration, time stamps and detections come from
+    :func:`~airpose_lib.data.official_layout.load_sequence`, which reads the release's detection
+    formats (:func:`read_official_openpose`, :func:`read_official_alphapose`) and the kit's.
 
     Args:
         root: the release folder (``machine_1``, ``machine_2``).
@@ -319,49 +325,26 @@ def load_official_real(root: Path | str, person: int | None = None, split: str |
     Raises:
         SequenceFormatError: no frame of the range on disk, or a malformed file (names it).
     """
+    from .official_layout import _image_index, _machines
+
     root = Path(root)
     rng = real_split_frames(split, person)
-    fmt: dict[str, str] = {}
-    for name in detectors:
-        if name not in DETECTOR_FILES:
-            raise ValueError(f"unknown detector {name!r}; known: {tuple(DETECTOR_FILES)}")
-        kinds = {detector_file_format(root / f"machine_{v}" / DETECTOR_FILES[name][0]) for v in (1, 2)}
-        if len(kinds) != 1:
-            raise SequenceFormatError(f"{root}: the {DETECTOR_FILES[name][0]} files of machine_1 and machine_2 "
-                                      f"are in different formats")
-        fmt[name] = kinds.pop()
-    kit = [n for n in detectors if fmt[n] == "kit"]
-    seq = load_sequence(root, None, detectors=kit, missing_detections=missing_detections, strict=strict,
-                        ground_truth=False)
     wanted = set(int(i) for i in frames) if frames is not None else (set(rng) if rng is not None else None)
+    sel = None
     if wanted is not None:
-        keep = np.isin(seq.frames, np.fromiter(wanted, dtype=np.int64, count=len(wanted)))
-        if not keep.any():
+        machines = _machines(root)
+        on_disk = set.intersection(*(set(_image_index(m)) for m in machines))
+        sel = sorted(wanted & on_disk)
+        if not sel:
+            first, last = min(on_disk, default=-1), max(on_disk, default=-1)
             span = (f"frames {rng.start}-{rng.stop - 1}" if rng is not None and frames is None
                     else "the requested frames")
-            raise SequenceFormatError(f"{root}: none of {span} is on disk (images go from {int(seq.frames[0])} to "
-                                      f"{int(seq.frames[-1])})")
-        idx = np.flatnonzero(keep)
-        seq.frames = seq.frames[idx]
-        seq.images = [LazyImages([im.paths[k] for k in idx]) for im in seq.images]
-        seq.keypoints = {k: v[idx] for k, v in seq.keypoints.items()}
-        if seq.timestamps is not None:
-            seq.timestamps = seq.timestamps[idx]
-        seq.info["missing_images"] = len(wanted) - int(keep.sum())
-    else:
-        seq.info["missing_images"] = 0
-    for name in detectors:
-        if fmt[name] != "official":
-            continue
-        per_view, stats = [], {"missing_frames": 0, "nan_keypoints": 0}
-        for v in range(seq.num_views):
-            kp, st = _OFFICIAL_READERS[name](root / f"machine_{v + 1}" / DETECTOR_FILES[name][0], seq.frames)
-            per_view.append(kp)
-            for k in stats:
-                stats[k] += st[k]
-        seq.keypoints[name] = np.stack(per_view, axis=1)
-        seq.info[name] = stats
-    seq.keypoints = {n: seq.keypoints[n] for n in detectors}
+            raise SequenceFormatError(f"{root}: none of {span} is on disk (images go from {first} to {last})")
+    # load_sequence reads the release's and the kit's detection formats alike, each file once.
+    seq = load_sequence(root, sel, detectors=detectors, missing_detections=missing_detections, strict=strict,
+                        ground_truth=False)
+    seq.info["missing_images"] = len(wanted) - len(sel) if wanted is not None else 0
+    fmt = {name: seq.info[name]["format"] for name in detectors}
     seq.meta = {**seq.meta, "source": "official_real", "split": split if person is None else PERSON_SPLITS[person],
                 "person": person, "detector_formats": fmt}
     return seq

@@ -27,6 +27,20 @@ class CLIError(Exception):
     """A user-facing error: printed without a traceback, exit status 1."""
 
 
+def parse_range(text: str | None, what: str = "image numbers",
+                example: str = "0:7000") -> tuple[int | None, int | None] | None:
+    """``--frames START:STOP`` (either side may be empty) -> ``(START, STOP)``; None if not given."""
+    if not text:
+        return None
+    start, sep, stop = text.partition(":")
+    try:
+        if not sep:
+            raise ValueError
+        return (int(start) if start else None, int(stop) if stop else None)
+    except ValueError:
+        raise CLIError(f"--frames expects START:STOP {what} (e.g. {example}), got {text!r}") from None
+
+
 # -- body -----------------------------------------------------------------------------------------
 def _cmd_body_build(args: argparse.Namespace) -> int:
     from airpose_lib.body import build_open_model
@@ -360,11 +374,8 @@ def _cmd_fit(args: argparse.Namespace) -> int:
     from airpose_lib.fitting import AirPosePlusConfig, airpose_plus, fitting_profile
     from airpose_lib.prior import PriorError, load_prior
 
-    frames = None
-    if args.frames:
-        start, _, stop = args.frames.partition(":")
-        frames = slice(int(start) if start else None, int(stop) if stop else None)
-    seq = load_sequence(args.sequence, frames=frames, ground_truth=False)
+    rng = parse_range(args.frames, "positions", "0:1000")
+    seq = load_sequence(args.sequence, frames=None if rng is None else slice(*rng), ground_truth=False)
     pred = np.load(args.init)
     missing = {"phi", "tau", "theta", "beta"} - set(pred.files)
     if missing:

@@ -19,17 +19,9 @@ def _profiles() -> tuple[str, ...]:
 
 def _frame_range(text: str | None) -> tuple[int | None, int | None] | None:
     """``"START:STOP"`` (either side may be empty) -> image-number range ``[START, STOP)``."""
-    from airpose_lib.cli import CLIError
+    from airpose_lib.cli import parse_range
 
-    if not text:
-        return None
-    start, sep, stop = text.partition(":")
-    try:
-        if not sep:
-            raise ValueError
-        return (int(start) if start else None, int(stop) if stop else None)
-    except ValueError:
-        raise CLIError(f"--frames expects START:STOP image numbers (e.g. 0:7000), got {text!r}") from None
+    return parse_range(text)
 
 
 # -- finetune -------------------------------------------------------------------------------------

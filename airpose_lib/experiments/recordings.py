@@ -145,23 +145,23 @@ def _network_estimate(checkpoint: Path, sequence, out: Path) -> dict:
 
 
 def _airpose_plus(sequence, init: dict, profile: str, out: Path, progress: bool) -> tuple[dict, dict]:
-    import torch
-
     from airpose_lib.fitting import airpose_plus, fitting_profile
     from airpose_lib.prior import load_prior
     from airpose_lib.prior.build import ensure_prior
 
     cfg = fitting_profile(profile)
     prior_path = ensure_prior(profile, progress=progress)
-    key = _key("airpose+", cfg.to_dict(), _stamp(prior_path), str(sequence.root),
-               hashlib.sha256(np.ascontiguousarray(init["tau"]).tobytes()).hexdigest())
+    start = {k: init[k] for k in ("phi", "tau", "theta", "beta")}
+    digest = hashlib.sha256()
+    for k in start:  # the whole initialisation, not just one of its arrays
+        digest.update(np.ascontiguousarray(start[k]).tobytes())
+    key = _key("airpose+", cfg.to_dict(), _stamp(prior_path), str(sequence.root), sequence.frames.tolist(),
+               digest.hexdigest())
     cached = _cached_npz(out, key)
     if cached is not None:
         info = json.loads(str(cached.pop("info")))
         return cached, info
     prior = load_prior("kit", prior_path)
-    with torch.no_grad():
-        start = {k: init[k] for k in ("phi", "tau", "theta", "beta")}
     res = airpose_plus(sequence.keypoints, sequence.K, start, prior=prior, config=cfg, progress=progress)
     arrays = res.to_numpy()
     info = {"seconds": res.seconds, "iterations": cfg.iterations, "frames": int(len(arrays["kept"])),

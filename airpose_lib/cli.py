@@ -237,6 +237,36 @@ def _cmd_train(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_pretrain(args: argparse.Namespace) -> int:
+    import json
+
+    from airpose_lib.data.manifest import DatasetError
+    from airpose_lib.train.pretrain import profile_backbone, write_reference_backbone
+
+    try:
+        path = profile_backbone(args.profile, progress=not args.quiet)
+    except (ValueError, DatasetError) as e:
+        raise CLIError(str(e)) from None
+    record = json.loads(path.with_suffix(".json").read_text())
+    print(f"backbone {path}\n  key {record['key']}  sha256 {record['sha256']}\n  gate {record['gate']}")
+    if args.write_reference:
+        print(f"reference copy: {write_reference_backbone(args.profile, path)}")
+    return 0
+
+
+def _add_pretrain(sub) -> None:
+    pr = sub.add_parser(
+        "pretrain", help="pretrain the profile's shared backbone (the CPU protocol's starting point)",
+        description="Train (or find in the cache / the committed results/<profile>/) the backbone every "
+                    "variant of the profile starts from: the `pretrain:` section, variant-neutral objective, "
+                    "gated on the test split.")
+    pr.add_argument("--profile", choices=PROFILES, default="smoke", help="(default: smoke)")
+    pr.add_argument("--write-reference", action="store_true",
+                    help="also copy the backbone into results/<profile>/ (the committed reference)")
+    pr.add_argument("--quiet", action="store_true", help="no progress bars")
+    pr.set_defaults(func=_cmd_pretrain)
+
+
 def _add_train(sub) -> None:
     tr = sub.add_parser(
         "train", help="train a network variant with a profile's sizes",
@@ -527,7 +557,7 @@ def _add_reproduce(sub) -> None:
 # their packages land.
 from airpose_lib.finetune.cli import _add_finetune, _add_predict  # noqa: E402 - argparse only
 
-_SUBCOMMANDS: tuple[Callable, ...] = (_add_body, _add_data, _add_train, _add_eval, _add_prior, _add_fit,
+_SUBCOMMANDS: tuple[Callable, ...] = (_add_body, _add_data, _add_pretrain, _add_train, _add_eval, _add_prior, _add_fit,
                                        _add_finetune, _add_predict, _add_node, _add_launch, _add_reproduce)
 
 

@@ -280,3 +280,42 @@ def test_worker_count_does_not_change_the_bytes(reference, tmp_path):
     root = tmp_path / "two_workers"
     generate_still_dataset(CFG, root, workers=2, progress=False, profile="test")
     assert _shard_bytes(root) == _shard_bytes(reference[0])
+
+
+# -- test crops (the official protocol: jittered like the training crops) --------------------------
+@pytest.fixture(scope="module")
+def crop_protocol(tmp_path_factory):
+    cfg = GenerationConfig(num_samples=40, shard_size=10, crop_size=16, seed=3)
+    root = tmp_path_factory.mktemp("crops") / "ds"
+    generate_still_dataset(cfg, root, workers=1, progress=False, profile="test")
+    return root
+
+
+def test_test_crops_are_jittered_like_training_crops(crop_protocol):
+    """The crop scale s of the test split lies inside the training distribution; the tight boxes of
+    the paper's text lie above it (copenet/dsets/aerialpeople.py jitters both splits)."""
+    s_train = StillFrameDataset(crop_protocol, "train").arrays["P"][..., 2].ravel()
+    s_test = StillFrameDataset(crop_protocol, "test").arrays["P"][..., 2].ravel()
+    s_tight = StillFrameDataset(crop_protocol, "test", crops="tight").arrays["P"][..., 2].ravel()
+    lo, hi = np.quantile(s_train, [0.1, 0.9])
+    assert lo <= np.median(s_test) <= hi
+    assert np.median(s_tight) > hi
+    assert np.all(s_tight >= s_test - 1e-6)  # a tight box is never larger than its enlargement
+
+
+def test_tight_crops_are_the_same_samples(crop_protocol):
+    test = StillFrameDataset(crop_protocol, "test")
+    tight = StillFrameDataset(crop_protocol, "test", crops="tight")
+    a, b = test.arrays, tight.arrays
+    for k in ("theta", "beta", "phi", "tau", "j2d", "index"):
+        np.testing.assert_array_equal(a[k], b[k])
+    np.testing.assert_allclose(b["bbox"], np.clip(a["bbox_tight"], -0.5, [1919.5, 1079.5, 1919.5, 1079.5]),
+                               atol=1e-4)
+    item = tight[0]
+    assert item["images"].shape == test[0]["images"].shape
+    assert not torch.equal(item["images"], test[0]["images"])
+    np.testing.assert_allclose(item["P"].numpy(), crop_vector(torch.from_numpy(b["bbox"][0]).double(),
+                                                              torch.from_numpy(b["K"][0]).double(), 16).numpy(),
+                               atol=1e-5)
+    with pytest.raises(ValueError, match="tight-box crops"):
+        StillFrameDataset(crop_protocol, "train", crops="tight")

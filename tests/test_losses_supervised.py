@@ -53,7 +53,8 @@ def make_batch(bodies, B=2, V=2, gender=0, seed=0):
         j3d[b], _ = body(axis_angle_to_matrix(theta[b]), beta[b], phi[b], tau[b], vertices=False)
     p = j3d @ K.transpose(-1, -2)
     j2d = p[..., :2] / p[..., 2:]
-    return dict(theta=theta, beta=beta, phi=phi, tau=tau, K=K, gender=genders, j2d=j2d, j3d_cam=j3d)
+    bbox = torch.cat((j2d.amin(-2) - 20, j2d.amax(-2) + 20), dim=-1)  # the tight box, (B, V, 4)
+    return dict(theta=theta, beta=beta, phi=phi, tau=tau, K=K, gender=genders, j2d=j2d, j3d_cam=j3d, bbox=bbox)
 
 
 def perfect_pred(batch):
@@ -149,6 +150,12 @@ def test_paper_weights_and_variants():
     assert loss_config("AirPose") == a and loss_config("baseline") == b
     assert loss_config("multiview").w_tau == 0 and loss_config("multiview").cross_view
     assert loss_config("fullcam").w_tau == 10 and not loss_config("fullcam").cross_view
+    # the official Baseline (hmr.py): crop-pixel 2D term and the weak-camera scale guard
+    assert (b.j2d_frame, b.w_cam_scale) == ("crop", 1.0) and (a.j2d_frame, a.w_cam_scale) == ("full", 0.0)
+    # Multi-view = Baseline + the exchange's one consistency term (muhmr.py), nothing of AirPose's loss
+    m = loss_config("multiview")
+    assert dataclasses.replace(m, cross_view=False, cross_view_terms=b.cross_view_terms) == b
+    assert m.cross_view_terms == ("theta",) and m.w_j2d == 0.01 and not m.vertices_with_phi
     o = official_variations(a)
     assert (o.total_scale, o.limb_weight_j3d, o.j3d_cross_view, o.w_beta_gt, o.vertices_with_phi) == (
         60, 3, True, 0, False)
@@ -326,3 +333,24 @@ def test_float32_gradients(bodies64):
     for k, v in pred.items():
         assert v.grad is not None and torch.isfinite(v.grad).all(), k
     assert pred["tau"].grad.abs().sum() > 0
+
+
+def test_crop_frame_j2d_is_full_frame_scaled_to_a_224_crop(bodies64):
+    """Crop pixels are ``(224 / side) (uv - centre) + 112``: the squared error of each view scales by
+    ``(224 / side)^2`` (hand-computed from the boxes)."""
+    batch = make_batch(bodies64, B=1, V=2)
+    pred = perfect_pred(batch)
+    pred["tau"][0, :, 0] += 0.05  # both views off sideways
+    full = SupervisedLoss(dataclasses.replace(BaselineLossConfig(), j2d_frame="full"), bodies64)(pred, batch)
+    crop = SupervisedLoss(BaselineLossConfig(), bodies64)(pred, batch)
+    box = batch["bbox"][0]
+    side = torch.maximum(box[:, 2] - box[:, 0], box[:, 3] - box[:, 1])
+    per_view_full = []
+    for v in range(2):
+        X = batch["j3d_cam"][0, v] + pred["tau"][0, v] - batch["tau"][0, v]
+        uv = X[:, :2] * 1475.0 / X[:, 2:] + torch.tensor([960.0, 540.0], dtype=F64)
+        per_view_full.append(((uv - batch["j2d"][0, v]) ** 2).mean())
+    assert full["j2d"].item() == pytest.approx(float(sum(per_view_full)) / 2, rel=1e-9)
+    expected = sum(per_view_full[v] * (224.0 / side[v]) ** 2 for v in range(2)) / 2
+    assert crop["j2d"].item() == pytest.approx(float(expected), rel=1e-9)
+

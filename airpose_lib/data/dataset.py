@@ -23,6 +23,9 @@ j3d_cam         (V, 22, 3) float32     22 body joints in each camera frame, metr
 index           () int64               sample index in the dataset
 ==============  =====================  ===========================================================
 
+``crops="tight"`` (test split only) gives the same samples with the tight-box crops instead of the
+jittered ones (``P`` and ``bbox`` follow the crop; see ``GenerationConfig.test_crops``).
+
 Training augmentation (``augment=True``, the default for the train split) permutes the views
 (a swap for two views); every per-view field moves together, so the sample stays consistent.
 Shards are checked against the manifest's SHA-256 when the dataset is opened.
@@ -57,6 +60,7 @@ EXTRA_KEYS: tuple[str, ...] = ("R_wb", "t_wb", "heading", "cam_centre", "cam_dis
                                "cam_azimuth", "bbox_tight", "attempt", "env_texture", "env_light_dir",
                                "env_light_intensity", "env_num_distractors", "skin_color")
 _LOADED = _FLOAT_KEYS + ("kp_visible", "gender", "index", "image_offsets") + EXTRA_KEYS
+_TIGHT = ("P_tight", "bbox_tight_crop", "image_offsets_tight")  # test shards only
 
 
 def swap_views(item: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
@@ -106,6 +110,8 @@ class StillFrameDataset(Dataset):
         split: ``"train"``, ``"test"`` or ``"all"``.
         augment: random view permutation; default True for the train split, else False.
         verify: check every shard's size and SHA-256 against the manifest when opening.
+        crops: ``"jittered"`` (the stored crops) or ``"tight"`` (the tight-box crops that test
+            shards also hold).
 
     Raises:
         DatasetError: no dataset, or an unfinished one (with the command that completes it).
@@ -113,9 +119,12 @@ class StillFrameDataset(Dataset):
     """
 
     def __init__(self, root: Path | str, split: str = "train", augment: bool | None = None, *,
-                 verify: bool = True) -> None:
+                 verify: bool = True, crops: str = "jittered") -> None:
         if split not in ("train", "test", "all"):
             raise ValueError(f"split must be 'train', 'test' or 'all', got {split!r}")
+        if crops not in ("jittered", "tight"):
+            raise ValueError(f"crops must be 'jittered' or 'tight', got {crops!r}")
+        self.crops = crops
         self.root = Path(root)
         self.split = split
         self.augment = (split == "train") if augment is None else bool(augment)
@@ -128,11 +137,21 @@ class StillFrameDataset(Dataset):
         loc = []
         for s, rec in enumerate(records):
             path = verify_shard(self.root, rec, self.manifest) if verify else self.root / rec["file"]
-            arrays = read_shard(path, list(_LOADED))
+            if crops == "tight":
+                try:
+                    arrays = read_shard(path, list(_LOADED) + list(_TIGHT))
+                except KeyError:
+                    raise ValueError(f"{path}: no tight-box crops in this shard (only test shards of "
+                                     "generator version 2 or later with tight_test_crops hold them)") from None
+                arrays["P"], arrays["bbox"] = arrays.pop("P_tight"), arrays.pop("bbox_tight_crop")
+                images = ShardImages(path, arrays.pop("image_offsets_tight"), member="images_tight")
+            else:
+                arrays = read_shard(path, list(_LOADED))
+                images = ShardImages(path, arrays["image_offsets"])
             for k in _LOADED:
                 if k != "image_offsets":
                     parts[k].append(arrays[k])
-            self._images.append(ShardImages(path, arrays["image_offsets"]))
+            self._images.append(images)
             n = len(arrays["index"])
             loc.append(np.stack([np.full(n, s), np.arange(n)], 1))
         if not loc:
@@ -179,4 +198,4 @@ class StillFrameDataset(Dataset):
 
     def __repr__(self) -> str:
         return (f"StillFrameDataset({str(self.root)!r}, split={self.split!r}, n={len(self)}, "
-                f"views={self.num_views}, S={self.crop_size}, augment={self.augment})")
+                f"views={self.num_views}, S={self.crop_size}, augment={self.augment}, crops={self.crops!r})")

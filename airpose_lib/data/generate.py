@@ -66,7 +66,8 @@ __all__ = [
 ]
 
 #: Bumped whenever the same configuration would produce different shards.
-GENERATOR_VERSION = 1
+#: 2: test crops are jittered like training crops; test shards also hold the tight-box crops.
+GENERATOR_VERSION = 2
 
 _PROFILES_DIR = Path(__file__).resolve().parents[1] / "reproduce" / "profiles"
 _ATTEMPT_BATCH = 16  # body forwards are batched over this many attempts
@@ -89,6 +90,13 @@ class GenerationConfig:
         anti_aliasing: MSAA on the rendered crops (slow in software rendering).
         blur_sigma: Gaussian blur (pixels) of the rendered crop before padding: softens
             aliased edges and textures like a real lens and downscaling do (0 = none).
+        test_crops: how the test split's crops are drawn. ``"jittered"`` (default, the official
+            code: ``copenet/dsets/aerialpeople.py`` enlarges every box, test split included, by a
+            random 0-200 px, so test crops come from the training distribution; deterministic per
+            sample, since each sample has its own generator) or ``"tight"`` (the box + 20 px of
+            the paper's text, outside the training range of the crop scale s).
+        tight_test_crops: test shards also store the tight-box crops (``images_tight``,
+            ``P_tight``) so that both protocols are evaluated on the same samples.
         body_source: ``"open"`` or ``"smplx"`` (:func:`airpose_lib.body.load_body_model`).
         max_attempts_per_sample: a shard gives up (error) after this many attempts per sample.
         scene: person / camera / crop / environment sampling.
@@ -104,6 +112,8 @@ class GenerationConfig:
     jpeg_quality: int = 95
     anti_aliasing: bool = False
     blur_sigma: float = 0.5
+    test_crops: str = "jittered"
+    tight_test_crops: bool = True
     body_source: str = "open"
     max_attempts_per_sample: int = 20
     scene: SceneConfig = field(default_factory=SceneConfig)
@@ -112,6 +122,8 @@ class GenerationConfig:
     def __post_init__(self) -> None:
         if self.num_samples < 1 or self.shard_size < 1:
             raise ValueError("num_samples and shard_size must be positive")
+        if self.test_crops not in ("jittered", "tight"):
+            raise ValueError(f"test_crops must be 'jittered' or 'tight', got {self.test_crops!r}")
         if self.image_format not in ("jpg", "png"):
             raise ValueError(f"image_format must be 'jpg' or 'png', got {self.image_format!r}")
         if not 0.0 <= self.test_fraction < 1.0:
@@ -311,7 +323,7 @@ class StillFrameGenerator:
         """
         import torch
 
-        from airpose_lib.geometry import body_in_camera, crop_intrinsics, crop_vector, project_points
+        from airpose_lib.geometry import body_in_camera, crop_vector, project_points
 
         cfg, sc = self.config, self.config.scene
         R_wb, t_wb = body_world_pose(person, v0)
@@ -337,21 +349,20 @@ class StillFrameGenerator:
                                  np.stack([c.centre for c in cams]))
         box_pts = uv_j if sc.bbox_from == "joints" else uv_v
         tight = np.stack([tight_bbox(box_pts[c], sc.bbox_margin_px) for c in range(V)])
-        margin = sc.bbox_jitter_px if train else 0.0
+        margin = sc.bbox_jitter_px if (train or cfg.test_crops == "jittered") else 0.0
         bbox = np.stack([jitter_bbox(tight[c], rng, margin, sc.image_size) for c in range(V)])
         P = crop_vector(T(bbox), T(K), cfg.crop_size).numpy()
-        K_crop = crop_intrinsics(T(K), T(bbox), cfg.crop_size).numpy()
-
-        from .render import pad_outside_box
 
         self.renderer.set_environment(env)
         self.renderer.set_body(v0 @ R_wb.T + t_wb, self.faces[person.gender], colors)
-        images = []
-        for c in range(V):
-            img = self.renderer.render(K_crop[c], R_cw[c], t_cw[c])
-            if cfg.blur_sigma > 0:
-                img = _blur(img, cfg.blur_sigma)
-            images.append(_encode(pad_outside_box(img, bbox[c]), cfg.image_format, cfg.jpeg_quality))
+        images = self._render_crops(bbox, K, R_cw, t_cw)
+        extra = {}
+        if not train and cfg.tight_test_crops:
+            # the same box before enlargement, clipped to the frame like every crop
+            tight_clipped = np.stack([jitter_bbox(tight[c], rng, 0.0, sc.image_size) for c in range(V)])
+            extra = {"images_tight": self._render_crops(tight_clipped, K, R_cw, t_cw),
+                     "P_tight": crop_vector(T(tight_clipped), T(K), cfg.crop_size).numpy(),
+                     "bbox_tight_crop": tight_clipped}
 
         kp_idx = self.body25
         kp2d = np.where((kp_idx >= 0)[None, :, None], uv_j[:, np.maximum(kp_idx, 0)], np.nan)
@@ -372,7 +383,27 @@ class StillFrameGenerator:
             "env_texture": env.ground_texture, "env_light_dir": env.light_dir,
             "env_light_intensity": env.light_intensity, "env_num_distractors": len(env.distractors),
             "skin_color": appearance.region_colors[0],
+            **extra,
         }
+
+    def _render_crops(self, bbox: np.ndarray, K: np.ndarray, R_cw: np.ndarray, t_cw: np.ndarray) -> list[bytes]:
+        """Encoded crops ``[V]`` of the scene set on the renderer, one per box ``bbox (V, 4)``."""
+        import torch
+
+        from airpose_lib.geometry import crop_intrinsics
+
+        from .render import pad_outside_box
+
+        cfg = self.config
+        T = lambda a: torch.as_tensor(a, dtype=torch.float64)  # noqa: E731
+        K_crop = crop_intrinsics(T(K), T(bbox), cfg.crop_size).numpy()
+        out = []
+        for c in range(len(bbox)):
+            img = self.renderer.render(K_crop[c], R_cw[c], t_cw[c])
+            if cfg.blur_sigma > 0:
+                img = _blur(img, cfg.blur_sigma)
+            out.append(_encode(pad_outside_box(img, bbox[c]), cfg.image_format, cfg.jpeg_quality))
+        return out
 
     def make_shard(self, k: int, progress=None) -> tuple[dict, dict]:
         """Generate shard ``k``: ``(arrays, stats)``; ``progress(n)`` is called per accepted sample."""
@@ -422,14 +453,17 @@ class StillFrameGenerator:
 def _stack_samples(samples: list[dict], first_index: int, attempts: list[int]) -> dict[str, np.ndarray]:
     """Turn per-sample dicts into the shard's arrays (one row per sample)."""
     out: dict[str, np.ndarray] = {}
-    images = [b for s in samples for b in s["images"]]
-    lengths = np.array([len(b) for b in images], dtype=np.int64)
-    out["image_offsets"] = np.concatenate([[0], np.cumsum(lengths)]).astype(np.int64)
-    out["images"] = np.frombuffer(b"".join(images), dtype=np.uint8)
+    for key, offsets in (("images", "image_offsets"), ("images_tight", "image_offsets_tight")):
+        if key not in samples[0]:
+            continue
+        images = [b for s in samples for b in s[key]]
+        lengths = np.array([len(b) for b in images], dtype=np.int64)
+        out[offsets] = np.concatenate([[0], np.cumsum(lengths)]).astype(np.int64)
+        out[key] = np.frombuffer(b"".join(images), dtype=np.uint8)
     out["index"] = first_index + np.arange(len(samples), dtype=np.int64)
     out["attempt"] = np.asarray(attempts, dtype=np.int64)
     for key in samples[0]:
-        if key == "images":
+        if key in ("images", "images_tight"):
             continue
         vals = [s[key] for s in samples]
         if key in ("gender", "env_texture", "env_num_distractors"):

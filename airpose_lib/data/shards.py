@@ -123,19 +123,21 @@ class ShardImages:
     Args:
         path: the shard file.
         offsets: its ``image_offsets`` array ``(n * V + 1,)``.
+        member: the image array (``images``; test shards also have ``images_tight``).
 
     ``get(j)`` returns the encoded bytes (JPEG/PNG) of image ``j = sample * V + view``. The map
     is opened on first use, so the object pickles cheaply into DataLoader workers.
     """
 
-    def __init__(self, path: Path, offsets: np.ndarray) -> None:
+    def __init__(self, path: Path, offsets: np.ndarray, member: str = "images") -> None:
         self.path = Path(path)
         self.offsets = np.asarray(offsets, dtype=np.int64)
+        self.member = member
         self._map: np.memmap | None = None
 
     def _open(self) -> np.memmap:
         if self._map is None:
-            start, dtype, shape = _member_data_offset(self.path, "images.npy")
+            start, dtype, shape = _member_data_offset(self.path, f"{self.member}.npy")
             if dtype != np.uint8 or len(shape) != 1:
                 raise ValueError(f"{self.path}: images must be a flat uint8 array, got {dtype} {shape}")
             self._map = np.memmap(self.path, dtype=np.uint8, mode="r", offset=start, shape=shape)
@@ -146,4 +148,4 @@ class ShardImages:
         return m[self.offsets[j]:self.offsets[j + 1]].tobytes()
 
     def __getstate__(self) -> dict:
-        return {"path": self.path, "offsets": self.offsets, "_map": None}
+        return {"path": self.path, "offsets": self.offsets, "member": self.member, "_map": None}

@@ -36,7 +36,8 @@ __all__ = [
 ]
 
 #: Metric columns of :func:`per_view_table`.
-PER_VIEW_METRICS = ("mpe_m", "mpjpe_m", "pa_mpjpe_m", "root_rot_deg", "err_x_m", "err_y_m", "err_z_m")
+PER_VIEW_METRICS = ("mpe_m", "mpjpe_m", "mpjpe_shape_m", "pa_mpjpe_m", "root_rot_deg", "err_x_m", "err_y_m",
+                    "err_z_m")
 
 
 def _t(x) -> Tensor:
@@ -60,9 +61,14 @@ def per_view_table(pred: Mapping, gt: Mapping, method: str = "", sample_ids=None
     """One row per (sample, view): MPE, MPJPE (pelvis aligned), PA-MPJPE, root-orientation error and
     the translation error per camera axis (signed, prediction - ground truth).
 
+    ``mpjpe_m`` is Table I's MPJPE: when both sides have ``joints_zero_beta`` (the official
+    evaluation's bodies: zero betas, root rotation, no translation) it is computed on those, and
+    ``mpjpe_shape_m`` on ``joints`` (shape-aware); otherwise both are the MPJPE of ``joints``.
+    PA-MPJPE is always on ``joints``.
+
     Args:
-        pred, gt: ``tau (N, V, 3)``, ``phi (N, V, 3, 3)``, ``joints`` / ``j3d_cam (N, V, 22, 3)``.
-            ``phi`` is optional (the column is then NaN).
+        pred, gt: ``tau (N, V, 3)``, ``phi (N, V, 3, 3)``, ``joints`` / ``j3d_cam (N, V, 22, 3)``,
+            optionally ``joints_zero_beta (N, V, 22, 3)``. ``phi`` is optional (the column is then NaN).
         method: value of the ``method`` column.
         sample_ids: ``(N,)`` identifiers (default ``0..N-1``).
 
@@ -72,9 +78,12 @@ def per_view_table(pred: Mapping, gt: Mapping, method: str = "", sample_ids=None
     tau_p, tau_g = _t(pred["tau"]), _t(gt["tau"])
     jp, jg = _joints(pred), _joints(gt)
     N, V = tau_p.shape[:2]
+    shape_aware = M.mpjpe(jp, jg)
+    official = ("joints_zero_beta" in pred and "joints_zero_beta" in gt)
     cols = {
         "mpe_m": M.translation_error(tau_p, tau_g),
-        "mpjpe_m": M.mpjpe(jp, jg),
+        "mpjpe_m": M.mpjpe(_t(pred["joints_zero_beta"]), _t(gt["joints_zero_beta"])) if official else shape_aware,
+        "mpjpe_shape_m": shape_aware,
         "pa_mpjpe_m": M.pa_mpjpe(jp, jg),
         "root_rot_deg": (torch.rad2deg(M.rotation_error(_t(pred["phi"]), _t(gt["phi"])))
                          if "phi" in pred and "phi" in gt else torch.full((N, V), float("nan"))),

@@ -14,7 +14,15 @@ The terms (pred = neutral body model, ground truth = the sample's gendered model
 through :class:`PaperBody`, ``V = phi V0(theta, beta) + tau`` about the model origin):
 
 ``j2d``    the 22 body joints ``phi J0 + tau`` projected with the full-frame ``K`` versus the
-           sample's ``j2d`` (full-image pixels).
+           sample's ``j2d``: in full-image pixels (``j2d_frame="full"``, the official two-view
+           AirPose code, ``copenet_twoview.py``: ``smpl_joints_2d0``) or in crop pixels
+           (``j2d_frame="crop"``, the official HMR and multi-view Baseline code, ``hmr.py`` /
+           ``muhmr.py``: ``smpl_joints_2d_crop0``), measured in pixels of a 224-px crop whatever the
+           kit's crop size so that the paper's weight keeps its meaning.
+``cam``    the weak-camera scale guard of the official Baseline (``hmr.py``, ``muhmr.py``):
+           ``exp(-10 s)^2`` on the weak camera's scale ``s``. Without it ``s`` can cross zero,
+           every depth turns negative, the projection is clamped at ``min_depth`` and the
+           gradient that would bring it back vanishes.
 ``j3d``    the 22 body joints of ``J0(theta, beta)``: identity root rotation and zero translation
            ("default values (zero-filled vector) are provided for tau and phi"), i.e. the model
            frame, without pelvis alignment (``j3d_align_pelvis`` adds it).
@@ -30,8 +38,10 @@ through :class:`PaperBody`, ``V = phi V0(theta, beta) + tau`` about the model or
            included, no translation (``vertices_with_phi``). ``vertex_subsample`` evaluates a
            fixed random subset of the vertices (the full mesh is the expensive part of the loss).
 
-Cross-view consistency (AirPose, ``cross_view=True``): ``||1theta - 2theta||^2`` is added to the
-theta term, ``||1beta - 2beta||^2`` to the beta term and a vertex term to ``V``. The paper writes
+Cross-view consistency (``cross_view=True``): ``||1theta - 2theta||^2`` is added to the
+theta term, ``||1beta - 2beta||^2`` to the beta term and a vertex term to ``V`` (AirPose,
+``cross_view_terms=("theta", "beta", "V")``; the official multi-view Baseline, ``muhmr.py``, has
+the theta term only). The paper writes
 the vertex term as ``||V(1phi, 1theta, 1beta) - V(2phi, 2theta, 2beta)||^2``, each view with its
 **own** root rotation. Read literally that term is not zero for a perfect prediction: the two
 cameras see the person under different rotations (``1phi != 2phi`` whenever the cameras are not
@@ -64,6 +74,7 @@ from torch import Tensor, nn
 from airpose_lib.body.joint_sets import NUM_BODY_JOINTS, NUM_POSE_JOINTS
 from airpose_lib.geometry import (
     axis_angle_to_matrix,
+    full_to_crop_pixels,
     matrix_to_rot6d,
     project_points,
     transform_points,
@@ -88,6 +99,8 @@ __all__ = [
     "cross_view_mse",
 ]
 
+#: Input side of the official networks: the crop-pixel 2D term is measured in its pixels.
+OFFICIAL_CROP_SIZE = 224
 #: ``sample['gender']`` codes.
 GENDER_CODES: dict[int, str] = {0: "neutral", 1: "male", 2: "female"}
 #: Knees and elbows (indices into the 22 body joints): weighted ``limb_weight``.
@@ -119,6 +132,9 @@ class LossConfig:
         total_scale: multiplies the total (official code: 60).
         min_depth: depth floor (m) when projecting for ``L_j2d``: a prediction behind the camera
             gives large but finite pixels.
+        cross_view_terms: which terms get the cross-view consistency (subset of theta, beta, V).
+        j2d_frame: ``"full"`` (full-image pixels) or ``"crop"`` (pixels of a 224-px crop).
+        w_cam_scale: weight of the weak-camera scale guard ``exp(-10 s)^2`` (weak variants).
     """
 
     w_j2d: float = 0.01
@@ -142,8 +158,16 @@ class LossConfig:
     vertex_subsample_seed: int = 0
     total_scale: float = 1.0
     min_depth: float = 0.1
+    cross_view_terms: tuple[str, ...] = ("theta", "beta", "V")
+    j2d_frame: Literal["full", "crop"] = "full"
+    w_cam_scale: float = 0.0
 
     def __post_init__(self) -> None:
+        if self.j2d_frame not in ("full", "crop"):
+            raise ValueError(f"j2d_frame must be 'full' or 'crop', got {self.j2d_frame!r}")
+        object.__setattr__(self, "cross_view_terms", tuple(self.cross_view_terms))
+        if not set(self.cross_view_terms) <= {"theta", "beta", "V"}:
+            raise ValueError(f"cross_view_terms must be a subset of theta, beta, V, got {self.cross_view_terms}")
         if self.view_reduction not in ("sum", "mean"):
             raise ValueError(f"view_reduction must be 'sum' or 'mean', got {self.view_reduction!r}")
         if self.cross_vertex_frame not in ("model", "own_phi"):
@@ -157,7 +181,8 @@ class LossConfig:
     def weights(self) -> dict[str, float]:
         """Term name -> weight (the keys of :meth:`SupervisedLoss.forward`'s terms)."""
         return {"j2d": self.w_j2d, "j3d": self.w_j3d, "phi": self.w_phi, "tau": self.w_tau,
-                "theta": self.w_theta, "beta": self.w_beta, "V": self.w_V, "beta_gt": self.w_beta_gt}
+                "theta": self.w_theta, "beta": self.w_beta, "V": self.w_V, "beta_gt": self.w_beta_gt,
+                "cam": self.w_cam_scale}
 
     def to_dict(self) -> dict:
         return dataclasses.asdict(self)
@@ -165,7 +190,11 @@ class LossConfig:
 
 @dataclass(frozen=True)
 class BaselineLossConfig(LossConfig):
-    """``L_baseline`` (paper eq. 3): monocular, weak-perspective camera (no tau term)."""
+    """``L_baseline`` (paper eq. 3): monocular, weak-perspective camera (no tau term); as the
+    official ``hmr.py``: the 2D term in crop pixels and the weak-camera scale guard."""
+
+    j2d_frame: Literal["full", "crop"] = "crop"
+    w_cam_scale: float = 1.0
 
 
 @dataclass(frozen=True)
@@ -182,12 +211,16 @@ class AirPoseLossConfig(LossConfig):
 
 
 @dataclass(frozen=True)
-class MultiviewLossConfig(AirPoseLossConfig):
-    """Ablation "Baseline + Multi-view" (the paper gives no loss; our choice): ``L_AirPose`` with the
-    cross-view terms, but, like the Baseline, no tau term (the weak camera has no tau output; the
-    2D term supervises it)."""
+class MultiviewLossConfig(BaselineLossConfig):
+    """Ablation "Baseline + Multi-view": the Baseline's loss (weights, crop-pixel 2D term, scale
+    guard, vertices without root rotation) plus the cross-view theta term, as the official
+    ``muhmr.py`` (whose only cross-view term is ``||1theta - 2theta||^2``). The ablation thus
+    changes one thing: the exchange and its consistency term. One deviation: the official module
+    sums its terms over the two views, here they are averaged like the Baseline's (a constant
+    factor 2, which Adam's step size does not see)."""
 
-    w_tau: float = 0.0
+    cross_view: bool = True
+    cross_view_terms: tuple[str, ...] = ("theta",)
 
 
 @dataclass(frozen=True)
@@ -447,13 +480,15 @@ class SupervisedLoss(nn.Module):
             pred: camera-frame parameters per view (``airpose_lib.model.to_smplx_params``):
                 ``phi (B, V, 3, 3)``, ``theta (B, V, 21, 3, 3)``, ``beta (B, V, 10)``,
                 ``tau (B, V, 3)``; with ``rotation_space="6d"`` also the network's raw
-                ``phi6d (B, V, 6)`` and ``theta6d (B, V, 21, 6)``.
+                ``phi6d (B, V, 6)`` and ``theta6d (B, V, 21, 6)``; the weak variants' ``cam
+                (B, V, 3)`` for the scale guard.
             batch: a collated still-frame batch: ``K (B, V, 3, 3)``, ``j2d (B, V, 22, 2)``,
+                ``bbox (B, V, 4)`` (crop-pixel 2D term),
                 ``phi (B, V, 3, 3)``, ``tau (B, V, 3)``, ``theta (B, 21, 3)`` axis-angle,
                 ``beta (B, 10)``, ``gender (B,)``.
 
         Returns:
-            ``{"total": scalar, "j2d", "j3d", "phi", "tau", "theta", "beta", "V", "beta_gt"}``:
+            ``{"total": scalar, "j2d", "j3d", "phi", "tau", "theta", "beta", "V", "beta_gt", "cam"}``:
             the unweighted terms (``V`` is 0 when ``w_V == 0``: the vertices are then skipped) and
             ``total = total_scale * sum_k w_k term_k``.
         """
@@ -472,7 +507,11 @@ class SupervisedLoss(nn.Module):
 
         terms: dict[str, Tensor] = {}
         uv = project_points(transform_points(J0, phi, tau), batch["K"].to(dtype), min_depth=c.min_depth)
-        terms["j2d"] = view_mse(uv, batch["j2d"].to(dtype), view_reduction=vr)
+        uv_gt = batch["j2d"].to(dtype)
+        if c.j2d_frame == "crop":
+            bbox = batch["bbox"].to(dtype)
+            uv, uv_gt = full_to_crop_pixels(uv, bbox, OFFICIAL_CROP_SIZE), full_to_crop_pixels(uv_gt, bbox, OFFICIAL_CROP_SIZE)
+        terms["j2d"] = view_mse(uv, uv_gt, view_reduction=vr)
 
         Jp, Jg = J0, J0_gt.unsqueeze(1)
         if c.j3d_align_pelvis:
@@ -494,9 +533,14 @@ class SupervisedLoss(nn.Module):
         terms["theta"] = view_mse(th_p, th_t, w_rot, vr)
         terms["beta"] = view_mse(beta, torch.zeros_like(beta), view_reduction=vr)
         terms["beta_gt"] = view_mse(beta, beta_gt.unsqueeze(1), view_reduction=vr)
-        if c.cross_view:
+        cross = set(c.cross_view_terms) if c.cross_view else set()
+        if "theta" in cross:
             terms["theta"] = terms["theta"] + cross_view_mse(th_p, w_rot)
+        if "beta" in cross:
             terms["beta"] = terms["beta"] + cross_view_mse(beta)
+        cam = pred.get("cam")
+        terms["cam"] = (view_mse(torch.exp(-10.0 * cam[..., 0]), torch.zeros_like(cam[..., 0]), view_reduction=vr)
+                        if cam is not None else J0.sum() * 0.0)
 
         if need_v:
             if c.vertices_with_phi:
@@ -505,7 +549,7 @@ class SupervisedLoss(nn.Module):
             else:
                 Vp, Vg = V0, V0_gt.unsqueeze(1)
             terms["V"] = view_mse(Vp, Vg, view_reduction=vr)
-            if c.cross_view:
+            if "V" in cross:
                 own = c.cross_vertex_frame == "own_phi"
                 terms["V"] = terms["V"] + cross_view_mse(V0 @ phi.transpose(-1, -2) if own else V0)
         else:

@@ -18,6 +18,15 @@ Parameters per view (the regressor's *state*): root rotation ``phi6d (6)``, body
 (Fullcam, AirPose; the paper's depth normalisation, initial ``tau = [0, 0, 10] m`` is fed as
 ``[0, 0, 0.5]`` and the regressed value is multiplied by 20).
 
+Translation. Fullcam and AirPose regress the root translation ``tau`` directly in the drone's
+camera frame (normalised by 20 m), as the official networks do (``copenet_singleview.py`` /
+``copenet_twoview.py``: the regressed ``pred_smpltrans`` is compared with the camera-frame ground
+truth); they do not regress the crop-camera translation of the paper's eq. (1)-(2) and map it back.
+The crop vector P in the input is what lets them do so. The mapping of eq. (1)-(2) is in
+:func:`airpose_lib.geometry.crop_to_full_translation` for whoever wants the paper's form; because
+the regressed value is metric and camera-frame, a camera with another focal length than the
+training one needs a rule that maps it to the training camera (see the real-data section).
+
 Exchange (Multi-view, AirPose): after each iteration a view sends its *message*: its 126 body
 pose values and 10 betas (136 float32, 544 bytes). Iteration 1 takes the mean parameters as the
 "other view"; iterations 2 and 3 take the other view's previous message. With more than two views

@@ -46,7 +46,8 @@ def run_ablation(profile: str, variants: Sequence[str] = tuple(VARIANT_LABELS), 
             threads also slow down several-fold when anything else runs). Same results as 1.
     Returns:
         (variant, seed) -> :class:`AblationRun` (tables of :func:`airpose_lib.train.evaluate.evaluate`
-        on the test split).
+        on the test split: ``per_view``, ``per_joint``, ``relative_camera``, and ``per_view_tight``
+        on the tight-box test crops when the dataset has them).
     """
     if workers > 1:
         _train_parallel(profile, variants, seeds, out_root, workers)
@@ -55,8 +56,14 @@ def run_ablation(profile: str, variants: Sequence[str] = tuple(VARIANT_LABELS), 
     for seed in seeds:
         for variant in variants:
             checkpoint = trained_checkpoint(profile, variant, seed, out_root, progress)
-            tables = evaluate_checkpoint(checkpoint, split="test", method=VARIANT_LABELS[variant],
-                                         max_samples=eval_max_samples)
+            label = VARIANT_LABELS[variant]
+            tables = evaluate_checkpoint(checkpoint, split="test", method=label, max_samples=eval_max_samples)
+            try:
+                tight = evaluate_checkpoint(checkpoint, split="test", method=label, max_samples=eval_max_samples,
+                                            crops="tight")
+                tables["per_view_tight"] = tight["per_view"]
+            except ValueError:  # a dataset without tight-box test crops (generator version 1)
+                pass
             results[variant, seed] = AblationRun(variant, seed, checkpoint, tables)
     return results
 

@@ -68,6 +68,12 @@ class TrainConfig:
             of processes under DDP).
         deterministic: ``torch.use_deterministic_algorithms`` (warn only).
         progress: tqdm progress bar.
+        task: what the engine trains: ``"supervised"`` (a variant end to end on the crops, the
+            paper), ``"regressor"`` (a variant's regressor on the cached features of a frozen,
+            shared pretrained backbone: the CPU protocol, :mod:`airpose_lib.train.features`) or
+            ``"pretrain"`` (that backbone, :mod:`airpose_lib.train.pretrain`).
+        pretrained: a pretrained backbone file (:func:`airpose_lib.train.pretrain.ensure_backbone`)
+            to start from; ``"profile"`` resolves the profile's own; None: random initialisation.
     """
 
     variant: str = "airpose"
@@ -100,8 +106,12 @@ class TrainConfig:
     num_threads: int | None = None
     deterministic: bool = True
     progress: bool = True
+    task: str = "supervised"
+    pretrained: str | None = None
 
     def __post_init__(self) -> None:
+        if self.task not in ("supervised", "regressor", "pretrain"):
+            raise ValueError(f"task must be 'supervised', 'regressor' or 'pretrain', got {self.task!r}")
         if self.steps < 0 or self.batch_size < 1:
             raise ValueError("steps must be >= 0 and batch_size >= 1")
         if self.world_size < 1 or self.batch_size % self.world_size:
@@ -117,7 +127,8 @@ class TrainConfig:
 
     # Fields whose change makes a resumed run differ from a straight one.
     RESUME_KEYS = ("variant", "batch_size", "lr", "amsgrad", "weight_decay", "grad_clip", "seed", "backbone",
-                   "model", "freeze_backbone", "loss", "official_loss", "body_source", "data", "train_split")
+                   "model", "freeze_backbone", "loss", "official_loss", "body_source", "data", "train_split",
+                   "task", "pretrained")
 
 
 def profile_path(profile: str | Path) -> Path:
@@ -129,9 +140,9 @@ def profile_path(profile: str | Path) -> Path:
 
 
 def load_train_config(profile: str | Path | None, variant: str, seed: int | None = None,
-                      **overrides: Any) -> TrainConfig:
-    """The profile's ``train`` section, then its ``variants[variant]`` entry, then ``seed`` and
-    ``overrides`` (TrainConfig fields), on top of :class:`TrainConfig`'s defaults.
+                      section: str = "train", **overrides: Any) -> TrainConfig:
+    """The profile's ``train`` section (or ``section``), then its ``variants[variant]`` entry, then
+    ``seed`` and ``overrides`` (TrainConfig fields), on top of :class:`TrainConfig`'s defaults.
 
     ``profile=None`` uses the defaults only. Unknown keys raise ``ValueError`` (typos in a
     profile fail before anything runs).
@@ -142,9 +153,9 @@ def load_train_config(profile: str | Path | None, variant: str, seed: int | None
         if not path.is_file():
             raise ValueError(f"profile file not found: {path}")
         raw = yaml.safe_load(path.read_text()) or {}
-        section = dict(raw.get("train") or {})
-        per_variant = section.pop("variants", None) or {}
-        values.update(section)
+        settings = dict(raw.get(section) or {})
+        per_variant = settings.pop("variants", None) or {}
+        values.update(settings)
         values.update(per_variant.get(variant) or {})
     values["variant"] = variant
     if profile is not None:

@@ -1,8 +1,13 @@
 """Run a trained network over a still-frame split and turn the result into evaluation tables.
 
-Predicted joints are the 22 body joints of the neutral body model in the paper's convention
-(``phi J0 + tau``, camera frame); ground truth is the sample's ``j3d_cam`` (gendered model), as
-the paper evaluates.
+Two sets of joints are scored (:func:`airpose_lib.eval.tables.per_view_table`):
+
+- Table I's MPJPE as the official evaluation defines it (``test_epoch_end`` of
+  ``copenet/copenet_twoview.py``): prediction and ground truth both on the neutral body with
+  **zero betas**, their own root rotation, no translation, the first 22 joints; body shape is not
+  scored (``joints_zero_beta``, pelvis-aligned: the official SMPL-X rotates about the pelvis).
+- the kit's shape-aware MPJPE: the predicted neutral body with its predicted betas in the paper's
+  convention (``phi J0 + tau``, camera frame) against the sample's ``j3d_cam`` (gendered model).
 """
 
 from __future__ import annotations
@@ -15,6 +20,7 @@ from torch import nn
 from torch.utils.data import DataLoader
 
 from airpose_lib.eval import per_joint_table, per_view_table, relative_camera_table
+from airpose_lib.geometry import axis_angle_to_matrix
 from airpose_lib.losses import PaperBody
 
 from .checkpoint import load_checkpoint
@@ -33,9 +39,13 @@ def predict(model: nn.Module, dataset, batch_size: int = 8, device: str | torch.
         body: the neutral body of the predictions: a :class:`PaperBody` or a body-model source
             (``"open"``, ``"smplx"``).
 
+    The dataset may serve crops (``images``) or cached backbone ``features`` (a
+    :class:`~airpose_lib.train.features.FeatureDataset`; then only the regressor runs).
+
     Returns:
         ``pred``: phi (N, V, 3, 3), theta (N, V, 21, 3, 3), beta (N, V, 10), tau (N, V, 3),
-        joints (N, V, 22, 3); ``gt``: phi, tau, j3d_cam (N, V, 22, 3), index (N,). CPU tensors.
+        joints (N, V, 22, 3), joints_zero_beta (N, V, 22, 3); ``gt``: phi, tau, j3d_cam
+        (N, V, 22, 3), joints_zero_beta, index (N,). CPU tensors.
     """
     from airpose_lib.body import load_body_model
     from airpose_lib.model import to_smplx_params
@@ -51,15 +61,25 @@ def predict(model: nn.Module, dataset, batch_size: int = 8, device: str | torch.
     n = 0
     for batch in loader:
         batch = {k: v.to(device) if isinstance(v, torch.Tensor) else v for k, v in batch.items()}
-        out = model(batch["images"], batch["P"])
-        p = dict(to_smplx_params(out, batch["P"], batch["K"]))
+        if "features" in batch:
+            out = model.regress(batch["features"], batch["P"])
+            size = int(batch["crop_size"][0])
+        else:
+            out = model(batch["images"], batch["P"])
+            size = int(batch["images"].shape[-1])
+        p = dict(to_smplx_params(out, batch["P"], batch["K"], input_size=size))
         p["joints"], _ = body(p["theta"], p["beta"], p["phi"], p["tau"], vertices=False)
+        zero = torch.zeros_like(p["beta"])
+        p["joints_zero_beta"], _ = body(p["theta"], zero, p["phi"], vertices=False)
         for k, v in p.items():
             preds.setdefault(k, []).append(v.float().cpu())
+        theta_gt = axis_angle_to_matrix(batch["theta"].to(p["theta"].dtype)).unsqueeze(1).expand_as(p["theta"])
+        gt_zero, _ = body(theta_gt, zero, batch["phi"].to(p["theta"].dtype), vertices=False)
+        gts.setdefault("joints_zero_beta", []).append(gt_zero.float().cpu())
         for k in ("phi", "tau", "j3d_cam", "index"):
             if k in batch:
                 gts.setdefault(k, []).append(batch[k].cpu())
-        n += batch["images"].shape[0]
+        n += batch["phi"].shape[0]
         if max_samples is not None and n >= max_samples:
             break
     cat = lambda d: {k: torch.cat(v)[:max_samples] for k, v in d.items()}  # noqa: E731
@@ -90,13 +110,19 @@ def load_trained_model(checkpoint: str | Path, device: str | torch.device = "cpu
 
 def evaluate_checkpoint(checkpoint: str | Path, split: str = "test", method: str | None = None,
                         data: dict | None = None, batch_size: int = 8, device: str | torch.device = "cpu",
-                        max_samples: int | None = None) -> dict[str, pd.DataFrame]:
-    """Evaluate a checkpoint on a split of the dataset it was trained with (or ``data`` kwargs)."""
+                        max_samples: int | None = None, crops: str | None = None) -> dict[str, pd.DataFrame]:
+    """Evaluate a checkpoint on a split of the dataset it was trained with (or ``data`` kwargs).
+
+    ``crops="tight"`` evaluates on the test split's tight-box crops instead of the jittered ones.
+    A checkpoint of the ``regressor`` task is evaluated on the cached features of its backbone.
+    """
     from .loop import default_dataset_factory, prepare_data
 
     model, cfg = load_trained_model(checkpoint, device)
     if data is not None:
         cfg = cfg.replace(data=dict(data))
+    if crops is not None:
+        cfg = cfg.replace(data=dict(cfg.data, crops=crops))
     dataset = default_dataset_factory(prepare_data(cfg, progress=False), split)
     return evaluate(model, dataset, method or cfg.variant, batch_size=batch_size, device=device,
                     max_samples=max_samples, body=cfg.body_source)

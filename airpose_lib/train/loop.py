@@ -61,16 +61,36 @@ __all__ = [
     "prepare_data",
     "default_loss_factory",
     "forward_loss",
+    "regressor_forward_loss",
+    "pretrain_forward_loss",
+    "TASK_FORWARD",
     "validation_loss",
 ]
 
 
 # -- factories (top-level functions: picklable for spawned processes) -----------------------------
 def default_model_factory(cfg: TrainConfig) -> nn.Module:
-    """``airpose_lib.model.build_model(cfg.variant, backbone=cfg.backbone, **cfg.model)``."""
+    """The network of ``cfg.task``: ``build_model(cfg.variant, backbone=cfg.backbone, **cfg.model)``
+    (its backbone loaded from ``cfg.pretrained`` when given; frozen for the ``regressor`` task, whose
+    checkpoints therefore hold the whole network), or a
+    :class:`~airpose_lib.model.pretrain.PretrainNet` for ``pretrain``."""
     from airpose_lib.model import build_model
+    from airpose_lib.model.pretrain import PretrainNet
 
-    return build_model(cfg.variant, backbone=cfg.backbone, **cfg.model)
+    if cfg.task == "pretrain":
+        return PretrainNet(cfg.backbone, **cfg.model)
+    model = build_model(cfg.variant, backbone=cfg.backbone, **cfg.model)
+    if cfg.pretrained is not None:
+        from .features import load_backbone_file
+
+        backbone, meta = load_backbone_file(cfg.pretrained)
+        if meta["backbone"] != cfg.backbone:
+            raise ValueError(f"{cfg.pretrained} is a {meta['backbone']}, the config asks for {cfg.backbone}")
+        model.backbone.load_state_dict(backbone.state_dict())
+    if cfg.task == "regressor":
+        for p in model.backbone.parameters():
+            p.requires_grad_(False)
+    return model
 
 
 def prepare_data(cfg: TrainConfig, progress: bool | None = None) -> TrainConfig:
@@ -91,6 +111,7 @@ def prepare_data(cfg: TrainConfig, progress: bool | None = None) -> TrainConfig:
             raise ValueError("training on the official synthetic data needs body_source='smplx' (its betas "
                              "are SMPL-X v1.1 shape coefficients; see data_manifests/smplx_v1_1.yaml)")
         return cfg.replace(data=data)
+    show = cfg.progress if progress is None else progress
     if data.get("root") is None:
         source = data.pop("profile", None) or cfg.profile
         if source is None:
@@ -98,8 +119,24 @@ def prepare_data(cfg: TrainConfig, progress: bool | None = None) -> TrainConfig:
                              "`data: still:` section")
         from airpose_lib.data.generate import ensure_still_dataset
 
-        data["root"] = str(ensure_still_dataset(source, progress=cfg.progress if progress is None else progress))
-    return cfg.replace(data=data)
+        data["root"] = str(ensure_still_dataset(source, progress=show))
+    cfg = cfg.replace(data=data)
+    if cfg.pretrained == "profile":
+        # lazy: the pretraining module runs this engine itself
+        from airpose_lib.data.manifest import load_manifest
+
+        from .pretrain import ensure_backbone
+
+        fingerprint = load_manifest(Path(data["root"]))["fingerprint"]
+        cfg = cfg.replace(pretrained=str(ensure_backbone(cfg.profile, data["root"], fingerprint, progress=show)))
+    if cfg.task == "regressor":
+        from .features import ensure_features
+
+        if cfg.pretrained is None:
+            raise ValueError("the regressor task trains on the features of a pretrained backbone: set pretrained")
+        for split in {cfg.train_split, cfg.val_split}:
+            ensure_features(cfg.pretrained, data["root"], split, progress=show)
+    return cfg
 
 
 def default_dataset_factory(cfg: TrainConfig, split: str):
@@ -110,6 +147,12 @@ def default_dataset_factory(cfg: TrainConfig, split: str):
     kwargs = {k: v for k, v in cfg.data.items() if k not in ("root", "profile", "source")}
     if cfg.data.get("root") is None:
         raise ValueError("cfg.data has no root; call prepare_data(cfg) first")
+    if cfg.task == "regressor":
+        from .features import FeatureDataset, ensure_features
+
+        crops = kwargs.pop("crops", "jittered")
+        feats = ensure_features(cfg.pretrained, cfg.data["root"], split, crops)
+        return FeatureDataset(cfg.data["root"], split, feats, crops=crops, **kwargs)
     if cfg.data.get("source", "generated") == "official_synthetic":
         from airpose_lib.data.official_synthetic import OfficialSyntheticDataset
 
@@ -118,20 +161,58 @@ def default_dataset_factory(cfg: TrainConfig, split: str):
 
 
 def default_loss_factory(cfg: TrainConfig) -> nn.Module:
-    """The variant's :class:`~airpose_lib.losses.SupervisedLoss` (``cfg.loss`` overrides)."""
+    """The variant's :class:`~airpose_lib.losses.SupervisedLoss` (``cfg.loss`` overrides), or the
+    pretraining objective :class:`~airpose_lib.losses.pretrain.PretrainLoss` (task ``pretrain``)."""
     from airpose_lib.losses import SupervisedLoss, loss_config
+    from airpose_lib.losses.pretrain import PretrainLoss, PretrainLossConfig
 
+    if cfg.task == "pretrain":
+        return PretrainLoss(PretrainLossConfig(**cfg.loss), source=cfg.body_source)
     return SupervisedLoss(loss_config(cfg.variant, cfg.official_loss, **cfg.loss), source=cfg.body_source)
 
 
-def forward_loss(model: nn.Module, loss_fn: nn.Module, batch: Mapping[str, torch.Tensor]) -> dict[str, torch.Tensor]:
-    """Network forward on a batch, camera-frame parameters, loss terms (``"total"`` included)."""
+#: Floor of the weak camera's scale where the losses turn it into a depth. Just past zero the depth
+#: ``2 f s / (S s_w)`` flips from +inf to -inf and one step can throw the 2D term to 1e12; the scale
+#: guard ``exp(-10 s_w)^2`` (which sees the raw value) pushes s_w back above the floor.
+MIN_WEAK_SCALE = 0.05
+
+
+def _supervised_terms(out: Mapping, loss_fn: nn.Module, batch: Mapping[str, torch.Tensor], input_size: int) -> dict:
     from airpose_lib.model import to_smplx_params
 
-    out = model(batch["images"], batch["P"])
-    pred = dict(to_smplx_params(out, batch["P"], batch["K"]))
+    if "cam" in out:
+        cam = out["cam"]
+        out = dict(out, cam=torch.cat((cam[..., :1].clamp(min=MIN_WEAK_SCALE), cam[..., 1:]), dim=-1))
+    pred = dict(to_smplx_params(out, batch["P"], batch["K"], input_size=input_size))
     pred["phi6d"], pred["theta6d"] = out["phi6d"], out["theta6d"]
+    if "cam" in out:
+        pred["cam"] = cam  # the raw scale, for the guard
     return loss_fn(pred, batch)
+
+
+def forward_loss(model: nn.Module, loss_fn: nn.Module, batch: Mapping[str, torch.Tensor]) -> dict[str, torch.Tensor]:
+    """Task ``supervised``: network forward on the crops, camera-frame parameters, loss terms
+    (``"total"`` included)."""
+    out = model(batch["images"], batch["P"])
+    return _supervised_terms(out, loss_fn, batch, int(batch["images"].shape[-1]))
+
+
+def regressor_forward_loss(model: nn.Module, loss_fn: nn.Module, batch: Mapping[str, torch.Tensor]) -> dict:
+    """Task ``regressor``: the variant's regressor on cached ``features (B, V, C)``; same terms.
+    (Single process: the regressor alone is far too small to gain from DDP.)"""
+    out = _unwrap(model).regress(batch["features"], batch["P"])
+    return _supervised_terms(out, loss_fn, batch, int(batch["crop_size"][0]))
+
+
+def pretrain_forward_loss(model: nn.Module, loss_fn: nn.Module, batch: Mapping[str, torch.Tensor]) -> dict:
+    """Task ``pretrain``: the heads on every crop of the batch (views flattened)."""
+    out = model(batch["images"].flatten(0, 1))
+    return loss_fn(out, batch, _unwrap(model).n_heading_bins)
+
+
+#: The step of each task (SPIN's ``train_step`` per task, one engine around them).
+TASK_FORWARD: dict[str, Callable] = {"supervised": forward_loss, "regressor": regressor_forward_loss,
+                                     "pretrain": pretrain_forward_loss}
 
 
 # -- results --------------------------------------------------------------------------------------
@@ -147,19 +228,20 @@ class TrainResult:
     tensorboard: bool = False
     stopped_early: bool = False
     config: dict = field(default_factory=dict)
+    wall_s: float | None = None  # seconds of this call (a resumed run counts from its resume)
 
     def to_json(self) -> dict:
         return {"out_dir": str(self.out_dir), "step": self.step,
                 "checkpoint": str(self.checkpoint) if self.checkpoint else None,
                 "train_loss": self.train_loss, "val_losses": self.val_losses, "tensorboard": self.tensorboard,
-                "stopped_early": self.stopped_early, "config": self.config}
+                "stopped_early": self.stopped_early, "config": self.config, "wall_s": self.wall_s}
 
     @classmethod
     def from_json(cls, d: dict) -> "TrainResult":
         return cls(out_dir=Path(d["out_dir"]), step=d["step"],
                    checkpoint=Path(d["checkpoint"]) if d["checkpoint"] else None, train_loss=d["train_loss"],
                    val_losses=d["val_losses"], tensorboard=d["tensorboard"], stopped_early=d["stopped_early"],
-                   config=d["config"])
+                   config=d["config"], wall_s=d.get("wall_s"))
 
 
 def default_out_dir(profile: str | Path | None, variant: str, seed: int) -> Path:
@@ -388,6 +470,7 @@ def _run_training(cfg: TrainConfig, out_dir: Path, resume: bool, model_factory: 
             dist.barrier()
         return result
 
+    step_fn = TASK_FORWARD[cfg.task]
     bar = tqdm(total=cfg.steps, initial=step, disable=not (cfg.progress and rank == 0), desc=f"train {cfg.variant}",
                dynamic_ncols=True)
     t_start = time.time()
@@ -407,7 +490,7 @@ def _run_training(cfg: TrainConfig, out_dir: Path, resume: bool, model_factory: 
                                 generator=torch.Generator().manual_seed(_mix(cfg.seed, 3, epoch, rank)))
             for batch in loader:
                 batch = _to_device(batch, device)
-                terms = forward_loss(net, loss_fn, batch)
+                terms = step_fn(net, loss_fn, batch)
                 optimizer.zero_grad(set_to_none=True)
                 terms["total"].backward()
                 if cfg.grad_clip is not None:
@@ -447,7 +530,7 @@ def _run_training(cfg: TrainConfig, out_dir: Path, resume: bool, model_factory: 
     result = TrainResult(out_dir=out_dir, step=step, checkpoint=checkpoint,
                          train_loss=last_values["total"] if last_values else None, val_losses=val_losses,
                          tensorboard=bool(logger and logger.tensorboard), stopped_early=stopped,
-                         config=cfg.to_dict())
+                         config=cfg.to_dict(), wall_s=round(time.time() - t_start, 1))
     if rank == 0:
         (out_dir / "result.json").write_text(json.dumps(result.to_json(), indent=2))
     return result
@@ -471,8 +554,8 @@ def validation_loss(model: nn.Module, loss_fn: nn.Module, dataset, cfg: TrainCon
         if cfg.val_batches is not None and b >= cfg.val_batches:
             break
         batch = _to_device(batch, device)
-        terms = forward_loss(model, loss_fn, batch)
-        k = batch["images"].shape[0]
+        terms = TASK_FORWARD[cfg.task](model, loss_fn, batch)
+        k = batch["phi"].shape[0]
         for key, v in terms.items():
             sums[key] = sums.get(key, 0.0) + float(v) * k
         n += k

@@ -1,0 +1,98 @@
+"""The variant-neutral objective of the shared pretrained backbone (:mod:`airpose_lib.model.pretrain`).
+
+Every term compares one head with the sample's ground truth, per crop (the views of a sample are
+independent crops here; nothing couples them):
+
+``heading``  cross-entropy of the heading class (:func:`airpose_lib.model.pretrain.heading_bin`)
+``phi``      ``||R(phi6d) - phi||^2`` on rotation matrices (mean over entries)
+``theta``    ``||R(theta6d) - theta||^2`` on the 21 body rotations
+``beta``     ``||beta - beta_gt||^2``
+``j3d``      ``||J - J0_gt||^2`` model-frame joints of the gendered ground-truth body, metres
+``j2d``      ``||u - u_gt||^2`` joints in the crop normalised to [-1, 1]
+
+No term uses the crop vector P, the translation or the other view, so no variant of the ablation
+is favoured by the starting point they share.
+"""
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import asdict, dataclass
+
+import torch
+from torch import Tensor, nn
+from torch.nn import functional as F
+
+from airpose_lib.geometry import axis_angle_to_matrix, full_to_crop_pixels, rot6d_to_matrix
+
+from .supervised import SupervisedLoss
+
+__all__ = ["PretrainLossConfig", "PretrainLoss"]
+
+
+@dataclass(frozen=True)
+class PretrainLossConfig:
+    """Term weights; chosen so that every term starts at a comparable size (errors of about
+    90 degrees, 0.1 m and a tenth of the crop)."""
+
+    w_heading: float = 1.0
+    w_phi: float = 1.0
+    w_theta: float = 10.0
+    w_beta: float = 0.1
+    w_j3d: float = 100.0
+    w_j2d: float = 10.0
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+class PretrainLoss(nn.Module):
+    """Loss of :class:`~airpose_lib.model.pretrain.PretrainNet` on a still-frame batch.
+
+    Args:
+        config: weights (default :class:`PretrainLossConfig`).
+        body_models: gender name -> ``smplx.SMPLX`` (ground-truth joints); default loaded from
+            ``source``.
+        source: body-model source (``open`` or ``smplx``).
+    """
+
+    def __init__(self, config: PretrainLossConfig | None = None, body_models: Mapping | None = None,
+                 source: str = "open") -> None:
+        super().__init__()
+        self.config = config or PretrainLossConfig()
+        # The supervised loss's gendered ground-truth body, without its vertices.
+        self.gt = SupervisedLoss(body_models=body_models, source=source)
+
+    def forward(self, out: Mapping[str, Tensor], batch: Mapping[str, Tensor], n_bins: int) -> dict[str, Tensor]:
+        """Terms and their weighted ``total``.
+
+        Args:
+            out: heads of ``B * V`` crops (``PretrainNet.forward`` on the flattened views).
+            batch: ``phi (B, V, 3, 3)``, ``theta (B, 21, 3)``, ``beta (B, 10)``, ``gender (B,)``,
+                ``j2d (B, V, 22, 2)``, ``bbox (B, V, 4)``, ``images (B, V, 3, S, S)``.
+            n_bins: heading classes.
+        """
+        from airpose_lib.model.pretrain import heading_bin
+
+        c = self.config
+        B, V = batch["phi"].shape[:2]
+        S = batch["images"].shape[-1]
+        dtype = out["phi6d"].dtype
+        flat = lambda x: x.reshape(B * V, *x.shape[2:]).to(dtype)  # noqa: E731
+        phi = flat(batch["phi"])
+        theta = axis_angle_to_matrix(batch["theta"].to(dtype))  # (B, 21, 3, 3)
+        with torch.no_grad():
+            J0, _ = self.gt.ground_truth_body(theta, batch["beta"].to(dtype), batch.get("gender"), vertices=False)
+        rep = lambda x: x.unsqueeze(1).expand(B, V, *x.shape[1:]).reshape(B * V, *x.shape[1:])  # noqa: E731
+        uv = full_to_crop_pixels(batch["j2d"].to(dtype), batch["bbox"].to(dtype), S) / (0.5 * S) - 1.0
+        terms = {
+            "heading": F.cross_entropy(out["heading"], heading_bin(phi, n_bins)),
+            "phi": (rot6d_to_matrix(out["phi6d"]) - phi).square().mean(),
+            "theta": (rot6d_to_matrix(out["theta6d"]) - rep(theta)).square().mean(),
+            "beta": (out["beta"] - rep(batch["beta"].to(dtype))).square().mean(),
+            "j3d": (out["j3d"] - rep(J0)).square().mean(),
+            "j2d": (out["j2d"] - flat(uv)).square().mean(),
+        }
+        w = {"heading": c.w_heading, "phi": c.w_phi, "theta": c.w_theta, "beta": c.w_beta, "j3d": c.w_j3d,
+             "j2d": c.w_j2d}
+        return {"total": sum(w[k] * terms[k] for k in terms), **terms}
+

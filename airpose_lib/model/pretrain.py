@@ -1,0 +1,87 @@
+r"""A backbone pretrained once per profile on a variant-neutral objective (the CPU protocol).
+
+The paper starts every variant from ImageNet weights, which cannot be downloaded here. The kit
+gives all four variants the same substitute starting point instead: one ResNet trained on the
+kit's own crops to read what every variant needs from the image and nothing that tells the
+variants apart -- no crop vector P, no translation, no exchange between views. Its heads are
+linear in the pooled feature, like the variants' regressor (fc1 and fc2 have no nonlinearity
+between them), so what the heads read, the variants can read too.
+
+Heads on the feature ``f (N, C)``:
+
+==============  ==============  =================================================================
+``heading``     (N, n_bins)     the body's heading in the camera (azimuth of the body's forward
+                                axis in the camera's x-z plane) as classes: a classification does
+                                not average the front and back modes of a small, ambiguous
+                                person the way a mean-squared rotation regression does
+``phi6d``       (N, 6)          root rotation in the camera (6D, first two columns of R)
+``theta6d``     (N, 21, 6)      body pose
+``beta``        (N, 10)         shape
+``j3d``         (N, 22, 3)      model-frame body joints (identity root, zero translation), metres
+``j2d``         (N, 22, 2)      body joints in the crop, normalised to [-1, 1]
+==============  ==============  =================================================================
+"""
+from __future__ import annotations
+
+import math
+
+import torch
+from torch import Tensor, nn
+
+from .backbone import ResNet, build_backbone
+
+__all__ = ["PretrainNet", "heading_of", "heading_bin", "PRETRAIN_HEADS"]
+
+#: Output widths of the linear heads (besides ``heading``, whose width is the number of bins).
+PRETRAIN_HEADS: dict[str, tuple[int, ...]] = {
+    "phi6d": (6,), "theta6d": (21, 6), "beta": (10,), "j3d": (22, 3), "j2d": (22, 2),
+}
+
+
+def heading_of(phi: Tensor) -> Tensor:
+    """Heading of the body in the camera, radians in ``(-pi, pi]``.
+
+    Args:
+        phi: ``(..., 3, 3)`` root rotation (model -> camera); the model faces +Z.
+
+    Returns:
+        ``(...)`` azimuth of the body's forward axis ``phi[:, :, 2]`` in the camera's x-z plane
+        (0: facing away from the camera, pi: facing it).
+    """
+    forward = phi[..., :, 2]
+    return torch.atan2(forward[..., 0], forward[..., 2])
+
+
+def heading_bin(phi: Tensor, n_bins: int) -> Tensor:
+    """Class index ``(...)`` int64 of :func:`heading_of` in ``n_bins`` equal bins of ``(-pi, pi]``."""
+    h = heading_of(phi)
+    return torch.floor((h + math.pi) / (2 * math.pi) * n_bins).long().clamp_(0, n_bins - 1)
+
+
+class PretrainNet(nn.Module):
+    """ResNet + linear heads of the variant-neutral objective.
+
+    Args:
+        backbone: ``"resnet18"`` / ``"resnet34"`` / ``"resnet50"`` or a :class:`ResNet`.
+        n_heading_bins: classes of the heading head.
+        channels_last: NHWC backbone (faster on CPU).
+    """
+
+    def __init__(self, backbone: str | ResNet = "resnet18", n_heading_bins: int = 12,
+                 channels_last: bool = False) -> None:
+        super().__init__()
+        self.backbone = backbone if isinstance(backbone, ResNet) else build_backbone(backbone, channels_last)
+        C = self.backbone.feature_dim
+        self.n_heading_bins = int(n_heading_bins)
+        self.heads = nn.ModuleDict({"heading": nn.Linear(C, self.n_heading_bins)})
+        for name, shape in PRETRAIN_HEADS.items():
+            self.heads[name] = nn.Linear(C, math.prod(shape))
+
+    def forward(self, images: Tensor) -> dict[str, Tensor]:
+        """Args: images ``(N, 3, S, S)`` normalised crops. Returns the heads' outputs (module doc)
+        and ``feature (N, C)``."""
+        f = self.backbone(images)
+        out = {"feature": f, "heading": self.heads["heading"](f)}
+        for name, shape in PRETRAIN_HEADS.items():
+            out[name] = self.heads[name](f).unflatten(-1, shape)
+        return out

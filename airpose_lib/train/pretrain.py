@@ -1,0 +1,184 @@
+"""The shared pretrained backbone of a profile: trained once, gated on held-out data, cached.
+
+``ensure_backbone(profile)`` returns the path of the profile's backbone file. It is looked for, in
+order, in the kit cache (``<cache>/backbones/<key>.pt``), in the repository's committed reference
+(``results/<profile>/pretrained_backbone.pt``, used when its recorded key matches and its SHA-256
+is the recorded one), and otherwise trained with the profile's ``pretrain:`` section by the one
+training engine (:func:`airpose_lib.train.loop.train`, task ``"pretrain"``;
+:mod:`airpose_lib.model.pretrain` has the network, :mod:`airpose_lib.losses.pretrain` the
+objective). The key hashes the ``pretrain:`` settings and the dataset's configuration fingerprint,
+so a change of either trains a new backbone.
+
+The file holds the backbone's weights in float16 (half the size; the features differ from the
+float32 network's by about 1e-3 relative, far below what the regressors resolve) and a JSON
+record: backbone name, key, the gate's measurements on the test split, the wall time and the
+command that rebuilds it (``airpose pretrain --profile <profile>``).
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import shutil
+import time
+from pathlib import Path
+
+import torch
+from torch.utils.data import DataLoader
+
+from airpose_lib.body.cache import atomic_path, cache_dir, file_lock
+from airpose_lib.data.dataset import StillFrameDataset
+from airpose_lib.data.shards import sha256_file
+from airpose_lib.eval.metrics import rotation_error
+from airpose_lib.geometry import rot6d_to_matrix
+from airpose_lib.model.pretrain import heading_bin
+
+from .checkpoint import kit_version, load_checkpoint
+from .config import TrainConfig, load_train_config
+
+__all__ = ["PRETRAIN_VERSION", "pretrain_config", "backbone_key", "ensure_backbone", "profile_backbone",
+           "export_backbone", "gate_metrics", "reference_backbone_path", "write_reference_backbone"]
+
+#: Bumped when the same settings would train another backbone.
+PRETRAIN_VERSION = 1
+_REPO = Path(__file__).resolve().parents[2]
+
+
+def pretrain_config(profile: str, **overrides) -> TrainConfig:
+    """The ``pretrain:`` section of a profile as a :class:`TrainConfig` (task ``pretrain``)."""
+    return load_train_config(profile, "pretrain", section="pretrain", task="pretrain", **overrides)
+
+
+def backbone_key(cfg: TrainConfig, data_fingerprint: str) -> str:
+    """First 16 hex digits of the SHA-256 of the settings that make the backbone."""
+    settings = {k: v for k, v in cfg.to_dict().items()
+                if k not in ("progress", "data", "num_workers", "log_every", "checkpoint_every", "keep_checkpoints",
+                             "val_every", "val_batches", "device", "num_threads", "profile")}
+    blob = json.dumps({"version": PRETRAIN_VERSION, "settings": settings, "data": data_fingerprint},
+                      sort_keys=True, default=str)
+    return hashlib.sha256(blob.encode()).hexdigest()[:16]
+
+
+def reference_backbone_path(profile: str) -> Path:
+    """Where a profile's committed backbone lives in the repository."""
+    return _REPO / "results" / profile / "pretrained_backbone.pt"
+
+
+@torch.no_grad()
+def gate_metrics(model: torch.nn.Module, dataset, batch_size: int = 32, max_samples: int | None = None
+                 ) -> dict[str, float]:
+    """The pretrained heads on held-out data: heading accuracy, root-rotation and body-pose errors.
+
+    Returns ``heading_acc`` (fraction), ``root_rot_median_deg`` / ``root_rot_mean_deg`` of the
+    linear ``phi6d`` head, ``theta_mean_deg`` (mean over the 21 joints) and ``n`` crops.
+    """
+    from airpose_lib.geometry import axis_angle_to_matrix
+
+    model = model.eval()
+    n_bins = model.n_heading_bins
+    rot, th, hit = [], [], []
+    n = 0
+    for batch in DataLoader(dataset, batch_size=batch_size, shuffle=False):
+        B, V = batch["phi"].shape[:2]
+        out = model(batch["images"].flatten(0, 1))
+        phi = batch["phi"].flatten(0, 1)
+        rot.append(torch.rad2deg(rotation_error(rot6d_to_matrix(out["phi6d"]).double(), phi.double())))
+        theta = axis_angle_to_matrix(batch["theta"]).unsqueeze(1).expand(B, V, 21, 3, 3).flatten(0, 1)
+        th.append(torch.rad2deg(rotation_error(rot6d_to_matrix(out["theta6d"]).double(), theta.double())).mean(-1))
+        hit.append(out["heading"].argmax(-1) == heading_bin(phi, n_bins))
+        n += B
+        if max_samples is not None and n >= max_samples:
+            break
+    rot_all, th_all, hit_all = torch.cat(rot), torch.cat(th), torch.cat(hit)
+    return {"heading_acc": float(hit_all.float().mean()), "root_rot_median_deg": float(rot_all.median()),
+            "root_rot_mean_deg": float(rot_all.mean()), "theta_mean_deg": float(th_all.mean()),
+            "n": int(len(rot_all))}
+
+
+def export_backbone(checkpoint: str | Path, path: str | Path, meta: dict) -> Path:
+    """Write the backbone of a pretraining checkpoint as a float16 file with its JSON record."""
+    state = load_checkpoint(checkpoint)
+    sd = {k[len("backbone."):]: v.half() if v.is_floating_point() else v
+          for k, v in state["model"].items() if k.startswith("backbone.")}
+    path = Path(path)
+    with atomic_path(path) as tmp:
+        torch.save({"state_dict": sd, "meta_json": json.dumps(meta, sort_keys=True)}, tmp)
+    record = dict(meta, sha256=sha256_file(path), bytes=path.stat().st_size)
+    path.with_suffix(".json").write_text(json.dumps(record, indent=2, sort_keys=True) + "\n")
+    return path
+
+
+def _reference_if_valid(profile: str, key: str) -> Path | None:
+    ref = reference_backbone_path(profile)
+    try:
+        record = json.loads(ref.with_suffix(".json").read_text())
+    except (OSError, ValueError):
+        return None
+    if record.get("key") != key or not ref.is_file() or sha256_file(ref) != record.get("sha256"):
+        return None
+    return ref
+
+
+def ensure_backbone(profile: str, data_root: str | Path, data_fingerprint: str, out_root: str | Path | None = None,
+                    progress: bool = False, **overrides) -> Path:
+    """The profile's pretrained backbone file (see the module docstring for where it comes from).
+
+    Args:
+        profile: reproduction profile (its ``pretrain:`` section).
+        data_root: the still-frame dataset to pretrain on (train split; the test split gates).
+        data_fingerprint: that dataset's configuration fingerprint (part of the key).
+        out_root: parent of the pretraining run folder (default ``runs/pretrain/<profile>``).
+        overrides: TrainConfig fields over the ``pretrain:`` section.
+    """
+    from .loop import train  # the engine imports this module for its "regressor" task
+
+    cfg = pretrain_config(profile, **overrides).replace(data={"root": str(data_root)})
+    key = backbone_key(cfg, data_fingerprint)
+    target = cache_dir() / "backbones" / f"{key}.pt"
+    with file_lock(target.with_suffix(".lock")):
+        if target.is_file():
+            return target
+        ref = _reference_if_valid(profile, key)
+        if ref is not None:
+            shutil.copyfile(ref, target)
+            shutil.copyfile(ref.with_suffix(".json"), target.with_suffix(".json"))
+            return target
+        out = Path(out_root) if out_root is not None else Path("runs") / "pretrain" / profile
+        t0 = time.time()
+        run = train("pretrain", profile, out_dir=out / key, config=cfg.replace(progress=progress))
+        wall = time.time() - t0
+        model = _load_pretrain_model(run.checkpoint, cfg)
+        gate = gate_metrics(model, StillFrameDataset(data_root, "test", augment=False),
+                            max_samples=cfg.val_batches * cfg.batch_size if cfg.val_batches else None)
+        meta = {"backbone": cfg.backbone, "key": key, "profile": profile, "kit_version": kit_version(),
+                "config": cfg.to_dict(), "data_fingerprint": data_fingerprint, "gate": gate,
+                "train_wall_s": round(wall, 1), "steps": run.step,
+                "command": f"airpose pretrain --profile {profile}"}
+        export_backbone(run.checkpoint, target, meta)
+    return target
+
+
+def _load_pretrain_model(checkpoint: str | Path, cfg: TrainConfig) -> torch.nn.Module:
+    from .loop import default_model_factory
+
+    model = default_model_factory(cfg)
+    model.load_state_dict(load_checkpoint(checkpoint)["model"])
+    return model.eval()
+
+
+def profile_backbone(profile: str, progress: bool = False) -> Path:
+    """The backbone of a profile for its own still-frame dataset (generated first if missing)."""
+    from airpose_lib.data.generate import ensure_still_dataset
+    from airpose_lib.data.manifest import load_manifest
+
+    root = ensure_still_dataset(profile, progress=progress)
+    return ensure_backbone(profile, root, load_manifest(Path(root))["fingerprint"], progress=progress)
+
+
+def write_reference_backbone(profile: str, backbone_file: str | Path) -> Path:
+    """Copy a backbone file and its record into ``results/<profile>/`` (the committed reference)."""
+    ref = reference_backbone_path(profile)
+    ref.parent.mkdir(parents=True, exist_ok=True)
+    for src, dst in ((Path(backbone_file), ref), (Path(backbone_file).with_suffix(".json"), ref.with_suffix(".json"))):
+        with atomic_path(dst) as tmp:
+            shutil.copyfile(src, tmp)
+    return ref

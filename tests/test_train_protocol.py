@@ -1,0 +1,173 @@
+"""The Table I protocol: weak-camera scale guard, official MPJPE, shared pretrained backbone and its
+feature cache, heading classes."""
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+import torch
+from torch import nn
+
+from airpose_lib.eval.tables import per_view_table
+from airpose_lib.geometry import axis_angle_to_matrix, matrix_to_rot6d, project_points
+from airpose_lib.losses import BaselineLossConfig, PaperBody, SupervisedLoss
+from airpose_lib.losses.pretrain import PretrainLoss
+from airpose_lib.model.pretrain import PretrainNet, heading_bin, heading_of
+from airpose_lib.train.evaluate import predict
+from airpose_lib.train.features import feature_key
+from airpose_lib.train.loop import MIN_WEAK_SCALE, _supervised_terms
+
+
+@pytest.fixture(scope="module")
+def bodies(open_model_files):
+    from airpose_lib.body import load_body_model
+
+    return {g: load_body_model("open", g) for g in ("neutral", "male", "female")}
+
+
+def _batch(bodies, B=4, V=2, seed=0):
+    """Ground truth of B samples seen by V cameras at about 10 m (float32, neutral bodies)."""
+    g = torch.Generator().manual_seed(seed)
+    theta = torch.randn(B, 21, 3, generator=g) * 0.2
+    beta = torch.randn(B, 10, generator=g)
+    # upright and facing the camera, turned about the vertical by a random heading
+    yaw = (torch.rand(B, V, generator=g) - 0.5) * 2.0
+    phi = axis_angle_to_matrix(torch.tensor([math.pi, 0.0, 0.0])) @ axis_angle_to_matrix(
+        torch.stack([torch.zeros_like(yaw), yaw, torch.zeros_like(yaw)], -1))
+    tau = torch.stack([torch.randn(B, V, generator=g) * 0.5, torch.randn(B, V, generator=g) * 0.5,
+                       9.0 + 2 * torch.rand(B, V, generator=g)], -1)
+    K = torch.tensor([[1475.0, 0, 959.5], [0, 1475, 539.5], [0, 0, 1]]).expand(B, V, 3, 3)
+    body = PaperBody(bodies["neutral"])
+    j3d, _ = body(axis_angle_to_matrix(theta).unsqueeze(1).expand(B, V, 21, 3, 3), beta.unsqueeze(1), phi, tau,
+                  vertices=False)
+    j2d = project_points(j3d, K)
+    bbox = torch.cat((j2d.amin(-2) - 20, j2d.amax(-2) + 20), -1)
+    side = torch.maximum(bbox[..., 2] - bbox[..., 0], bbox[..., 3] - bbox[..., 1])
+    cc = 0.5 * (bbox[..., :2] + bbox[..., 2:])
+    P = torch.stack([cc[..., 0] / 959.5 - 1, cc[..., 1] / 539.5 - 1, 224.0 / side], -1)
+    return dict(theta=theta, beta=beta, phi=phi, tau=tau, K=K, j2d=j2d, j3d_cam=j3d, bbox=bbox, P=P,
+                gender=torch.zeros(B, dtype=torch.long), index=torch.arange(B))
+
+
+# -- the weak-camera scale guard ------------------------------------------------------------------
+def _fit_weak_scale(bodies, w_cam_scale: float, steps: int = 150) -> float:
+    """Optimise the Baseline's weak cameras on 2D targets mirrored through the box centre (what a
+    negative depth shows): the 2D term then shrinks the body towards s_w = 0, and past it."""
+    batch = _batch(bodies)
+    cc = 0.5 * (batch["bbox"][..., None, :2] + batch["bbox"][..., None, 2:])
+    batch["j2d"] = 2 * cc - batch["j2d"]
+    loss_fn = SupervisedLoss(BaselineLossConfig(w_cam_scale=w_cam_scale), bodies)
+    B, V = batch["phi"].shape[:2]
+    theta = axis_angle_to_matrix(batch["theta"]).unsqueeze(1).expand(B, V, 21, 3, 3)
+    cam = nn.Parameter(torch.tensor([0.5, 0.0, 0.0]).repeat(B, V, 1))
+    opt = torch.optim.Adam([cam], lr=0.02)
+    for _ in range(steps):
+        out = {"phi6d": matrix_to_rot6d(batch["phi"]), "theta6d": matrix_to_rot6d(theta),
+               "beta": batch["beta"].unsqueeze(1).expand(B, V, 10), "cam": cam}
+        terms = _supervised_terms(out, loss_fn, batch, 224)
+        opt.zero_grad()
+        terms["total"].backward()
+        opt.step()
+    return float(cam[..., 0].min())
+
+
+def test_scale_guard_keeps_the_weak_scale_positive(bodies):
+    collapsed = _fit_weak_scale(bodies, w_cam_scale=0.0)
+    guarded = _fit_weak_scale(bodies, w_cam_scale=1.0)
+    assert collapsed <= MIN_WEAK_SCALE  # without the guard s_w runs into (and past) zero
+    assert guarded > MIN_WEAK_SCALE
+
+
+# -- Table I's MPJPE (official definition) --------------------------------------------------------
+class _ReturnsInput(nn.Module):
+    """A 'regressor' that returns the parameters packed into its features (for an exact test)."""
+
+    def regress(self, feat, P):
+        return {"phi6d": feat[..., :6], "theta6d": feat[..., 6:132].unflatten(-1, (21, 6)),
+                "beta": feat[..., 132:142], "tau": feat[..., 142:145]}
+
+
+def test_official_mpjpe_ignores_shape_and_translation_but_scores_the_root(bodies):
+    batch = _batch(bodies, B=3)
+    B, V = batch["phi"].shape[:2]
+    theta = axis_angle_to_matrix(batch["theta"]).unsqueeze(1).expand(B, V, 21, 3, 3)
+    wrong_beta = batch["beta"].unsqueeze(1).expand(B, V, 10) + 2.0
+    feat = torch.cat([matrix_to_rot6d(batch["phi"]), matrix_to_rot6d(theta).flatten(-2), wrong_beta,
+                      batch["tau"] + torch.tensor([0.0, 0.0, 1.0])], -1)
+    items = [{**{k: v[i] for k, v in batch.items()}, "features": feat[i], "crop_size": torch.tensor(224)}
+             for i in range(B)]
+    body = PaperBody(bodies["neutral"])
+    pred, gt = predict(_ReturnsInput(), items, batch_size=B, body=body)
+    table = per_view_table(pred, gt)
+    assert table["mpjpe_m"].max() < 1e-5  # shape and depth are not scored
+    assert table["mpjpe_shape_m"].min() > 0.01  # the kit's shape-aware MPJPE sees the betas
+    assert table["mpe_m"].to_numpy() == pytest.approx(1.0, abs=1e-5)
+    # a root rotated by 90 degrees about the vertical: hand-computed from the zero-beta joints
+    R = axis_angle_to_matrix(torch.tensor([0.0, math.pi / 2, 0.0]))
+    feat[..., :6] = matrix_to_rot6d(batch["phi"] @ R)
+    items = [{**items[i], "features": feat[i]} for i in range(B)]
+    pred, gt = predict(_ReturnsInput(), items, batch_size=B, body=body)
+    J, _ = body(theta, torch.zeros(B, V, 10), vertices=False)
+    Jp, Jg = J @ (batch["phi"] @ R).transpose(-1, -2), J @ batch["phi"].transpose(-1, -2)
+    expected = ((Jp - Jp[..., :1, :]) - (Jg - Jg[..., :1, :])).norm(dim=-1).mean(-1)
+    np.testing.assert_allclose(per_view_table(pred, gt)["mpjpe_m"], expected.reshape(-1).numpy(), atol=1e-5)
+
+
+# -- the pretrained backbone ----------------------------------------------------------------------
+def test_heading_classes():
+    facing = axis_angle_to_matrix(torch.tensor([math.pi, 0.0, 0.0]))  # faces the camera
+    assert abs(float(heading_of(facing))) == pytest.approx(math.pi, abs=1e-6)
+    away = torch.eye(3)
+    assert float(heading_of(away)) == pytest.approx(0.0, abs=1e-6)
+    assert int(heading_bin(away, 12)) == 6 and int(heading_bin(facing, 12)) in (0, 11)
+    turned = away @ axis_angle_to_matrix(torch.tensor([0.0, math.pi / 2, 0.0]))
+    assert float(heading_of(turned)) == pytest.approx(math.pi / 2, abs=1e-6)
+    assert int(heading_bin(turned, 12)) == 9
+
+
+def test_pretrain_loss_is_zero_for_the_ground_truth(bodies):
+    batch = _batch(bodies, B=2)
+    B, V = batch["phi"].shape[:2]
+    S = 64
+    batch["images"] = torch.zeros(B, V, 3, S, S)
+    loss = PretrainLoss(body_models=bodies)
+    theta = axis_angle_to_matrix(batch["theta"])
+    J0, _ = PaperBody(bodies["neutral"])(theta, batch["beta"], vertices=False)
+    from airpose_lib.geometry import full_to_crop_pixels
+
+    uv = full_to_crop_pixels(batch["j2d"], batch["bbox"], S) / (S / 2) - 1
+    logits = torch.full((B * V, 12), -50.0)
+    logits[torch.arange(B * V), heading_bin(batch["phi"].flatten(0, 1), 12)] = 50.0
+    rep = lambda x: x.unsqueeze(1).expand(B, V, *x.shape[1:]).flatten(0, 1)  # noqa: E731
+    out = {"heading": logits, "phi6d": matrix_to_rot6d(batch["phi"]).flatten(0, 1),
+           "theta6d": rep(matrix_to_rot6d(theta)), "beta": rep(batch["beta"]), "j3d": rep(J0),
+           "j2d": uv.flatten(0, 1)}
+    terms = loss(out, batch, 12)
+    for k in ("heading", "phi", "theta", "beta", "j3d", "j2d"):
+        assert terms[k].item() == pytest.approx(0.0, abs=1e-5), k
+    net = PretrainNet("resnet18", n_heading_bins=12)
+    heads = net(torch.zeros(2, 3, 64, 64))
+    assert heads["heading"].shape == (2, 12) and heads["theta6d"].shape == (2, 21, 6) and heads["j2d"].shape == (2, 22, 2)
+
+
+def test_feature_key_changes_with_the_backbone_and_the_data(tmp_path):
+    import yaml
+
+    from airpose_lib.data.manifest import DATASET_KIND
+
+    data = tmp_path / "data"
+    data.mkdir()
+    manifest = {"kind": DATASET_KIND, "fingerprint": "abc", "shards": [{"sha256": "1"}, {"sha256": "2"}]}
+    (data / "manifest.yaml").write_text(yaml.safe_dump(manifest))
+    b1, b2 = tmp_path / "b1.pt", tmp_path / "b2.pt"
+    torch.save({"state_dict": {"w": torch.zeros(3)}, "meta_json": json.dumps({"backbone": "resnet18"})}, b1)
+    torch.save({"state_dict": {"w": torch.ones(3)}, "meta_json": json.dumps({"backbone": "resnet18"})}, b2)
+    k = feature_key(b1, data, "train", "jittered")
+    assert feature_key(b1, data, "train", "jittered") == k  # same inputs, same key
+    assert feature_key(b2, data, "train", "jittered") != k  # another backbone
+    assert feature_key(b1, data, "test", "jittered") != k and feature_key(b1, data, "train", "tight") != k
+    manifest["shards"][1]["sha256"] = "3"  # a regenerated shard
+    (data / "manifest.yaml").write_text(yaml.safe_dump(manifest))
+    assert feature_key(b1, data, "train", "jittered") != k

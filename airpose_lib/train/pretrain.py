@@ -147,8 +147,7 @@ def ensure_backbone(profile: str, data_root: str | Path, data_fingerprint: str, 
         run = train("pretrain", profile, out_dir=out / key, config=cfg.replace(progress=progress))
         wall = time.time() - t0
         model = _load_pretrain_model(run.checkpoint, cfg)
-        gate = gate_metrics(model, StillFrameDataset(data_root, "test", augment=False),
-                            max_samples=cfg.val_batches * cfg.batch_size if cfg.val_batches else None)
+        gate = gate_metrics(model, StillFrameDataset(data_root, "test", augment=False))  # the whole test split
         meta = {"backbone": cfg.backbone, "key": key, "profile": profile, "kit_version": kit_version(),
                 "config": cfg.to_dict(), "data_fingerprint": data_fingerprint, "gate": gate,
                 "train_wall_s": round(wall, 1), "steps": run.step,

@@ -509,7 +509,7 @@ def _finetune(checkpoint: Path, root: Path, out_dir: Path, cfg: FineTuneConfig, 
     targets = as_t(targets_np[usable])
     h_feats, h_P, h_targets = as_t(cache["features"][held]), as_t(cache["P"][held]), as_t(targets_np[held])
     K = as_t(seq.K)
-    K_net = as_t(np.broadcast_to(K_net_np, K.shape))
+    K_net = as_t(np.broadcast_to(K_net_np, K.shape).copy())
     r_px = as_t(scales)
     pixels = {**pixel_settings(scales, cfg.threshold_px, finetune_loss_config(train_cfg.variant, cfg.official_loss,
                                                                               **cfg.loss).w_j2d),

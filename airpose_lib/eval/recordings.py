@@ -217,8 +217,8 @@ PAPER_CLAIMS: dict[str, str] = {
     "pose": "AirPose+ improves the articulated pose over AirPose (MPJPE, each person)",
     "uav2": "AirPose+ improves UAV2-in-UAV1 over AirPose (translation and rotation error, each person)",
     "uav2_twisting": "the UAV2-in-UAV1 improvement is larger for person 2's twisting poses than for person 1",
-    "depth_smooth": "AirPose's depth is smoother than SPIN's (mean |dz| per frame, each person and UAV)",
-    "depth_real": "AirPose's depth is more realistic than SPIN's (mean |z error|, each person and UAV)",
+    "depth_smooth": "AirPose's depth is smoother than SPIN's (mean abs. frame-to-frame change of z, each person and UAV)",
+    "depth_real": "AirPose's depth is more realistic than SPIN's (mean abs. z error, each person and UAV)",
 }
 
 
@@ -289,8 +289,8 @@ def paper_claims(table: pd.DataFrame, depth: pd.DataFrame, *, tuning: str = "per
     overall("uav2_twisting")
     d = depth.set_index(["sequence", "view", "method"]) if not depth.empty else None
     keys = sorted({(s_, v) for s_, v, _ in d.index}) if d is not None else []
-    for claim, col, label in (("depth_smooth", "dz_per_frame_m", "mean |dz| per frame m"),
-                              ("depth_real", "z_err_m", "mean |z error| m")):
+    for claim, col, label in (("depth_smooth", "dz_per_frame_m", "mean abs. dz per frame m"),
+                              ("depth_real", "z_err_m", "mean abs. z error m")):
         for s_, v in keys:
             if (s_, v, airpose) in d.index and (s_, v, spin) in d.index and col in d.columns:
                 a, b = float(d.loc[(s_, v, airpose), col]), float(d.loc[(s_, v, spin), col])

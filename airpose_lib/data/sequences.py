@@ -760,8 +760,8 @@ def refresh_detections(root: str | Path, config: SequenceConfig) -> dict:
     for name, det in detections.items():
         for v in range(config.num_views):
             path = root / f"machine_{v + 1}" / DETECTOR_FILES[name][0]
-            write = OfficialLayoutWriter._write_openpose if name == "openpose" else OfficialLayoutWriter._write_alphapose
-            write(path, frames, det.keypoints[:, v])
+            w = OfficialLayoutWriter
+            (w._write_openpose if name == "openpose" else w._write_alphapose)(path, frames, det.keypoints[:, v])
     meta_path = root / "sequence.json"
     meta = json.loads(meta_path.read_text())
     meta.update(detector_version=DETECTOR_VERSION,

@@ -217,7 +217,8 @@ PAPER_CLAIMS: dict[str, str] = {
     "pose": "AirPose+ improves the articulated pose over AirPose (MPJPE, each person)",
     "uav2": "AirPose+ improves UAV2-in-UAV1 over AirPose (translation and rotation error, each person)",
     "uav2_twisting": "the UAV2-in-UAV1 improvement is larger for person 2's twisting poses than for person 1",
-    "depth_smooth": "AirPose's depth is smoother than SPIN's (mean abs. frame-to-frame change of z, each person and UAV)",
+    "depth_smooth": "AirPose's depth is smoother than SPIN's (mean abs. frame-to-frame change of z, "
+                    "each person and UAV)",
     "depth_real": "AirPose's depth is more realistic than SPIN's (mean abs. z error, each person and UAV)",
 }
 

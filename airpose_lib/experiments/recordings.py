@@ -36,7 +36,9 @@ import numpy as np
 import pandas as pd
 
 __all__ = ["METHODS", "RecordingExperiment", "default_experiment_dir", "run_recording_experiment",
-           "body_vertices", "recording_prior", "finetune_table", "selection_table", "claims_table", "test_person_diagnostic", "official_recordings", "official_networks", "networks_for", "recordings_for", "depth_summary", "overlay_inputs", "airpose_plus_checks", "markdown_table"]
+           "body_vertices", "recording_prior", "test_person_diagnostic", "finetune_table", "selection_table",
+           "claims_table", "official_recordings", "official_networks", "networks_for", "recordings_for",
+           "depth_summary", "overlay_inputs", "airpose_plus_checks", "markdown_table"]
 
 #: Estimate names in plotting order.
 METHODS = ("Baseline (pre-trained)", "AirPose (pre-trained)", "Baseline", "AirPose", "AirPose+")

@@ -529,7 +529,7 @@ def test_model_selection_never_reads_the_test_person(tiny_ckpt, smoke_root, tmp_
     import types
 
     from airpose_lib.data.official_layout import load_sequence
-    from airpose_lib.experiments.recordings import test_person_diagnostic
+    from airpose_lib.experiments.recordings import ground_truth_diagnostic
     from airpose_lib.finetune.predict import sequence_features
     from airpose_lib.train import load_checkpoint
 
@@ -544,7 +544,7 @@ def test_model_selection_never_reads_the_test_person(tiny_ckpt, smoke_root, tmp_
     kw = dict(prior=tiny_prior, body_model=body32)
     runs = {}
     for name, seq, f in (("real", test, feats), ("nan", nan, nan_feats)):
-        diag = test_person_diagnostic(model, seq, input_size=S, features=f)
+        diag = ground_truth_diagnostic(model, seq, input_size=S, features=f)
         runs[name] = finetune(tiny_ckpt, smoke_root, tmp_path / name, cfg, diagnostic=diag, **kw)
     a, b = runs["real"], runs["nan"]
     assert a.selection["step"] == [0, 2, 4, 6, 8] and a.heldout_frames == 3

@@ -36,7 +36,7 @@ import numpy as np
 import pandas as pd
 
 __all__ = ["METHODS", "RecordingExperiment", "default_experiment_dir", "run_recording_experiment",
-           "body_vertices", "recording_prior", "test_person_diagnostic", "finetune_table", "selection_table",
+           "body_vertices", "recording_prior", "ground_truth_diagnostic", "finetune_table", "selection_table",
            "claims_table", "official_recordings", "official_networks", "networks_for", "recordings_for",
            "depth_summary", "overlay_inputs", "airpose_plus_checks", "markdown_table"]
 
@@ -227,7 +227,7 @@ def recording_prior(profile: str, progress: bool = False):
     return prior, {"source": source, "file": str(file), "stamp": _stamp(file), "message": msg}
 
 
-def test_person_diagnostic(model, sequence, *, input_size: int, features: dict | None = None):
+def ground_truth_diagnostic(model, sequence, *, input_size: int, features: dict | None = None):
     """A fine-tuning diagnostic on a recording with ground truth (the test person): ``f(model) ->
     {"mpjpe_m", "mpe_m", "j2d_px"}`` for ``finetune(..., diagnostic=f)``.
 
@@ -396,7 +396,7 @@ def _kit_networks(profile: str, seed: int, tuning, tests: dict, prior, prior_inf
             net, _, size = load_network(pre)
             for name, seq in tests.items():  # the frozen backbone's features, once per network
                 feats = sequence_features(net, seq, input_size=size)
-                diagnostics[name] = test_person_diagnostic(net, seq, input_size=size, features=feats)
+                diagnostics[name] = ground_truth_diagnostic(net, seq, input_size=size, features=feats)
 
         def diagnostic(model, _d=diagnostics):
             return {f"{name}_{k}": v for name, d in _d.items() for k, v in d(model).items()}

@@ -16,7 +16,8 @@ from airpose_lib.data.detections import (
     simulate_detections,
 )
 
-CLEAN = dict(outlier_rate=0.0, swap_rate=0.0, limb_swap_rate=0.0, miss_rate=0.0, frame_miss_rate=0.0)
+CLEAN = dict(outlier_rate=0.0, swap_rate=0.0, limb_swap_rate=0.0, background_limb_rate=0.0, miss_rate=0.0,
+             frame_miss_rate=0.0)
 
 
 def _scene(F=3000, sizes=(80.0, 400.0), J=25, W=1920, H=1080, seed=0):
@@ -79,7 +80,7 @@ def test_temporal_correlation():
 def test_swap_and_miss_rates():
     det = dataclasses.replace(OPENPOSE, swap_rate=0.1, limb_swap_rate=0.1, miss_rate=0.05,
                               miss_size_ref=200.0, frame_miss_rate=0.05, outlier_rate=0.0,
-                              sigma_px=0.5, sigma_rel=0.0)
+                              background_limb_rate=0.0, sigma_px=0.5, sigma_rel=0.0)
     F = 4000
     kp, size, wh = _scene(F=F, sizes=(200.0, 100.0))
     out = detect_keypoints(kp, size, wh, det, np.random.default_rng(4))
@@ -107,7 +108,7 @@ def test_swap_and_miss_rates():
 
 def test_confidence_falls_with_error():
     det = dataclasses.replace(OPENPOSE, outlier_rate=0.1, swap_rate=0.0, limb_swap_rate=0.0,
-                              miss_rate=0.0, frame_miss_rate=0.0)
+                              background_limb_rate=0.0, miss_rate=0.0, frame_miss_rate=0.0)
     kp, size, wh = _scene(F=1000, sizes=(150.0, 300.0))
     out = detect_keypoints(kp, size, wh, det, np.random.default_rng(5))
     err = np.linalg.norm(out.keypoints[..., :2] - kp, axis=-1).ravel()
@@ -157,8 +158,75 @@ def test_detections_on_a_simulated_sequence(open_model_files):
 
     sim = simulate_sequence(SequenceConfig(person="person1", n_frames=20, seed=1))
     op = simulate_detections(sim.gt, OPENPOSE, seed=0)
-    ok = ~op.missed & (op.swap == 0)[..., None] & ~op.outlier
+    ok = ~op.missed & (op.swap == 0)[..., None] & ~op.outlier & ~op.background
     err = np.linalg.norm(op.keypoints[..., :2] - sim.gt["kp2d_body25"], axis=-1)
     # typical error of a person ~100-200 px tall in a 960x540 frame: a few pixels
     assert 0.5 < np.median(err[ok]) < 10
     assert (op.keypoints[..., 2] > 0).mean() > 0.8
+
+
+def test_a_limb_on_a_background_object():
+    det = dataclasses.replace(OPENPOSE, **{**CLEAN, "background_limb_rate": 0.2, "sigma_px": 0.0, "sigma_rel": 0.0})
+    kp, size, wh = _scene(F=4000, sizes=(150.0, 300.0))
+    out = detect_keypoints(kp, size, wh, det, np.random.default_rng(6))
+    hit = out.background.any(-1)
+    tol = 4 * np.sqrt(0.2 * 0.8 / hit.size)
+    assert abs(hit.mean() - 0.2) < tol + 0.01  # a few limbs leave the frame and are missed
+    names = np.array(BODY_25_NAMES)
+    for f, v in zip(*np.nonzero(hit[:50])):
+        moved = names[out.background[f, v]]
+        side = {n[0] for n in moved}
+        assert len(side) == 1 and all(n[1:] in ("Shoulder", "Elbow", "Wrist", "Hip", "Knee", "Ankle", "BigToe",
+                                                "SmallToe", "Heel") for n in moved)
+        shift = out.keypoints[f, v, out.background[f, v], :2] - kp[f, v, out.background[f, v]]
+        assert np.allclose(shift, shift[0], atol=1e-9)  # moved rigidly
+        d = np.linalg.norm(shift[0]) / size[f, v]
+        assert 0.45 < d < 1.55
+    assert out.keypoints[out.background][:, 2].min() >= 0.6 * det.conf_max - 1e-9  # confidently wrong
+
+
+def _spread_person(F: int, size: float = 600.0, W: int = 1920, H: int = 1080):
+    """BODY_25 / COCO-18 keypoints of one upright person with arms and legs spread, ``size`` px tall."""
+    from airpose_lib.finetune import BODY25_FROM_COCO18
+
+    x = {"Nose": (0, -0.45), "Neck": (0, -0.35), "MidHip": (0, 0.05), "REye": (-0.03, -0.47), "LEye": (0.03, -0.47),
+         "REar": (-0.06, -0.46), "LEar": (0.06, -0.46), "RShoulder": (-0.12, -0.33), "LShoulder": (0.12, -0.33),
+         "RElbow": (-0.35, -0.33), "LElbow": (0.35, -0.33), "RWrist": (-0.55, -0.33), "LWrist": (0.55, -0.33),
+         "RHip": (-0.1, 0.05), "LHip": (0.1, 0.05), "RKnee": (-0.2, 0.28), "LKnee": (0.2, 0.28),
+         "RAnkle": (-0.3, 0.5), "LAnkle": (0.3, 0.5)}
+    for side, sx in (("R", -1), ("L", 1)):
+        x.update({f"{side}BigToe": (sx * 0.33, 0.53), f"{side}SmallToe": (sx * 0.36, 0.53),
+                  f"{side}Heel": (sx * 0.29, 0.52)})
+    b25 = np.array([x[n] for n in BODY_25_NAMES]) * size + [W / 2, H / 2]
+    idx = np.asarray(BODY25_FROM_COCO18)
+    coco = np.array([b25[list(idx).index(k)] for k in range(18)])
+    rep = lambda a: np.broadcast_to(a, (F, 1, *a.shape)).copy()  # noqa: E731
+    return rep(b25), rep(coco), np.full((F, 1), size), np.array([[W, H]])
+
+
+def test_the_agreement_filter_drops_a_swapped_limb_and_a_background_limb():
+    from airpose_lib.finetune import agreement_masks
+
+    F = 200
+    b25, coco, size, wh = _spread_person(F)
+    exact = dict(CLEAN, sigma_px=0.0, sigma_rel=0.0)
+    ap = detect_keypoints(coco, size, wh, dataclasses.replace(ALPHAPOSE, **exact, keypoints="coco18"),
+                          np.random.default_rng(0))
+    op = detect_keypoints(b25, size, wh, dataclasses.replace(OPENPOSE, **{**exact, "limb_swap_rate": 0.5,
+                                                                          "background_limb_rate": 0.3}),
+                          np.random.default_rng(1))
+    m = agreement_masks(op.keypoints, ap.keypoints, threshold_px=100.0)
+    names = BODY_25_NAMES
+    arm = [names.index(n) for n in ("RElbow", "RWrist", "LElbow", "LWrist")]  # 410-1320 px from their mirror
+    legs = [names.index(n) for n in ("RKnee", "RAnkle", "LKnee", "LAnkle")]
+    intact = ~op.background[:, 0].any(-1) & ~op.missed[:, 0].any(-1)  # (a limb moved out of the image is missed)
+    arms_swapped = (op.swap[:, 0] == 2) & intact
+    legs_swapped = (op.swap[:, 0] == 3) & intact
+    assert arms_swapped.sum() > 10 and legs_swapped.sum() > 10
+    assert m.disagree[arms_swapped][:, :, arm].all() and m.kept[arms_swapped][:, :, legs].all()
+    assert m.disagree[legs_swapped][:, :, legs].all() and m.kept[legs_swapped][:, :, arm].all()
+    # a limb on the background (shifted >= 300 px) is dropped wherever both detectors see it
+    bg = op.background[:, 0] & ~m.unconfirmed[:, 0] & ~m.missing[:, 0]
+    assert bg.sum() > 50 and m.disagree[:, 0][bg].all()
+    clean = (op.swap[:, 0] == 0) & intact
+    assert clean.sum() > 20 and not m.disagree[clean].any()

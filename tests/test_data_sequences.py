@@ -260,6 +260,29 @@ def test_generate_and_load_end_to_end(tmp_path, open_model_files):
     mtime = (paths["p1"] / "sequence.json").stat().st_mtime_ns
     ensure_sequences(configs={"p1": cfg}, root=tmp_path)  # complete and identical: kept
     assert (paths["p1"] / "sequence.json").stat().st_mtime_ns == mtime
+    # a new detector model: the detector files are re-simulated from the stored ground truth, the
+    # images stay (no re-rendering), and the detections equal a fresh simulation's
+    import json
+
+    from airpose_lib.data.detections import DETECTOR_VERSION
+    from airpose_lib.data.sequences import recording_detections, simulate_sequence
+
+    meta_path = paths["p1"] / "sequence.json"
+    meta = json.loads(meta_path.read_text())
+    assert meta["detector_version"] == DETECTOR_VERSION and meta["detections"]["openpose"]["views"] == 6
+    meta["detector_version"] = -1
+    meta_path.write_text(json.dumps(meta))
+    op_file = paths["p1"] / "machine_1" / "openpose_res.pkl"
+    op_file.write_bytes(b"stale")
+    image = sorted((paths["p1"] / "machine_1" / "images").glob("*.jpg"))[0]
+    image_mtime = image.stat().st_mtime_ns
+    ensure_sequences(configs={"p1": cfg}, root=tmp_path)
+    assert image.stat().st_mtime_ns == image_mtime
+    assert json.loads(meta_path.read_text())["detector_version"] == DETECTOR_VERSION
+    fresh = recording_detections(simulate_sequence(cfg).gt, cfg)
+    again = load_sequence(paths["p1"])
+    np.testing.assert_allclose(again.keypoints["openpose"], fresh["openpose"].keypoints, atol=1e-4)
+    np.testing.assert_allclose(again.keypoints["alphapose"], seq.keypoints["alphapose"], atol=1e-4)
 
 
 # -- official layout --------------------------------------------------------------------------------

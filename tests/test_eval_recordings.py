@@ -149,3 +149,34 @@ def test_depth_summary_and_checks():
     assert bool(checks.loc["AirPose+ MPJPE < AirPose", "holds"]) is True
     assert bool(checks.loc["AirPose+ relative-camera translation error < AirPose", "holds"]) is False
     assert "AirPose+ jitter < AirPose" not in checks.index  # no column, no claim
+
+
+def test_paper_claims_measure_and_judge_each_claim():
+    from airpose_lib.eval.recordings import PAPER_CLAIMS, paper_claims
+
+    rows = []
+    for p, (a_t, a_r, p_t, p_r) in {"person1": (2.0, 20.0, 1.5, 15.0), "person2": (4.0, 40.0, 2.0, 45.0)}.items():
+        rows += [{"sequence": p, "method": "AirPose", "mpjpe_m": 0.2, "rel_t_err_m": a_t, "rel_rot_deg": a_r},
+                 {"sequence": p, "method": "AirPose+", "mpjpe_m": 0.15 if p == "person1" else 0.25,
+                  "rel_t_err_m": p_t, "rel_rot_deg": p_r}]
+    depth = pd.DataFrame([
+        {"sequence": s, "view": v, "method": m, "dz_per_frame_m": dz, "z_err_m": ze}
+        for s in ("person1", "person2") for v in ("UAV1", "UAV2")
+        for m, dz, ze in (("AirPose", 0.05, 0.5), ("SPIN-style", 0.4, 3.0))])
+    c = paper_claims(pd.DataFrame(rows), depth)
+    verdict = c[c["sequence"] == "overall"].set_index("claim")["verdict"]
+    assert set(verdict.index) == set(PAPER_CLAIMS)
+    assert verdict["pose"] == "partly"  # better on person 1, worse on person 2
+    assert verdict["uav2"] == "partly"  # person 2's rotation error grew
+    # translation gain 2.0 (person 2) > 0.5 (person 1); rotation gain -5 < 5: partly
+    assert verdict["uav2_twisting"] == "partly"
+    assert verdict["depth_smooth"] == "holds" and verdict["depth_real"] == "holds"
+    smooth = c[(c["claim"] == "depth_smooth") & (c["sequence"] == "person2 UAV1")].iloc[0]
+    assert smooth["value"] == pytest.approx(0.05) and smooth["ratio"] == pytest.approx(0.125)
+    gain = c[(c["claim"] == "uav2_twisting") & c["measure"].str.contains(" m ")].iloc[0]
+    assert (gain["value"], gain["reference"]) == (pytest.approx(2.0), pytest.approx(0.5))
+    # no ground truth: only the smoothness claim can be measured
+    c = paper_claims(pd.DataFrame(), depth[["sequence", "view", "method", "dz_per_frame_m"]])
+    verdict = c[c["sequence"] == "overall"].set_index("claim")["verdict"]
+    assert verdict["depth_smooth"] == "holds"
+    assert (verdict.drop("depth_smooth") == "not measurable").all()

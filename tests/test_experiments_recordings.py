@@ -65,3 +65,18 @@ def test_missing_real_checkpoint_names_the_archive(official, tmp_path):
     shutil.rmtree(tmp_path / "ckpt" / "hmr_real_ckpt")
     with pytest.raises(FileNotFoundError, match="hmr_real_ckpt.zip"):
         official_networks(tmp_path / "ckpt")
+
+
+def test_recording_prior_uses_vposer_when_installed(tmp_path, monkeypatch):
+    from test_prior_vposer import _write_fake_ckpt
+
+    from airpose_lib.experiments.recordings import recording_prior
+
+    root = tmp_path / "vposer"
+    _write_fake_ckpt(root / "V02_05" / "snapshots" / "V02_05_epoch=08_val_loss=0.03.ckpt", seed=1)
+    monkeypatch.setenv("AIRPOSE_VPOSER_DIR", str(root))
+    prior, info = recording_prior("smoke")
+    assert info["source"] == "vposer" and "VPoser V02_05" in info["message"] and info["file"].endswith(".ckpt")
+    monkeypatch.setenv("AIRPOSE_VPOSER_DIR", str(tmp_path / "absent"))
+    prior, info = recording_prior("smoke")
+    assert info["source"] == "kit" and "not installed" in info["message"]

@@ -314,8 +314,9 @@ def test_predict_sequence_roundtrip_and_airpose_plus_init(variant, request, smok
     crops, P, _ = offline_inputs(src, np.tile(np.arange(4)[:, None], (1, V)), S, boxes=pred["boxes"].astype(np.float64))
     with torch.no_grad():
         P_t = torch.from_numpy(P)
-        K = torch.from_numpy(seq.K).float().expand(F, V, 3, 3)
-        ref = to_smplx_params(model(torch.from_numpy(crops), P_t), P_t, K)
+        # P lives in the network's camera (the camera rule): a weak camera converts with it
+        K_net = torch.from_numpy(model.camera_K).float().expand(F, V, 3, 3)
+        ref = to_smplx_params(model(torch.from_numpy(crops), P_t), P_t, K_net)
     np.testing.assert_allclose(pred["P"], P, atol=1e-6)
     for k in ("phi", "tau", "theta", "beta"):
         np.testing.assert_allclose(pred[k], ref[k].numpy(), atol=1e-5, err_msg=k)
@@ -325,6 +326,9 @@ def test_predict_sequence_roundtrip_and_airpose_plus_init(variant, request, smok
     for k in shapes:
         np.testing.assert_array_equal(back[k], pred[k])
     assert back["provenance"]["input_size"] == S and back["provenance"]["checkpoint"] == str(tiny_ckpt)
+    np.testing.assert_allclose(back["provenance"]["K_net"], model.camera_K)  # the camera rule is recorded
+    assert "virtual camera" in back["provenance"]["camera_rule"]
+    np.testing.assert_allclose(back["provenance"]["focal_ratio"], 1475.0 / seq.K[:, 0, 0], rtol=1e-9)
     init = init_from_views(back["phi"], back["tau"], back["theta"], back["beta"], num_frames=F)
     assert init["theta"].shape == (F, 21, 3, 3) and init["beta"].shape == (10,)
     # the same file through the `airpose fit --init` reader's key contract
@@ -361,7 +365,7 @@ def test_predictions_file_errors(tmp_path):
 def _cfg(**kw):
     # Checkpoints only when stopping or done (writing them is the slow part here).
     base = dict(steps=6, batch_size=2, lr=1e-4, frames=[0, 6], checkpoint_every=100, keep_checkpoints=0,
-                log_every=1, seed=0, feature_batch_size=6)
+                log_every=1, seed=0, feature_batch_size=6, holdout_fraction=0.0)
     return FineTuneConfig(**{**base, **kw})
 
 
@@ -390,10 +394,11 @@ def test_resume_matches_an_uninterrupted_run(tiny_ckpt, smoke_root, tmp_path, bo
     from airpose_lib.train import load_checkpoint, read_log
 
     kw = dict(prior=tiny_prior, body_model=body32)
-    straight = finetune(tiny_ckpt, smoke_root, tmp_path / "a", _cfg(), **kw)
-    part = finetune(tiny_ckpt, smoke_root, tmp_path / "b", _cfg(), stop_at=3, **kw)
+    sel = dict(frames=[0, 8], holdout_fraction=0.25)  # 6 training, 2 held-out frames
+    straight = finetune(tiny_ckpt, smoke_root, tmp_path / "a", _cfg(**sel), **kw)
+    part = finetune(tiny_ckpt, smoke_root, tmp_path / "b", _cfg(**sel), stop_at=3, **kw)
     assert part.stopped_early and part.step == 3 and part.final is None
-    resumed = finetune(tiny_ckpt, smoke_root, tmp_path / "b", _cfg(), **kw)
+    resumed = finetune(tiny_ckpt, smoke_root, tmp_path / "b", _cfg(**sel), **kw)
     assert resumed.step == 6
     a, b = load_checkpoint(straight.checkpoint), load_checkpoint(resumed.checkpoint)
     for k in a["model"]:
@@ -401,8 +406,10 @@ def test_resume_matches_an_uninterrupted_run(tiny_ckpt, smoke_root, tmp_path, bo
     strip = lambda rows: [{k: v for k, v in r.items() if k != "time_s"} for r in rows]  # noqa: E731
     assert strip(read_log(tmp_path / "a" / "log.csv")) == strip(read_log(tmp_path / "b" / "log.csv"))
     assert straight.final == resumed.final and straight.initial == resumed.initial
+    assert straight.selection == resumed.selection and straight.best_step == resumed.best_step
+    assert straight.selection["step"] == [0, 6]  # before training and at the end (no step at the interruption)
     with pytest.raises(ValueError, match="cannot resume.*lr"):
-        finetune(tiny_ckpt, smoke_root, tmp_path / "b", _cfg(steps=8, lr=5e-5), **kw)
+        finetune(tiny_ckpt, smoke_root, tmp_path / "b", _cfg(steps=8, lr=5e-5, **sel), **kw)
 
 
 def test_finetune_bad_input(tiny_ckpt, smoke_root, tmp_path, body32, tiny_prior):
@@ -470,3 +477,84 @@ def test_cli_predict_and_finetune(tiny_ckpt, smoke_root, tmp_path, body32, capsy
     with pytest.raises(CLIError, match="unknown key"):
         run(["finetune", "--checkpoint", str(tiny_ckpt), "--sequence", str(smoke_root), "--out", str(tmp_path / "z"),
              "--set", "bogus=1"])
+
+
+# -- pixel units and model selection --------------------------------------------------------------
+def test_pixel_quantities_scale_with_resolution(open_model):
+    from airpose_lib.finetune import pixel_settings, resolution_scales
+
+    r = resolution_scales([(960, 540), (1920, 1080), (1280, 720)])
+    np.testing.assert_allclose(r, [0.5, 1.0, 2 / 3])
+    px = pixel_settings(r, threshold_px=100.0, w_j2d=0.01)
+    np.testing.assert_allclose(px["threshold_px"], [50.0, 100.0, 200 / 3])
+    np.testing.assert_allclose(px["w_j2d_per_px2"], [0.04, 0.01, 0.0225])
+    # the agreement filter: a joint 70 px apart is a disagreement at half resolution, not at full
+    op, ap = _agreeing_pair()
+    op = np.repeat(op, 2, axis=1)
+    ap = np.repeat(ap, 2, axis=1)
+    j, c = _b("RWrist"), _c("RWrist")
+    ap[:, :, c, 0] = op[:, :, j, 0] + 70.0
+    m = agreement_masks(op, ap, threshold_px=100.0 * resolution_scales([(960, 540), (1920, 1080)]))
+    assert m.disagree[:, 0, j].all() and m.kept[:, 1, j].all()
+    with pytest.raises(ValueError, match="3 values for 2 views"):
+        agreement_masks(op, ap, threshold_px=np.array([50.0, 60.0, 70.0]))
+    # the 2D loss of a half-resolution view with pixel_scale 0.5 equals the full-resolution one
+    loss = FineTuneLoss(finetune_loss_config("fullcam", w_vposer=0.0), body_model=open_model)
+    pred = _random_pred()
+    K_full = _K()
+    K_half = K_full.clone()
+    K_half[:, :2] *= 0.5
+    uv = loss.project(pred, K_full)
+    rng = torch.Generator().manual_seed(3)
+    targets = torch.cat((uv + 8 * torch.randn(uv.shape, generator=rng, dtype=uv.dtype),
+                         torch.rand(*uv.shape[:-1], 1, generator=rng, dtype=uv.dtype)), -1)
+    half = targets.clone()
+    half[..., :2] *= 0.5
+    full = loss(pred, targets, K_full)["j2d"]
+    torch.testing.assert_close(loss(pred, half, K_half, pixel_scale=torch.tensor([0.5, 0.5]))["j2d"], full)
+    torch.testing.assert_close(loss(pred, half, K_half)["j2d"], full / 4)  # without: 4x weaker
+
+
+def test_heldout_split():
+    from airpose_lib.finetune.train import heldout_split
+
+    tr, ho = heldout_split(10, 0.2)
+    assert tr.tolist() == list(range(8)) and ho.tolist() == [8, 9]
+    assert heldout_split(3, 0.2)[1].tolist() == [2] and heldout_split(5, 0.0)[1].size == 0
+
+
+def test_model_selection_never_reads_the_test_person(tiny_ckpt, smoke_root, tmp_path, body32, tiny_prior):
+    """Selection on person 1's held-out frames; a test recording's errors are logged per checkpoint.
+    With the test recording replaced by NaN the choice, the weights and the held-out losses are the same."""
+    import types
+
+    from airpose_lib.data.official_layout import load_sequence
+    from airpose_lib.experiments.recordings import ground_truth_diagnostic
+    from airpose_lib.finetune.predict import sequence_features
+    from airpose_lib.train import load_checkpoint
+
+    model, _, _ = load_network(tiny_ckpt)
+    test = load_sequence(smoke_root, frames=range(40, 46), detectors=("openpose",))
+    feats = sequence_features(model, test, input_size=S)
+    nan = types.SimpleNamespace(root=test.root, K=test.K, num_views=test.num_views, image=test.image,
+                                ground_truth={k: np.full_like(np.asarray(v, np.float64), np.nan)
+                                              for k, v in test.ground_truth.items()})
+    nan_feats = {k: (np.full_like(v, np.nan) if v.dtype.kind == "f" else v) for k, v in feats.items()}
+    cfg = _cfg(steps=8, frames=[0, 10], holdout_fraction=0.3, checkpoint_every=2, lr=3e-4)
+    kw = dict(prior=tiny_prior, body_model=body32)
+    runs = {}
+    for name, seq, f in (("real", test, feats), ("nan", nan, nan_feats)):
+        diag = ground_truth_diagnostic(model, seq, input_size=S, features=f)
+        runs[name] = finetune(tiny_ckpt, smoke_root, tmp_path / name, cfg, diagnostic=diag, **kw)
+    a, b = runs["real"], runs["nan"]
+    assert a.selection["step"] == [0, 2, 4, 6, 8] and a.heldout_frames == 3
+    assert a.best_step == b.best_step and a.selection["heldout_j2d"] == b.selection["heldout_j2d"]
+    assert a.best_step == a.selection["step"][int(np.argmin(a.selection["heldout_j2d"]))]
+    assert np.isfinite(a.selection["diag_mpjpe_m"]).all() and np.isnan(b.selection["diag_mpjpe_m"]).all()
+    assert len(set(a.selection["diag_mpjpe_m"])) > 1  # the diagnostic does see the changing weights
+    for which in ("best_checkpoint", "checkpoint"):
+        wa, wb = load_checkpoint(getattr(a, which))["model"], load_checkpoint(getattr(b, which))["model"]
+        assert all(torch.equal(wa[k], wb[k]) for k in wa), which
+    best = load_checkpoint(a.best_checkpoint)
+    assert best["step"] == a.best_step and load_network(a.best_checkpoint)[2] == S
+    assert (tmp_path / "real" / "selection.csv").is_file()

@@ -148,10 +148,17 @@ def test_crop_input_geometry_and_padding():
     image[:, 100:150] = 255  # something outside the (square) crop region's box
     bbox = np.array([250.0, 100.0, 350.0, 300.0])  # 100 x 200: padded left and right
     K = np.array([[500.0, 0, 299.0], [0, 500.0, 199.0], [0, 0, 1]])
-    crop, P = crop_input(image, bbox, K, S)
+    crop, P = crop_input(image, bbox, K, S, K_net=K)
     assert crop.shape == (1, 3, S, S) and crop.dtype == np.float32 and P.shape == (1, 3)
     # P by hand: centre (300, 200), side 200
     np.testing.assert_allclose(P[0], [300 / 299 - 1, 200 / 199 - 1, S / 200], rtol=1e-6)
+    # by default P is formed in the networks' training camera (f 1475, centre (959.5, 539.5)):
+    # the box scaled by k = 1475 / 500 about the principal point; the crop itself is the same
+    crop_v, P_v = crop_input(image, bbox, K, S)
+    k = 1475.0 / 500.0
+    np.testing.assert_allclose(P_v[0], [(k * 1 + 959.5) / 959.5 - 1, (k * 1 + 539.5) / 539.5 - 1, S / (200 * k)],
+                               rtol=1e-6)
+    np.testing.assert_allclose(crop_v, crop, atol=1e-5)
     rgb = crop[0].transpose(1, 2, 0) * IMAGENET_STD + IMAGENET_MEAN
     # the marker lands at s (u - ccx) + S/2 = 0.32 * (300 - 300) + 32, 0.32 * 10 + 32
     r = rgb[..., 0] - rgb[..., 1]
@@ -244,8 +251,9 @@ def test_result_stream_roundtrip(tmp_path):
     # eval reads it like offline predictions: camera-frame SMPL-X parameters
     from airpose_lib.model import to_smplx_params
 
-    params = to_smplx_params(pred, pred["P"], pred["K"])
+    params = to_smplx_params(pred, pred["P"], pred["K_net"])  # P lives in the network's camera
     assert params["theta"].shape == (2, 21, 3, 3) and params["tau"].shape == (2, 3)
+    assert pred["K_net"][0, 0, 0] == 1475.0
 
 
 def test_merge_views_joins_on_slots(tmp_path):
@@ -260,7 +268,7 @@ def test_merge_views_joins_on_slots(tmp_path):
     m = R.merge_views(out[::-1])
     assert m["slot"].tolist() == [0, 2, 3] and m["theta6d"].shape == (3, 2, 21, 6)
     np.testing.assert_array_equal(m["beta"][:, :, 0], [[10, 20], [12, 22], [13, 23]])
-    assert m["K"].shape == (2, 3, 3) and m["K"][1, 0, 0] == 2
+    assert m["K"].shape == (2, 3, 3) and m["K"][1, 0, 0] == 2 and m["K_net"][1, 0, 0] == 1475.0
     allm = R.merge_views(out, valid_only=False)
     assert allm["slot"].tolist() == [0, 1, 2, 3] and allm["flags"][1].tolist() == [0, R.DROPPED]
     json.dumps(R._jsonable({"a": np.float32(1.5), "b": np.arange(2)}))

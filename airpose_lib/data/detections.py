@@ -23,12 +23,39 @@ larger side of the tight box of the projected joints, ``k_j`` = per-keypoint dif
    is exchanged (the whole person read mirrored, typical for back views), else with probability
    ``limb_swap_rate`` only the arms or only the legs are exchanged. Swapped keypoints keep the
    confidence of their own location: detectors are confidently wrong on swaps.
-4. **Misses**: keypoints outside the image or behind the camera are missed; any other keypoint is
+4. **A limb on a background object**: per frame and view, with probability
+   ``background_limb_rate`` one limb (an arm: shoulder-elbow-wrist, or a leg: hip-knee-ankle and
+   the foot points; chosen uniformly) is read on something else in the scene: the whole chain
+   moves rigidly by ``U(background_shift) x s`` pixels in a uniform direction, with the confidence
+   of a well-localised keypoint (detectors are confidently wrong on these too).
+5. **Misses**: keypoints outside the image or behind the camera are missed; any other keypoint is
    missed with probability ``min(0.5, miss_rate * k_j * miss_size_ref / s)`` (more for small
    persons); with probability ``frame_miss_rate`` the person is not found at all in a frame.
-5. **Confidence**: ``conf = conf_max * exp(-0.5 (e / (conf_err_frac * s + 1))^2) + N(0, conf_noise)``
+6. **Confidence**: ``conf = conf_max * exp(-0.5 (e / (conf_err_frac * s + 1))^2) + N(0, conf_noise)``
    clipped to [0.05, 1] from the realised error ``e`` (px) of a detected keypoint (for swapped ones
    the error of the unswapped location), so confidence falls as the error grows.
+
+Rates (:data:`OPENPOSE`, :data:`ALPHAPOSE`; per frame and view unless said otherwise). They are
+the kit's assumptions, not measurements: chosen so that every failure the paper names (left/right
+swaps, "errors in keypoint detection ... common with 2D detectors") occurs several times in a
+30 s recording, and the two detectors fail independently (their own random streams), which is
+what the paper's two-detector filter relies on:
+
+=========================  ========  =========  =====================================================
+failure                    OpenPose  AlphaPose  disagreement it causes
+=========================  ========  =========  =====================================================
+whole-body left/right swap 3 %       2 %        every L/R pair; above the 100 px threshold only for
+                                                limbs far apart (arms spread, legs in a stride)
+arms-only or legs-only     5 %       3 %        one limb pair
+swap
+limb on a background       2 %       1 %        0.5-1.5 person sizes: almost always above 100 px
+object
+person missed              2 %       1 %        none (no target; the box is the previous frame's)
+outlier keypoint           1 % k_j   0.6 % k_j  within 0.3 person sizes
+=========================  ========  =========  =====================================================
+
+The filter's effect on a recording is in :func:`airpose_lib.finetune.keypoints.agreement_summary`
+(fine-tuning reports it); :func:`detection_summary` counts the simulated failures.
 
 Conventions: keypoints are ``(F, V, J, 3)`` float64 ``[x, y, confidence]`` in pixels of the image
 the detector saw; a missed keypoint is ``(0, 0, 0)`` exactly as OpenPose writes it (never NaN).
@@ -54,7 +81,13 @@ __all__ = [
     "left_right_permutation",
     "detect_keypoints",
     "simulate_detections",
+    "detection_summary",
+    "DETECTOR_VERSION",
 ]
+
+#: Bumped whenever the same ground truth and seed would give different detections (the recordings'
+#: detector files are then re-simulated without re-rendering, ``data.sequences.ensure_sequences``).
+DETECTOR_VERSION = 2
 
 KEYPOINT_SETS: dict[str, tuple[str, ...]] = {"body25": BODY_25_NAMES, "coco18": COCO18_NAMES}
 """Keypoint names of each layout (OpenPose BODY_25; OpenPose-style COCO-18 as AlphaPose writes)."""
@@ -71,6 +104,13 @@ are ill-defined under clothes, wrists and feet are small and fast, the face is e
 
 _ARMS = ("Shoulder", "Elbow", "Wrist")
 _LEGS = ("Hip", "Knee", "Ankle", "BigToe", "SmallToe", "Heel")
+#: The chains a background object can take over: (side, parts).
+_LIMBS = (("L", _ARMS), ("R", _ARMS), ("L", _LEGS), ("R", _LEGS))
+
+
+def _limb_mask(names: Sequence[str], side: str, parts: Sequence[str]) -> np.ndarray:
+    """(J,) bool: the keypoints of one limb (e.g. ``LShoulder, LElbow, LWrist``)."""
+    return np.array([len(n) > 1 and n[0] == side and n[1:] in parts for n in names])
 
 
 def left_right_permutation(names: Sequence[str], parts: Sequence[str] | None = None) -> np.ndarray:
@@ -103,6 +143,8 @@ class DetectorModel:
         outlier_rate: per-keypoint outlier probability (times ``k_j``).
         swap_rate: per frame/view probability of a whole-body left/right swap.
         limb_swap_rate: per frame/view probability of an arms-only or legs-only swap.
+        background_limb_rate: per frame/view probability that one limb lies on a background object.
+        background_shift: ``(min, max)`` displacement of that limb, in person sizes.
         miss_rate: per-keypoint miss probability at ``miss_size_ref`` (times ``k_j``).
         miss_size_ref: person size (px) at which ``miss_rate`` applies.
         frame_miss_rate: probability that the person is not detected in a frame.
@@ -115,11 +157,13 @@ class DetectorModel:
     sigma_rel: float = 0.012
     temporal_corr: float = 0.5
     outlier_rate: float = 0.01
-    swap_rate: float = 0.015
-    limb_swap_rate: float = 0.02
+    swap_rate: float = 0.03
+    limb_swap_rate: float = 0.05
+    background_limb_rate: float = 0.02
+    background_shift: tuple[float, float] = (0.5, 1.5)
     miss_rate: float = 0.03
     miss_size_ref: float = 200.0
-    frame_miss_rate: float = 0.01
+    frame_miss_rate: float = 0.02
     conf_max: float = 0.92
     conf_err_frac: float = 0.04
     conf_noise: float = 0.05
@@ -129,7 +173,11 @@ class DetectorModel:
             raise ValueError(f"keypoints must be one of {tuple(KEYPOINT_SETS)}, got {self.keypoints!r}")
         if not 0 <= self.temporal_corr < 1:
             raise ValueError("temporal_corr must be in [0, 1)")
-        for k in ("outlier_rate", "swap_rate", "limb_swap_rate", "miss_rate", "frame_miss_rate"):
+        lo, hi = self.background_shift
+        if not 0 <= lo <= hi:
+            raise ValueError(f"background_shift must be (min, max) with 0 <= min <= max, got {self.background_shift}")
+        for k in ("outlier_rate", "swap_rate", "limb_swap_rate", "background_limb_rate", "miss_rate",
+                  "frame_miss_rate"):
             if not 0 <= getattr(self, k) <= 1:
                 raise ValueError(f"{k} must be a probability, got {getattr(self, k)}")
 
@@ -156,8 +204,8 @@ class DetectorModel:
 OPENPOSE = DetectorModel("openpose", "body25")
 """OpenPose-like BODY_25: noisier, more misses and swaps, strongly correlated in time."""
 ALPHAPOSE = DetectorModel("alphapose", "coco18", sigma_px=1.0, sigma_rel=0.010, temporal_corr=0.3,
-                          outlier_rate=0.006, swap_rate=0.01, limb_swap_rate=0.015,
-                          miss_rate=0.015, frame_miss_rate=0.005, conf_max=0.88)
+                          outlier_rate=0.006, swap_rate=0.02, limb_swap_rate=0.03, background_limb_rate=0.01,
+                          miss_rate=0.015, frame_miss_rate=0.01, conf_max=0.88)
 """AlphaPose-like COCO-18: a little more precise and fewer misses, its own error stream."""
 DEFAULT_DETECTORS: dict[str, DetectorModel] = {"openpose": OPENPOSE, "alphapose": ALPHAPOSE}
 
@@ -175,6 +223,7 @@ class Detections:
         outlier: (F, V, J) bool.
         swap: (F, V) int8: 0 none, 1 whole body, 2 arms, 3 legs.
         frame_missed: (F, V) bool: nobody detected.
+        background: (F, V, J) bool: the keypoint lies on a background object (a moved limb).
     """
 
     keypoints: np.ndarray
@@ -185,6 +234,7 @@ class Detections:
     outlier: np.ndarray
     swap: np.ndarray
     frame_missed: np.ndarray
+    background: np.ndarray | None = None
 
 
 def detect_keypoints(kp2d: np.ndarray, size_px: np.ndarray, image_size: np.ndarray,
@@ -226,7 +276,7 @@ def detect_keypoints(kp2d: np.ndarray, size_px: np.ndarray, image_size: np.ndarr
     jump = rng.uniform(-0.3, 0.3, (F, V, J, 2)) * size[..., None, None]
     det = np.where(outlier[..., None], kp2d + jump, det)
     err = np.linalg.norm(det - kp2d, axis=-1)  # error of each location before any swap
-    # 5. confidence from the error of the location itself
+    # 6. confidence from the error of the location itself
     conf = model.conf_max * np.exp(-0.5 * (err / (model.conf_err_frac * size[..., None] + 1.0)) ** 2)
     conf = np.clip(conf + model.conf_noise * rng.standard_normal((F, V, J)), 0.05, 1.0)
     # 3. swaps: the labels of left/right pairs are exchanged (locations keep their confidence)
@@ -243,7 +293,19 @@ def detect_keypoints(kp2d: np.ndarray, size_px: np.ndarray, image_size: np.ndarr
         m = swap == code
         det[m] = det[m][:, perm]
         conf[m] = conf[m][:, perm]
-    # 4. misses
+    # 4. a limb on a background object: drawn after the swaps (it moves whatever the labels say)
+    hit = rng.random((F, V)) < model.background_limb_rate
+    which = rng.integers(0, len(_LIMBS), (F, V))
+    lo, hi = model.background_shift
+    dist = rng.uniform(lo, hi, (F, V)) * size
+    ang = rng.uniform(0.0, 2.0 * np.pi, (F, V))
+    bg_conf = model.conf_max * rng.uniform(0.6, 1.0, (F, V))
+    limbs = np.stack([_limb_mask(model.names, side, parts) for side, parts in _LIMBS])  # (4, J)
+    background = hit[..., None] & limbs[which]  # (F, V, J)
+    shift = np.stack((np.cos(ang), np.sin(ang)), -1) * dist[..., None]  # (F, V, 2)
+    det = np.where(background[..., None], det + shift[:, :, None, :], det)
+    conf = np.where(background, bg_conf[..., None], conf)
+    # 5. misses
     finite = np.isfinite(kp2d).all(-1)
     x, y = kp2d[..., 0], kp2d[..., 1]
     inside = finite & (x >= 0) & (y >= 0) & (x <= wh[None, :, None, 0] - 1) & (y <= wh[None, :, None, 1] - 1)
@@ -256,9 +318,13 @@ def detect_keypoints(kp2d: np.ndarray, size_px: np.ndarray, image_size: np.ndarr
     frame_missed = rng.random((F, V)) < model.frame_miss_rate
     missed |= frame_missed[..., None]
     missed |= ~np.isfinite(det).all(-1)
+    with np.errstate(invalid="ignore"):  # a detector reports nothing outside its image
+        missed |= (det[..., 0] < 0) | (det[..., 1] < 0) | (det[..., 0] > wh[None, :, None, 0] - 1) \
+            | (det[..., 1] > wh[None, :, None, 1] - 1)
     out = np.concatenate([det, conf[..., None]], -1)
     out[missed] = 0.0
-    return Detections(out, model.names, model, sigma, missed, outlier & ~missed, swap, frame_missed)
+    return Detections(out, model.names, model, sigma, missed, outlier & ~missed, swap, frame_missed,
+                      background & ~missed)
 
 
 def simulate_detections(gt: Mapping[str, np.ndarray], model: DetectorModel,
@@ -274,3 +340,15 @@ def simulate_detections(gt: Mapping[str, np.ndarray], model: DetectorModel,
     rng = np.random.default_rng(seed)
     return detect_keypoints(gt[f"kp2d_{model.keypoints}"], gt["person_size_px"], gt["image_size"],
                             model, rng, depth=gt.get(f"kp_depth_{model.keypoints}"))
+
+
+def detection_summary(det: Detections) -> dict[str, int]:
+    """Counts of the simulated failures (for ``sequence.json`` and reports): frame/view pairs with
+    a whole-body swap, a one-limb swap, a limb on the background, nobody detected; keypoints that
+    are outliers, on the background, missed; and the detected keypoints."""
+    bg = det.background if det.background is not None else np.zeros_like(det.missed)
+    return {"views": int(det.swap.size), "whole_body_swaps": int((det.swap == 1).sum()),
+            "limb_swaps": int(((det.swap == 2) | (det.swap == 3)).sum()),
+            "background_limbs": int(bg.any(-1).sum()), "persons_missed": int(det.frame_missed.sum()),
+            "outlier_keypoints": int(det.outlier.sum()), "background_keypoints": int(bg.sum()),
+            "missed_keypoints": int(det.missed.sum()), "detected_keypoints": int((~det.missed).sum())}

@@ -70,6 +70,8 @@ __all__ = [
     "SequenceRenderer",
     "render_sequence",
     "generate_sequence",
+    "recording_detections",
+    "refresh_detections",
     "sequence_configs_from_profile",
     "profile_sequences",
     "default_sequence_root",
@@ -699,13 +701,11 @@ def generate_sequence(config: SequenceConfig, root: str | Path, *, progress: boo
         a summary dict: ``root``, ``num_frames``, ``render_seconds``, ``frames_per_second``
         (rendered images per second, all views counted), ``config``.
     """
-    from .detections import DEFAULT_DETECTORS, simulate_detections
+    from .detections import DETECTOR_VERSION, detection_summary
     from .official_layout import OfficialLayoutWriter
 
     sim = simulate_sequence(config, body_model)
-    det_seed = config.detector_seed if config.detector_seed is not None else config.seed + 1
-    detections = {name: simulate_detections(sim.gt, det, seed=[det_seed, k])
-                  for k, (name, det) in enumerate(DEFAULT_DETECTORS.items())}
+    detections = recording_detections(sim.gt, config)
     writer = OfficialLayoutWriter(root, sim.num_views, jpeg_quality=config.jpeg_quality)
     t0 = time.perf_counter()
     bar = None
@@ -725,10 +725,51 @@ def generate_sequence(config: SequenceConfig, root: str | Path, *, progress: boo
                   timestamps=sim.gt["timestamps"], ground_truth=sim.gt,
                   meta={"generator_version": SEQUENCE_GENERATOR_VERSION, "config": config.to_dict(),
                         "script": [dataclasses.asdict(s) for s in sim.script.segments],
-                        "render_seconds": seconds})
+                        "render_seconds": seconds, "detector_version": DETECTOR_VERSION,
+                        "detections": {k: detection_summary(d) for k, d in detections.items()}})
     n_img = sim.num_frames * sim.num_views
     return {"root": str(Path(root)), "num_frames": sim.num_frames, "render_seconds": seconds,
             "frames_per_second": n_img / max(seconds, 1e-9), "config": config.to_dict()}
+
+
+def recording_detections(gt: Mapping[str, np.ndarray], config: SequenceConfig) -> dict:
+    """Both simulated detectors on a recording's ground truth (``data.detections``): name ->
+    :class:`~airpose_lib.data.detections.Detections`, seeded by ``config.detector_seed`` (default
+    ``seed + 1``) and the detector's position."""
+    from .detections import DEFAULT_DETECTORS, simulate_detections
+
+    det_seed = config.detector_seed if config.detector_seed is not None else config.seed + 1
+    return {name: simulate_detections(gt, det, seed=[det_seed, k])
+            for k, (name, det) in enumerate(DEFAULT_DETECTORS.items())}
+
+
+def refresh_detections(root: str | Path, config: SequenceConfig) -> dict:
+    """Re-simulate the detector files of a rendered recording from its ``ground_truth.npz`` (the
+    images stay): what :func:`ensure_sequences` does when only the detector model changed
+    (:data:`~airpose_lib.data.detections.DETECTOR_VERSION`). Returns the new summaries."""
+    import json
+
+    from .detections import DETECTOR_VERSION, detection_summary
+    from .official_layout import DETECTOR_FILES, OfficialLayoutWriter, load_sequence
+
+    root = Path(root)
+    with np.load(root / "ground_truth.npz") as z:
+        gt = {k: z[k] for k in z.files}
+    frames = [int(i) for i in load_sequence(root, detectors=(), ground_truth=False).frames]
+    detections = recording_detections(gt, config)
+    for name, det in detections.items():
+        for v in range(config.num_views):
+            path = root / f"machine_{v + 1}" / DETECTOR_FILES[name][0]
+            w = OfficialLayoutWriter
+            (w._write_openpose if name == "openpose" else w._write_alphapose)(path, frames, det.keypoints[:, v])
+    meta_path = root / "sequence.json"
+    meta = json.loads(meta_path.read_text())
+    meta.update(detector_version=DETECTOR_VERSION,
+                detections={k: detection_summary(d) for k, d in detections.items()})
+    tmp = meta_path.with_suffix(".json.tmp")
+    tmp.write_text(json.dumps(meta, indent=1))
+    tmp.replace(meta_path)
+    return meta["detections"]
 
 
 def sequence_configs_from_profile(profile_section: Mapping) -> dict[str, SequenceConfig]:
@@ -772,7 +813,19 @@ def default_sequence_root(profile: str) -> Path:
     return cache_dir() / "data" / f"sequences_{profile}"
 
 
+def _detections_current(root: Path) -> bool:
+    import json
+
+    from .detections import DETECTOR_VERSION
+
+    try:
+        return json.loads((root / "sequence.json").read_text()).get("detector_version") == DETECTOR_VERSION
+    except (OSError, json.JSONDecodeError):
+        return False
+
+
 def _is_complete(root: Path, config: SequenceConfig) -> bool:
+    """The images and ground truth of ``config`` are all there (the detections may be outdated)."""
     import json
 
     meta_path = root / "sequence.json"
@@ -832,5 +885,7 @@ def ensure_sequences(profile: str | None = None, root: str | Path | None = None,
             if folder.exists():
                 shutil.rmtree(folder)  # outdated
             partial.rename(folder)
+        elif not _detections_current(folder):
+            refresh_detections(folder, configs[name])  # a new detector model: no re-rendering
         out[name] = folder
     return out

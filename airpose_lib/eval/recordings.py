@@ -36,6 +36,8 @@ __all__ = [
     "relative_camera_positions",
     "recording_frame_table",
     "recording_table",
+    "PAPER_CLAIMS",
+    "paper_claims",
 ]
 
 #: Columns of :func:`recording_table`, with their meaning.
@@ -208,3 +210,93 @@ def recording_table(estimates: Mapping[str, Mapping], ground_truth: Mapping, joi
         row["jitter_gt_mps2"] = jit_gt
         rows.append(row)
     return pd.DataFrame(rows)
+
+
+#: The paper's qualitative real-data claims (Sec. IV-C) that :func:`paper_claims` measures.
+PAPER_CLAIMS: dict[str, str] = {
+    "pose": "AirPose+ improves the articulated pose over AirPose (MPJPE, each person)",
+    "uav2": "AirPose+ improves UAV2-in-UAV1 over AirPose (translation and rotation error, each person)",
+    "uav2_twisting": "the UAV2-in-UAV1 improvement is larger for person 2's twisting poses than for person 1",
+    "depth_smooth": "AirPose's depth is smoother than SPIN's (mean abs. frame-to-frame change of z, "
+                    "each person and UAV)",
+    "depth_real": "AirPose's depth is more realistic than SPIN's (mean abs. z error, each person and UAV)",
+}
+
+
+def _verdict(ok: list[bool]) -> str:
+    if not ok:
+        return "not measurable"
+    return "holds" if all(ok) else ("partly" if any(ok) else "does not hold")
+
+
+def paper_claims(table: pd.DataFrame, depth: pd.DataFrame, *, tuning: str = "person1", test: str = "person2",
+                 airpose: str = "AirPose", plus: str = "AirPose+", spin: str = "SPIN-style") -> pd.DataFrame:
+    """Each claim of :data:`PAPER_CLAIMS` with the measured numbers and a verdict.
+
+    Args:
+        table: :func:`recording_table` rows of every person (``sequence``, ``method``, ``mpjpe_m``,
+            ``rel_t_err_m``, ``rel_rot_deg``); may be empty (no ground truth).
+        depth: ``sequence, method, view, dz_per_frame_m`` and, with ground truth, ``z_err_m``
+            (``experiments.recordings.depth_summary``) with methods ``airpose`` and ``spin``.
+        tuning, test: the fine-tuning and the test person (the paper's person 1 and 2).
+
+    Returns:
+        one row per claim and person (or view): ``claim``, ``sequence``, ``measure``, ``value``
+        (the claim's subject: AirPose+ or AirPose), ``reference`` (AirPose or SPIN-style),
+        ``ratio`` (value / reference), ``holds``; and one ``overall`` row per claim with the
+        verdict ``holds`` / ``partly`` / ``does not hold`` / ``not measurable``.
+    """
+    rows: list[dict] = []
+
+    def add(claim, seq, measure, value, reference, holds):
+        rows.append({"claim": claim, "sequence": seq, "measure": measure, "value": float(value),
+                     "reference": float(reference),
+                     "ratio": float(value) / float(reference) if reference else float("nan"),
+                     "holds": bool(holds), "verdict": ""})
+
+    def overall(claim):
+        ok = [r["holds"] for r in rows if r["claim"] == claim and r["sequence"] != "overall"]
+        rows.append({"claim": claim, "sequence": "overall", "measure": PAPER_CLAIMS[claim], "value": float("nan"),
+                     "reference": float("nan"), "ratio": float("nan"), "holds": _verdict(ok) == "holds",
+                     "verdict": _verdict(ok)})
+
+    t = table.set_index(["sequence", "method"]) if not table.empty else None
+
+    def get(seq, method, col):
+        if t is None or (seq, method) not in t.index or col not in t.columns:
+            return None
+        v = float(t.loc[(seq, method), col])
+        return v if np.isfinite(v) else None
+
+    persons = list(dict.fromkeys(table["sequence"])) if not table.empty else []
+    for p in persons:
+        a, b = get(p, plus, "mpjpe_m"), get(p, airpose, "mpjpe_m")
+        if a is not None and b is not None:
+            add("pose", p, "MPJPE m (AirPose+ vs AirPose)", a, b, a < b)
+    overall("pose")
+    gain = {}
+    for p in persons:
+        for col, unit in (("rel_t_err_m", "m"), ("rel_rot_deg", "deg")):
+            a, b = get(p, plus, col), get(p, airpose, col)
+            if a is not None and b is not None:
+                add("uav2", p, f"UAV2-in-UAV1 {col.split('_')[1]} error {unit} (AirPose+ vs AirPose)", a, b, a < b)
+                gain[(p, col)] = b - a
+    overall("uav2")
+    for col, unit in (("rel_t_err_m", "m"), ("rel_rot_deg", "deg")):
+        if (test, col) in gain and (tuning, col) in gain:
+            g2, g1 = gain[(test, col)], gain[(tuning, col)]
+            add("uav2_twisting", f"{test} vs {tuning}", f"error reduction by AirPose+, {unit} ({test} vs {tuning})",
+                g2, g1, g2 > g1)
+    overall("uav2_twisting")
+    d = depth.set_index(["sequence", "view", "method"]) if not depth.empty else None
+    keys = sorted({(s_, v) for s_, v, _ in d.index}) if d is not None else []
+    for claim, col, label in (("depth_smooth", "dz_per_frame_m", "mean abs. dz per frame m"),
+                              ("depth_real", "z_err_m", "mean abs. z error m")):
+        for s_, v in keys:
+            if (s_, v, airpose) in d.index and (s_, v, spin) in d.index and col in d.columns:
+                a, b = float(d.loc[(s_, v, airpose), col]), float(d.loc[(s_, v, spin), col])
+                if np.isfinite(a) and np.isfinite(b):
+                    add(claim, f"{s_} {v}", f"{label} (AirPose vs {spin})", a, b, a < b)
+        overall(claim)
+    return pd.DataFrame(rows, columns=["claim", "sequence", "measure", "value", "reference", "ratio", "holds",
+                                       "verdict"])

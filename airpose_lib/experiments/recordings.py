@@ -5,10 +5,17 @@ Steps (each cached under ``out_dir``, so notebooks 03, 04 and 05 share one run):
 1. the recordings: the profile's generated persons (``airpose data sequence``), or user-given
    folders in the official real-data layout;
 2. Table I's Baseline and AirPose networks of the profile (:func:`~airpose_lib.train.ablation.trained_checkpoint`);
-3. fine-tuning of both on person 1's 2D detections (:mod:`airpose_lib.finetune`);
+3. fine-tuning of both on person 1's 2D detections (:mod:`airpose_lib.finetune`), the model
+   selected on person 1's held-out last 20 % of frames; the test persons' 2D and 3D errors per
+   checkpoint are logged next to it as a diagnostic, never used for the choice;
 4. per-frame estimates on every person, before and after fine-tuning;
 5. AirPose+ on every person, initialised from the fine-tuned AirPose;
 6. camera-frame joints of every estimate and, where ground truth exists, the error tables.
+
+The pose prior of fine-tuning and AirPose+ is VPoser V02_05 when it is installed
+(``data_manifests/vposer_v02_05.yaml``), else the kit's (:func:`recording_prior`); every pixel
+quantity (agreement threshold, 2D weight, AirPose+'s Geman-McClure scale) is the paper's
+full-resolution value converted to each recording's resolution.
 
 Methods (keys of :attr:`RecordingExperiment.estimates`):
 
@@ -29,7 +36,9 @@ import numpy as np
 import pandas as pd
 
 __all__ = ["METHODS", "RecordingExperiment", "default_experiment_dir", "run_recording_experiment",
-           "body_vertices", "official_recordings", "official_networks", "networks_for", "recordings_for", "depth_summary", "overlay_inputs", "airpose_plus_checks", "markdown_table"]
+           "body_vertices", "recording_prior", "ground_truth_diagnostic", "finetune_table", "selection_table",
+           "claims_table", "official_recordings", "official_networks", "networks_for", "recordings_for",
+           "depth_summary", "overlay_inputs", "airpose_plus_checks", "markdown_table"]
 
 #: Estimate names in plotting order.
 METHODS = ("Baseline (pre-trained)", "AirPose (pre-trained)", "Baseline", "AirPose", "AirPose+")
@@ -61,7 +70,9 @@ class RecordingExperiment:
             (empty without ground truth).
         checkpoints: method -> network checkpoint used.
         fit_info: person -> AirPose+ run summary (seconds, skipped frames, loss).
-        finetune_info: variant -> fine-tuning summary.
+        finetune_info: variant -> fine-tuning summary (steps, selected step, agreement-filter
+            counts, per-view threshold, the selection log).
+        prior_info: the pose prior used (``source`` kit or vposer, ``file``, ``message``).
     """
 
     profile: str
@@ -73,6 +84,7 @@ class RecordingExperiment:
     checkpoints: dict
     fit_info: dict = field(default_factory=dict)
     finetune_info: dict = field(default_factory=dict)
+    prior_info: dict = field(default_factory=dict)
 
     @property
     def persons(self) -> list[str]:
@@ -124,11 +136,24 @@ def _save_npz(path: Path, key: str, arrays: dict) -> None:
             np.savez(fh, cache_key=np.array(key), **{k: np.asarray(v) for k, v in arrays.items()})
 
 
+def _sequence_stamp(sequence) -> list[str]:
+    """What a recording's estimates depend on besides the images: its detector files and metadata
+    (re-simulated detections change the boxes)."""
+    root = Path(sequence.root)
+    files = sorted(root.glob("machine_*/*_res.*")) + sorted(root.glob("sequence.json"))
+    return [_stamp(f) for f in files]
+
+
+#: Bumped when the estimates of an unchanged network and recording change (e.g. the camera rule).
+_ESTIMATE_VERSION = 2
+
+
 def _network_estimate(checkpoint: Path, sequence, out: Path) -> dict:
     from airpose_lib.finetune import predict_sequence
     from airpose_lib.finetune.network import load_network
 
-    key = _key("predict", _stamp(checkpoint), str(sequence.root), sequence.frames.tolist())
+    key = _key("predict", _ESTIMATE_VERSION, _stamp(checkpoint), str(sequence.root), sequence.frames.tolist(),
+               _sequence_stamp(sequence))
     cached = _cached_npz(out, key)
     if cached is not None:
         return cached
@@ -144,30 +169,116 @@ def _network_estimate(checkpoint: Path, sequence, out: Path) -> dict:
     return arrays
 
 
-def _airpose_plus(sequence, init: dict, profile: str, out: Path, progress: bool) -> tuple[dict, dict]:
+def _airpose_plus(sequence, init: dict, profile: str, prior, prior_info: dict, out: Path,
+                  progress: bool) -> tuple[dict, dict]:
+    import dataclasses
+
+    from airpose_lib.finetune.keypoints import resolution_scales
+    from airpose_lib.finetune.predict import image_sizes
     from airpose_lib.fitting import airpose_plus, fitting_profile
-    from airpose_lib.prior import load_prior
-    from airpose_lib.prior.build import ensure_prior
 
     cfg = fitting_profile(profile)
-    prior_path = ensure_prior(profile, progress=progress)
+    # The Geman-McClure scale (30 px) is a full-resolution value: rho is a function of residual / sigma.
+    scale = float(np.mean(resolution_scales(image_sizes(sequence))))
+    cfg = dataclasses.replace(cfg, sigma=cfg.sigma * scale)
     start = {k: init[k] for k in ("phi", "tau", "theta", "beta")}
     digest = hashlib.sha256()
     for k in start:  # the whole initialisation, not just one of its arrays
         digest.update(np.ascontiguousarray(start[k]).tobytes())
-    key = _key("airpose+", cfg.to_dict(), _stamp(prior_path), str(sequence.root), sequence.frames.tolist(),
-               digest.hexdigest())
+    key = _key("airpose+", cfg.to_dict(), prior_info.get("stamp"), str(sequence.root), sequence.frames.tolist(),
+               digest.hexdigest(), _sequence_stamp(sequence))
     cached = _cached_npz(out, key)
     if cached is not None:
         info = json.loads(str(cached.pop("info")))
         return cached, info
-    prior = load_prior("kit", prior_path)
     res = airpose_plus(sequence.keypoints, sequence.K, start, prior=prior, config=cfg, progress=progress)
     arrays = res.to_numpy()
     info = {"seconds": res.seconds, "iterations": cfg.iterations, "frames": int(len(arrays["kept"])),
-            "skipped_frames": len(res.skipped_frames), "final_loss": float(res.history["loss"][-1])}
+            "skipped_frames": len(res.skipped_frames), "final_loss": float(res.history["loss"][-1]),
+            "sigma_px": cfg.sigma, "prior": prior_info.get("source")}
     _save_npz(out, key, {**arrays, "info": np.array(json.dumps(info))})
     return arrays, info
+
+
+def recording_prior(profile: str, progress: bool = False):
+    """The pose prior of the experiment: VPoser V02_05 when it is installed (``vposer_v02_05``
+    asset, e.g. ``$AIRPOSE_VPOSER_DIR``), else the profile's kit prior (trained on first use).
+
+    Returns:
+        ``(prior, info)``: the :class:`~airpose_lib.prior.VPoser` and ``{"source": "vposer" | "kit",
+        "file", "stamp", "message"}`` (the message says which prior and why).
+    """
+    from airpose_lib.assets import resolve_data_source
+    from airpose_lib.prior import load_prior
+    from airpose_lib.prior.build import ensure_prior
+
+    found = resolve_data_source("official", needs=["vposer_v02_05"])
+    if found.source == "official":
+        prior, prov = load_prior("vposer", found.roots["vposer_v02_05"], return_provenance=True)
+        file = Path(prov["file"])
+        msg = f"Pose prior: VPoser V02_05 ({file}), as the paper."
+        source = "vposer"
+    else:
+        file = ensure_prior(profile, progress=progress)
+        prior = load_prior("kit", file)
+        msg = (f"Pose prior: the kit's VPoser-architecture prior ({file}); VPoser V02_05 is not installed "
+               "(data_manifests/vposer_v02_05.yaml says how to get it; it is then used automatically).")
+        source = "kit"
+    return prior, {"source": source, "file": str(file), "stamp": _stamp(file), "message": msg}
+
+
+def ground_truth_diagnostic(model, sequence, *, input_size: int, features: dict | None = None):
+    """A fine-tuning diagnostic on a recording with ground truth (the test person): ``f(model) ->
+    {"mpjpe_m", "mpe_m", "j2d_px"}`` for ``finetune(..., diagnostic=f)``.
+
+    The backbone is frozen during fine-tuning, so the recording's features are computed once here
+    (with ``model``'s backbone) and every call only runs the regressor. ``j2d_px`` is the mean
+    distance of the predicted BODY_25 keypoints to the true ones, in pixels at the reference
+    width (1920); ``mpjpe_m`` pelvis-aligned, 22 joints; ``mpe_m`` the position error.
+
+    Args:
+        features: precomputed :func:`~airpose_lib.finetune.predict.sequence_features` output.
+    """
+    import torch
+
+    from airpose_lib.body import load_body_model
+    from airpose_lib.body.joint_sets import BODY_25_FROM_SMPLX
+    from airpose_lib.eval import metrics as M
+    from airpose_lib.finetune.keypoints import resolution_scales
+    from airpose_lib.finetune.predict import image_sizes, network_camera_of, regress_features, sequence_features
+    from airpose_lib.model import posed_joints_and_vertices, to_smplx_params
+
+    gt = sequence.ground_truth
+    if gt is None:
+        raise ValueError(f"{sequence.root}: no ground truth for a diagnostic")
+    feats = features if features is not None else sequence_features(model, sequence, input_size=input_size)
+    K_net = network_camera_of(model)
+    body = load_body_model("open", "neutral", dtype=torch.float32)
+    f = torch.as_tensor(np.asarray(feats["features"]), dtype=torch.float32)
+    P = torch.as_tensor(np.asarray(feats["P"]), dtype=torch.float32)
+    pos = np.asarray(feats["positions"])
+    F, V = P.shape[:2]
+    K = torch.as_tensor(np.asarray(sequence.K), dtype=torch.float32)
+    K_p = torch.as_tensor(K_net, dtype=torch.float32).expand(F, V, 3, 3)
+    j3d = torch.as_tensor(np.asarray(gt["j3d_cam"])[pos], dtype=torch.float32)
+    tau_gt = torch.as_tensor(np.asarray(gt["tau"])[pos], dtype=torch.float32)
+    kp_gt = torch.as_tensor(np.asarray(gt["kp2d_body25"])[pos], dtype=torch.float32)
+    r = torch.as_tensor(resolution_scales(image_sizes(sequence)), dtype=torch.float32).reshape(1, V, 1)
+    idx = torch.as_tensor(BODY_25_FROM_SMPLX)
+
+    def diagnostic(net) -> dict[str, float]:
+        out = regress_features(net, f.to(net.init_beta.dtype), P.to(net.init_beta.dtype), input_size)
+        pred = {k: v.float() for k, v in to_smplx_params(out, P, K_p, input_size).items()}
+        flat = {k: v.reshape(F * V, *v.shape[2:]) for k, v in pred.items()}
+        joints = posed_joints_and_vertices(body, flat, joints_only=True)["joints"].reshape(F, V, -1, 3)
+        uv = (joints[:, :, idx] @ K.transpose(-1, -2)[None])
+        uv = uv[..., :2] / uv[..., 2:].clamp_min(0.05)
+        err2d = torch.linalg.norm(uv - kp_gt, dim=-1) / r
+        return {"mpjpe_m": float(M.mpjpe(joints[:, :, :22], j3d).mean()),
+                "mpe_m": float(M.translation_error(pred["tau"], tau_gt).mean()),
+                "j2d_px": float(torch.nanmean(err2d))}
+
+    return diagnostic
 
 
 def body_vertices(params: dict, body_model, index, view: int) -> np.ndarray:
@@ -243,28 +354,66 @@ def recordings_for(source, profile: str) -> dict | None:
     return official_recordings(source.roots["official_real"])
 
 
-def _kit_networks(profile: str, seed: int, tuning, out: Path, progress: bool) -> tuple[dict, dict]:
-    """Table I's Baseline and AirPose of the profile, and their fine-tuning on ``tuning``."""
+def _finetune_done(run_dir: Path, cfg) -> bool:
+    """A finished fine-tuning run with these settings in ``run_dir`` (it will be loaded, not
+    trained: no diagnostics needed)."""
+    from airpose_lib.finetune.train import FineTuneConfig
+    from airpose_lib.train.checkpoint import last_checkpoint, load_checkpoint
+
+    last = last_checkpoint(run_dir)
+    try:
+        state = load_checkpoint(last) if last is not None else None
+        saved = (state or {}).get("finetune", {}).get("config", {})
+    except (OSError, ValueError, KeyError, RuntimeError):
+        return False
+    now = cfg.to_dict()
+    return (state is not None and int(state["step"]) >= cfg.steps
+            and all(saved.get(k) == now.get(k) for k in FineTuneConfig.RESUME_KEYS))
+
+
+def _kit_networks(profile: str, seed: int, tuning, tests: dict, prior, prior_info: dict, out: Path,
+                  progress: bool) -> tuple[dict, dict]:
+    """Table I's Baseline and AirPose of the profile, their fine-tuning on ``tuning`` (model
+    selected on its held-out frames) with the ``tests`` recordings' errors logged per checkpoint."""
     import dataclasses
 
     from airpose_lib.finetune import finetune, finetune_config
-    from airpose_lib.prior import load_prior
-    from airpose_lib.prior.build import ensure_prior
+    from airpose_lib.finetune.network import load_network
+    from airpose_lib.finetune.predict import sequence_features
     from airpose_lib.train.ablation import trained_checkpoint
 
     checkpoints, finetune_info = {}, {}
     ft_cfg = finetune_config(profile)
     if ft_cfg.frames is None and "person" in tuning.meta:  # an official split: fine-tune on its frames only
         ft_cfg = dataclasses.replace(ft_cfg, frames=[int(tuning.frames[0]), int(tuning.frames[-1]) + 1])
-    prior = load_prior("kit", ensure_prior(profile, progress=progress))
+    ft_cfg = dataclasses.replace(ft_cfg, prior=prior_info["source"], prior_path=prior_info["file"])
     for variant, label in (("baseline", "Baseline"), ("airpose", "AirPose")):
         pre = trained_checkpoint(profile, variant, seed, progress=progress)
         checkpoints[f"{label} (pre-trained)"] = pre
-        res = finetune(pre, tuning.root, out / "finetune" / variant, ft_cfg, progress=progress, prior=prior)
-        checkpoints[label] = Path(res.checkpoint)
-        finetune_info[label] = {"steps": res.step, "frames": res.num_frames,
-                                "j2d_before": res.initial.get("j2d"),
-                                "j2d_after": (res.final or {}).get("j2d")}
+        run_dir = out / "finetune" / variant
+        diagnostics = {}
+        if tests and not _finetune_done(run_dir, ft_cfg):
+            net, _, size = load_network(pre)
+            for name, seq in tests.items():  # the frozen backbone's features, once per network
+                feats = sequence_features(net, seq, input_size=size)
+                diagnostics[name] = ground_truth_diagnostic(net, seq, input_size=size, features=feats)
+
+        def diagnostic(model, _d=diagnostics):
+            return {f"{name}_{k}": v for name, d in _d.items() for k, v in d(model).items()}
+
+        kw = dict(progress=progress, prior=prior, diagnostic=diagnostic if diagnostics else None)
+        try:
+            res = finetune(pre, tuning.root, run_dir, ft_cfg, **kw)
+        except ValueError as e:
+            if "cannot resume" not in str(e):
+                raise
+            res = finetune(pre, tuning.root, run_dir, ft_cfg, resume=False, **kw)  # settings changed: afresh
+        checkpoints[label] = Path(res.best_checkpoint or res.checkpoint)
+        finetune_info[label] = {"steps": res.step, "frames": res.num_frames, "heldout_frames": res.heldout_frames,
+                                "selected_step": res.best_step, "heldout_j2d": res.best_heldout_j2d,
+                                "j2d_before": res.initial.get("j2d"), "j2d_after": (res.final or {}).get("j2d"),
+                                "threshold_px": res.pixels.get("threshold_px"), "keypoints": res.keypoints,
+                                "selection": res.selection}
     return checkpoints, finetune_info
 
 
@@ -304,6 +453,7 @@ def run_recording_experiment(profile: str = "smoke", out_dir: str | Path | None 
     if seed is None:
         seed = load_train_config(profile, "airpose").seed
 
+    prior, prior_info = recording_prior(profile, progress)
     finetune_info = {}
     if networks is not None:
         missing = set(_NETWORKS) - set(networks)
@@ -311,7 +461,9 @@ def run_recording_experiment(profile: str = "smoke", out_dir: str | Path | None 
             raise ValueError(f"networks lacks {sorted(missing)}")
         checkpoints = {m: Path(networks[m]) for m in _NETWORKS}
     else:
-        checkpoints, finetune_info = _kit_networks(profile, seed, seqs[fine_tune_on], out, progress)
+        tests = {n: s for n, s in seqs.items() if n != fine_tune_on and s.ground_truth is not None}
+        checkpoints, finetune_info = _kit_networks(profile, seed, seqs[fine_tune_on], tests, prior, prior_info, out,
+                                                   progress)
     estimates, joints, fit_info, tables = {}, {}, {}, []
     body = load_body_model("open", "neutral", dtype=torch.float32)
     for person, seq in seqs.items():
@@ -319,8 +471,8 @@ def run_recording_experiment(profile: str = "smoke", out_dir: str | Path | None 
         for method in _NETWORKS:
             est[method] = _network_estimate(checkpoints[method], seq,
                                             out / "estimates" / person / f"{_slug(method)}.npz")
-        plus, info = _airpose_plus(seq, est["AirPose"], profile, out / "estimates" / person / "airpose_plus.npz",
-                                   progress)
+        plus, info = _airpose_plus(seq, est["AirPose"], profile, prior, prior_info,
+                                   out / "estimates" / person / "airpose_plus.npz", progress)
         F, V = est["AirPose"]["phi"].shape[:2]
         plus = dict(plus)
         plus["theta"] = np.broadcast_to(plus["theta"][:, None], (F, V, 21, 3, 3))
@@ -338,7 +490,7 @@ def run_recording_experiment(profile: str = "smoke", out_dir: str | Path | None 
     table = pd.concat(tables, ignore_index=True) if tables else pd.DataFrame()
     return RecordingExperiment(profile=profile, out_dir=out, sequences=seqs, estimates=estimates, joints=joints,
                                tables=table, checkpoints=checkpoints, fit_info=fit_info,
-                               finetune_info=finetune_info)
+                               finetune_info=finetune_info, prior_info=prior_info)
 
 
 # -- what the notebooks show ------------------------------------------------------------------------
@@ -426,6 +578,46 @@ def airpose_plus_checks(table: pd.DataFrame, person: str | None = None) -> pd.Da
                              "holds": bool(va < vb)})
     out = pd.DataFrame(rows)
     return out[["sequence", "claim", "value", "reference", "holds"]] if not out.empty else out
+
+
+def finetune_table(exp: RecordingExperiment) -> pd.DataFrame:
+    """One row per fine-tuned network: steps, the selected step and its held-out 2D loss, the
+    per-view agreement threshold and how many OpenPose keypoints the two-detector filter kept or
+    dropped (and why)."""
+    rows = []
+    for label, info in exp.finetune_info.items():
+        k = info.get("keypoints") or {}
+        seen = sum(k.get(x, 0) for x in ("kept", "disagree", "unconfirmed", "low_confidence"))
+        rows.append({"network": label, "steps": info.get("steps"), "selected_step": info.get("selected_step"),
+                     "heldout_j2d": info.get("heldout_j2d"), "train_frames": info.get("frames"),
+                     "heldout_frames": info.get("heldout_frames"),
+                     "threshold_px": ", ".join(f"{t:.0f}" for t in info.get("threshold_px") or []),
+                     "kept": k.get("kept"), "dropped_disagree": k.get("disagree"),
+                     "dropped_unconfirmed": k.get("unconfirmed"), "dropped_low_conf": k.get("low_confidence"),
+                     "missing": k.get("missing"),
+                     "dropped_share": (seen - k.get("kept", 0)) / seen if seen else float("nan")})
+    return pd.DataFrame(rows)
+
+
+def selection_table(exp: RecordingExperiment) -> pd.DataFrame:
+    """The model-selection log of every fine-tuned network (long format): per checkpoint step the
+    held-out 2D loss on person 1 (the only input of the choice) and the test persons' errors
+    (``diag_*``, diagnostics)."""
+    parts = []
+    for label, info in exp.finetune_info.items():
+        sel = info.get("selection") or {}
+        if sel:
+            parts.append(pd.DataFrame(sel).assign(network=label))
+    return pd.concat(parts, ignore_index=True) if parts else pd.DataFrame()
+
+
+def claims_table(exp: RecordingExperiment, spin: str = "Baseline (pre-trained)") -> pd.DataFrame:
+    """:func:`airpose_lib.eval.recordings.paper_claims` of the experiment (SPIN-style = ``spin``)."""
+    from airpose_lib.eval.recordings import paper_claims
+
+    depth = depth_summary(exp, {"SPIN-style": spin, "AirPose": "AirPose"})
+    persons = exp.persons
+    return paper_claims(exp.tables, depth, tuning=persons[0], test=persons[-1])
 
 
 def markdown_table(table: pd.DataFrame, digits: int = 3) -> str:

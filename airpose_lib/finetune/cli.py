@@ -58,10 +58,15 @@ def _cmd_finetune(args: argparse.Namespace) -> int:
     k = res.keypoints
     print(f"{res.num_frames} training frames; 2D targets kept {k['kept']}, dropped {k['disagree']} disagreeing, "
           f"{k['unconfirmed']} unconfirmed, {k['low_confidence'] + k['missing']} missing/low confidence")
+    thr = ", ".join(f"{t:.0f}" for t in res.pixels.get("threshold_px", []))
+    print(f"agreement threshold {thr} px per view (100 px at {res.pixels.get('reference_width', 1920):.0f} px wide)")
     if res.final is not None:
-        print(f"step {res.step}: 2D loss {res.initial['j2d']:.4g} -> {res.final['j2d']:.4g} px^2, total "
-              f"{res.initial['total']:.4g} -> {res.final['total']:.4g} ({res.seconds:.0f} s)")
+        print(f"step {res.step}: 2D loss {res.initial['j2d']:.4g} -> {res.final['j2d']:.4g} px^2 (at the reference "
+              f"width), total {res.initial['total']:.4g} -> {res.final['total']:.4g} ({res.seconds:.0f} s)")
     print(f"checkpoint {res.checkpoint}")
+    if res.best_checkpoint is not None:
+        print(f"selected step {res.best_step} (held-out 2D loss {res.best_heldout_j2d:.4g} on {res.heldout_frames} "
+              f"frames): {res.best_checkpoint}")
     return 0
 
 

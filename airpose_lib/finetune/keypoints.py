@@ -35,6 +35,11 @@ Rules, per frame, view and BODY_25 joint (``w = 0`` means the joint does not sup
    zero there); ``unmatched="keep"`` keeps OpenPose's joint unchecked, which adds pelvis and foot
    evidence at the price of unfiltered outliers.
 
+Pixel units: the paper's 100 px is a full-resolution (1920 px wide) value. ``threshold_px`` may
+be one value or one per view; :func:`resolution_scales` and :func:`pixel_settings` derive the
+values for images of another width (``threshold_px x r``, ``w_j2d / r^2`` for the squared-pixel
+2D loss, ``r = width / 1920``).
+
 NaN or inf anywhere in a keypoint counts as missing (the kit's loader already turns them into
 zeros); dropped targets hold ``(0, 0, 0)`` so the arrays are always finite.
 """
@@ -53,7 +58,39 @@ __all__ = [
     "agreement_masks",
     "agreement_targets",
     "agreement_summary",
+    "REFERENCE_WIDTH",
+    "resolution_scales",
+    "pixel_settings",
 ]
+
+REFERENCE_WIDTH = 1920.0
+"""Width (px) of the frames the paper's pixel quantities refer to (its real data: 1920x1080)."""
+
+
+def resolution_scales(image_sizes, reference_width: float = REFERENCE_WIDTH) -> np.ndarray:
+    """``(V,)`` ``r = width / reference_width`` of each view.
+
+    Args:
+        image_sizes: ``(W, H)`` per view (a sequence of pairs or a ``(V, 2)`` array).
+        reference_width: the width the paper's values refer to.
+    """
+    wh = np.asarray(image_sizes, np.float64).reshape(-1, 2)
+    if not (wh[:, 0] > 0).all() or not reference_width > 0:
+        raise ValueError(f"image widths and reference_width must be positive, got {wh[:, 0].tolist()}, "
+                         f"{reference_width}")
+    return wh[:, 0] / float(reference_width)
+
+
+def pixel_settings(scales: np.ndarray, threshold_px: float = 100.0, w_j2d: float = 0.01) -> dict:
+    """The full-resolution pixel quantities at each view's resolution (for logs and provenance).
+
+    Returns:
+        ``scale (V,)``, ``threshold_px (V,)`` = threshold x r and ``w_j2d_per_px2 (V,)`` = w_j2d / r^2
+        (the weight on squared pixels of the view's own image), as lists.
+    """
+    r = np.asarray(scales, np.float64).reshape(-1)
+    return {"scale": r.tolist(), "threshold_px": (threshold_px * r).tolist(),
+            "w_j2d_per_px2": (w_j2d / r ** 2).tolist(), "reference": {"threshold_px": threshold_px, "w_j2d": w_j2d}}
 
 BODY25_FROM_COCO18: tuple[int, ...] = tuple(COCO18_NAMES.index(n) if n in COCO18_NAMES else -1
                                             for n in BODY_25_NAMES)
@@ -92,14 +129,18 @@ def _check(openpose: np.ndarray, alphapose: np.ndarray) -> tuple[np.ndarray, np.
     return op, ap
 
 
-def agreement_masks(openpose: np.ndarray, alphapose: np.ndarray, *, threshold_px: float = 100.0,
+def agreement_masks(openpose: np.ndarray, alphapose: np.ndarray, *, threshold_px=100.0,
                     min_confidence: float = 0.05, unmatched: str = "drop") -> AgreementMasks:
     """The per-joint decisions of :func:`agreement_targets` (same arguments)."""
-    if not threshold_px > 0:
-        raise ValueError(f"threshold_px must be positive, got {threshold_px}")
+    thr = np.asarray(threshold_px, np.float64)
+    if not (thr > 0).all() or thr.ndim > 1:
+        raise ValueError(f"threshold_px must be positive (one value or one per view), got {threshold_px}")
     if unmatched not in _UNMATCHED_CHOICES:
         raise ValueError(f"unmatched must be one of {_UNMATCHED_CHOICES}, got {unmatched!r}")
     op, ap = _check(openpose, alphapose)
+    if thr.ndim == 1 and thr.shape[0] != op.shape[1]:
+        raise ValueError(f"threshold_px has {thr.shape[0]} values for {op.shape[1]} views")
+    thr = thr.reshape(-1, 1) if thr.ndim == 1 else thr  # (V, 1) broadcasts over (F, V, 25)
     op_ok = np.isfinite(op).all(-1)
     with np.errstate(invalid="ignore"):
         seen = op_ok & (op[..., 2] > 0)
@@ -117,20 +158,21 @@ def agreement_masks(openpose: np.ndarray, alphapose: np.ndarray, *, threshold_px
     else:
         confirmable = ap_seen
     unconfirmed = candidate & ~confirmable
-    disagree = candidate & ap_seen & (dist > threshold_px)
+    disagree = candidate & ap_seen & (dist > thr)
     kept = candidate & ~unconfirmed & ~disagree
     return AgreementMasks(missing=missing, low_confidence=low, unconfirmed=unconfirmed, disagree=disagree,
                           kept=kept)
 
 
-def agreement_targets(openpose: np.ndarray, alphapose: np.ndarray, *, threshold_px: float = 100.0,
+def agreement_targets(openpose: np.ndarray, alphapose: np.ndarray, *, threshold_px=100.0,
                       min_confidence: float = 0.05, unmatched: str = "drop") -> np.ndarray:
     """2D targets of the fine-tuning loss from two detectors.
 
     Args:
         openpose: ``(F, V, 25, 3)`` BODY_25 ``[x, y, confidence]`` full-image pixels (missing = 0).
         alphapose: ``(F, V, 18, 3)`` COCO-18 ``[x, y, confidence]`` of the same frames and views.
-        threshold_px: largest distance (pixels) at which the detectors still agree.
+        threshold_px: largest distance (pixels of the view's image) at which the detectors still
+            agree: one value or ``(V,)`` (e.g. ``100 x resolution_scales(...)``).
         min_confidence: OpenPose joints below it are dropped.
         unmatched: ``"drop"`` (default) or ``"keep"`` the BODY_25 joints COCO-18 lacks.
 

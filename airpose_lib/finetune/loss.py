@@ -10,7 +10,9 @@ of one view, reduced over the views like the supervised loss: summed for the mul
             ``BODY_25_FROM_SMPLX``) projected with each view's full-image ``K``, against the
             targets of :func:`~airpose_lib.finetune.keypoints.agreement_targets`; ``w`` =
             OpenPose confidence, 0 for dropped joints (they still count in the mean, as the
-            official code's ``(MSE * conf).mean()``). Pixels squared.
+            official code's ``(MSE * conf).mean()``). Pixels squared, at the reference resolution
+            when ``pixel_scale`` is given (residuals divided by each view's ``r = width / 1920``,
+            i.e. ``w_j2d / r^2``: the paper's weight means the same on a half-resolution frame).
 ``beta``    ``||beta||^2`` (L2 shape prior); with ``cross_view_beta`` plus
             ``||1beta - 2beta||^2`` (the official code's beta term).
 ``vposer``  ``||z||^2`` of the VPoser encoding of the predicted body pose ``theta`` (axis-angle
@@ -180,7 +182,8 @@ class FineTuneLoss(nn.Module):
         z = q.rsample() if self.config.vposer_latent == "sample" else q.loc
         return z.reshape(*lead, -1).to(theta.dtype)
 
-    def forward(self, pred: Mapping[str, Tensor], targets: Tensor, K: Tensor) -> dict[str, Tensor]:
+    def forward(self, pred: Mapping[str, Tensor], targets: Tensor, K: Tensor,
+                pixel_scale: Tensor | None = None) -> dict[str, Tensor]:
         """Loss terms and their weighted total.
 
         Args:
@@ -189,6 +192,8 @@ class FineTuneLoss(nn.Module):
             targets: ``(B, V, 25, 3)`` ``[x, y, w]`` BODY_25 targets, full-image pixels
                 (:func:`~airpose_lib.finetune.keypoints.agreement_targets`); must be finite.
             K: ``(V, 3, 3)`` or ``(B, V, 3, 3)`` full-image intrinsics.
+            pixel_scale: optional ``(V,)`` image width / reference width of each view
+                (``keypoints.resolution_scales``); the 2D residuals are divided by it.
 
         Returns:
             ``{"total", "j2d", "beta", "vposer", "theta", "depth"}``: scalars; the terms are
@@ -212,8 +217,13 @@ class FineTuneLoss(nn.Module):
         targets = targets.to(dtype)
         zero = theta.sum() * 0.0
         terms: dict[str, Tensor] = {}
-        uv = self.project(pred, K)
-        terms["j2d"] = view_mse(uv, targets[..., :2], targets[..., 2:], vr)
+        uv, xy = self.project(pred, K), targets[..., :2]
+        if pixel_scale is not None:
+            r = torch.as_tensor(pixel_scale, dtype=dtype, device=uv.device).reshape(-1, 1, 1)  # (V, 1, 1)
+            if r.shape[0] != V or not bool((r > 0).all()):
+                raise ValueError(f"pixel_scale must be ({V},) positive, got {tuple(r.shape)}")
+            uv, xy = uv / r, xy / r
+        terms["j2d"] = view_mse(uv, xy, targets[..., 2:], vr)
         terms["beta"] = view_mse(beta, torch.zeros_like(beta), view_reduction=vr)
         if c.cross_view_beta:
             terms["beta"] = terms["beta"] + cross_view_mse(beta)

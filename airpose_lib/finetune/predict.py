@@ -7,6 +7,13 @@ views of a batch of frames and the regressor on all views jointly (so the multi-
 exchange their messages, as :meth:`AirPoseNet.forward`), and returns camera-frame parameters per
 view (:func:`airpose_lib.model.to_smplx_params`).
 
+Any camera: the crops and P are formed in the network's virtual camera ``K_net`` (the camera it
+was trained with, ``model.camera_K`` from :func:`~airpose_lib.finetune.network.load_network`,
+else ``runtime.source.network_camera()``: f = 1475 px at 1920x1080), see
+``geometry.virtual_crop``. The network's translation is then already in the real camera's frame;
+a weak camera is converted with ``K_net`` (the camera its P refers to). The provenance records
+the rule (``camera_rule``, ``K_net``).
+
 Frames without a usable detection in a view (fewer than 4 keypoints above the box confidence)
 reuse that view's previous box, as a drone does; leading frames take the first box the view
 has. Their outputs are computed from that stale crop and flagged ``valid[f, v] = False``; a view
@@ -22,7 +29,7 @@ key             shape                  meaning
 ``theta``       (F, V, 21, 3, 3)       body joint rotations predicted by view v
 ``beta``        (F, V, 10) float32     shape predicted by view v
 ``frames``      (F,) int64             image numbers of the recording (strictly increasing)
-``P``           (F, V, 3) float32      crop vectors ``[bx, by, s]``
+``P``           (F, V, 3) float32      crop vectors ``[bx, by, s]`` in the virtual camera ``K_net``
 ``boxes``       (F, V, 4) float32      person boxes ``[x0, y0, x1, y1]``, full-image pixels
 ``valid``       (F, V) bool            the box came from this frame's detections
 ``provenance``  () str                 JSON: kit version, sequence, detector, input size, ...
@@ -50,6 +57,9 @@ __all__ = [
     "regress_features",
     "detection_boxes",
     "frames_in_range",
+    "network_camera_of",
+    "camera_rule",
+    "image_sizes",
     "sequence_features",
     "predict_sequence",
     "validate_predictions",
@@ -197,6 +207,34 @@ def _positions(sequence, frames) -> np.ndarray:
     return out
 
 
+def network_camera_of(model: nn.Module, K_net=None) -> np.ndarray:
+    """``(3, 3)`` virtual camera of a network: ``K_net`` if given, else ``model.camera_K`` (set by
+    ``load_network``), else ``runtime.source.network_camera()``."""
+    from airpose_lib.runtime.source import network_camera
+
+    if K_net is None:
+        K_net = getattr(model, "camera_K", None)
+    return np.asarray(network_camera() if K_net is None else K_net, np.float64).reshape(3, 3)
+
+
+def camera_rule(K_net: np.ndarray, K: np.ndarray) -> dict:
+    """What predictions record about the camera rule (JSON-able)."""
+    K = np.asarray(K, np.float64)
+    return {"camera_rule": "virtual camera K_net (geometry.virtual_crop): crop and P formed in the network's "
+                           "training camera; tau in the real camera frame",
+            "K_net": np.asarray(K_net, np.float64).tolist(),
+            "focal_ratio": [float(K_net[0, 0] / K[v, 0, 0]) for v in range(K.shape[0])]}
+
+
+def image_sizes(sequence) -> list[tuple[int, int]]:
+    """``(W, H)`` of each view of a loaded sequence (from its first frame)."""
+    out = []
+    for v in range(sequence.num_views):
+        h, w = sequence.image(0, v).shape[:2]
+        out.append((w, h))
+    return out
+
+
 def _model_device(model: nn.Module) -> torch.device:
     return next(model.parameters()).device
 
@@ -213,10 +251,11 @@ def _resolve_input_size(model: nn.Module, input_size: int | None) -> int:
 @torch.no_grad()
 def sequence_features(model: nn.Module, sequence, *, input_size: int, detector: str = "openpose",
                       frames=None, batch_size: int = 16, box_min_confidence: float = 0.2,
-                      margin_px: float = 20.0, progress: bool = False) -> dict[str, np.ndarray]:
+                      margin_px: float = 20.0, K_net=None, progress: bool = False) -> dict[str, np.ndarray]:
     """Backbone features of every frame and view (eval mode, no gradients).
 
-    Args: as :func:`predict_sequence`.
+    Args: as :func:`predict_sequence`; the crops and P are formed in the virtual camera
+    ``K_net`` (:func:`network_camera_of`).
 
     Returns:
         ``features (F, V, C)`` float32, ``P (F, V, 3)`` float32, ``boxes (F, V, 4)`` float32,
@@ -243,6 +282,7 @@ def sequence_features(model: nn.Module, sequence, *, input_size: int, detector: 
     device = _model_device(model)
     dtype = model.init_beta.dtype
     source = _Views(sequence)
+    K_net = network_camera_of(model, K_net)
     feats, Ps = [], []
     chunks = range(0, len(pos), batch_size)
     if progress:
@@ -253,7 +293,7 @@ def sequence_features(model: nn.Module, sequence, *, input_size: int, detector: 
         for a in chunks:
             rows = pos[a:a + batch_size]
             index = np.repeat(rows[:, None], V, axis=1)
-            crops, P, _ = offline_inputs(source, index, input_size, boxes=boxes[a:a + batch_size])
+            crops, P, _ = offline_inputs(source, index, input_size, boxes=boxes[a:a + batch_size], K_net=K_net)
             x = torch.from_numpy(crops).to(device=device, dtype=dtype)
             f = model.features(x.flatten(0, 1)).unflatten(0, (len(rows), V))
             feats.append(f.float().cpu())
@@ -268,7 +308,7 @@ def sequence_features(model: nn.Module, sequence, *, input_size: int, detector: 
 @torch.no_grad()
 def predict_sequence(model: nn.Module, sequence, *, input_size: int | None = None, detector: str = "openpose",
                      frames=None, batch_size: int = 16, features_only: bool = False,
-                     box_min_confidence: float = 0.2, margin_px: float = 20.0,
+                     box_min_confidence: float = 0.2, margin_px: float = 20.0, K_net=None,
                      provenance: Mapping | None = None, progress: bool = False) -> dict:
     """Run a network over a recording.
 
@@ -284,6 +324,7 @@ def predict_sequence(model: nn.Module, sequence, *, input_size: int | None = Non
             :func:`sequence_features`; what fine-tuning caches).
         box_min_confidence, margin_px: :func:`airpose_lib.runtime.source.person_box` settings
             (the runtime's defaults: 0.2 and 20 px).
+        K_net: ``(3, 3)`` the network's training camera (default :func:`network_camera_of`).
         provenance: extra JSON-able facts stored in the ``provenance`` string (e.g. the checkpoint).
         progress: tqdm bar over the batches.
 
@@ -295,16 +336,18 @@ def predict_sequence(model: nn.Module, sequence, *, input_size: int | None = Non
     from airpose_lib.model import to_smplx_params
 
     size = _resolve_input_size(model, input_size)
+    K_net = network_camera_of(model, K_net)
     cache = sequence_features(model, sequence, input_size=size, detector=detector, frames=frames,
                               batch_size=batch_size, box_min_confidence=box_min_confidence,
-                              margin_px=margin_px, progress=progress)
+                              margin_px=margin_px, K_net=K_net, progress=progress)
     if features_only:
         return cache
     was_training = model.training
     model.eval()
     device = _model_device(model)
     dtype = model.init_beta.dtype
-    K = torch.as_tensor(np.asarray(sequence.K), dtype=dtype, device=device)  # (V, 3, 3)
+    # P refers to the virtual camera: a weak camera becomes a translation with K_net.
+    K = torch.as_tensor(K_net, dtype=dtype, device=device).expand(sequence.num_views, 3, 3)
     parts: dict[str, list[Tensor]] = {k: [] for k in ("phi", "tau", "theta", "beta")}
     F = len(cache["frames"])
     try:
@@ -325,6 +368,7 @@ def predict_sequence(model: nn.Module, sequence, *, input_size: int | None = Non
             "views_without_detection": int((~cache["valid"]).sum()),
             "box": {"min_confidence": box_min_confidence, "margin_px": margin_px,
                     "missing": "previous box (leading frames: the first box), valid=False"},
+            **camera_rule(K_net, np.asarray(sequence.K)),
             **dict(provenance or {})}
     pred.update(frames=cache["frames"], P=cache["P"], boxes=cache["boxes"], valid=cache["valid"],
                 provenance=json.dumps(info, default=str))

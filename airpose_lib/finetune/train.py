@@ -15,7 +15,24 @@ r"""Fine-tuning a trained network on the 2D detections of a recording (paper Sec
    Adam (AMSGrad, lr 5e-5, paper) on :class:`~airpose_lib.finetune.loss.FineTuneLoss` with the
    variant's paper weights. A training sample is one frame with all its views (the multi-view
    variants exchange messages as in the forward); frames whose targets are all dropped are
-   skipped.
+   skipped;
+5. selects the model (the paper stops "once the model starts overfitting on any loss
+   component"): the last ``holdout_fraction`` of the selected frames (20 %) never train; their
+   2D loss (``j2d``, eval mode) is measured before training and at every checkpoint, and the
+   checkpoint with the lowest one is kept as ``checkpoints/best.pt`` (``FineTuneResult.best_*``).
+   An optional ``diagnostic(model)`` (e.g. errors on a test person) is logged next to it in
+   ``selection.csv`` and never used for the choice.
+
+Pixel units: ``threshold_px`` and the 2D loss weight are the paper's values for 1920 px wide
+frames (``reference_width``). A view of another width gets them at its own resolution
+(:func:`~airpose_lib.finetune.keypoints.resolution_scales`, ``r = width / reference_width``):
+the agreement threshold ``threshold_px r`` and the 2D residuals divided by ``r`` (= a weight
+``w_j2d / r^2`` on the squared pixels), so a half-resolution recording is filtered and weighted
+as its full-resolution original would be.
+
+Crops and P are formed in the network's virtual camera (``geometry.virtual_crop``; the
+checkpoint's training camera, :func:`~airpose_lib.finetune.network.checkpoint_camera`); the 2D
+loss projects the predicted body with the recording's own intrinsics.
 
 Determinism and resume follow ``airpose_lib.train``: the frame order of epoch e is drawn from
 ``(seed, e)`` only; dropout and the VPoser sample use torch's global RNG, seeded from the seed and
@@ -26,7 +43,8 @@ thread count). The caller's RNG states and torch thread count are restored on re
 Output folder: ``checkpoints/last.pt`` (+ ``step_<n>.pt``) in the kit checkpoint format (read by
 ``airpose_lib.train.load_trained_model`` and :func:`~airpose_lib.finetune.network.load_network`;
 the base ``config`` is kept and a ``finetune`` entry records this run), ``log.csv``,
-``config.json``, ``result.json`` and the feature cache.
+``config.json``, ``result.json``, ``selection.csv`` (held-out 2D loss and diagnostics per
+checkpoint, ``checkpoints/best.pt`` the selected one) and the feature cache.
 """
 from __future__ import annotations
 
@@ -35,7 +53,7 @@ import hashlib
 import json
 import math
 import time
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -46,7 +64,8 @@ from torch import nn
 
 from airpose_lib.body.cache import atomic_path
 
-__all__ = ["FineTuneConfig", "FineTuneResult", "finetune_config", "finetune", "evaluate_finetune_loss"]
+__all__ = ["FineTuneConfig", "FineTuneResult", "finetune_config", "finetune", "evaluate_finetune_loss",
+           "heldout_split"]
 
 
 @dataclass
@@ -61,7 +80,12 @@ class FineTuneConfig:
         loss: :class:`~airpose_lib.finetune.loss.FineTuneLossConfig` overrides (``w_j2d``,
             ``w_beta``, ``w_vposer``, ``w_theta``, ``cross_view_beta`` ...) on top of the variant's
             paper weights; ``official_loss`` applies the official code's x60 and depth term first.
-        threshold_px, min_confidence, unmatched: the agreement filter (``agreement_targets``).
+        threshold_px, min_confidence, unmatched: the agreement filter (``agreement_targets``);
+            ``threshold_px`` at ``reference_width``.
+        reference_width: image width (px) the pixel quantities (``threshold_px``, the 2D loss
+            weight) refer to: the paper's 1920; each view uses them at its own width.
+        holdout_fraction: the last part of the selected frames held out for model selection
+            (0: no selection, the last checkpoint is the result).
         frames: ``[start, stop)`` image numbers to train on (paper: ``[0, 7000]``); None: all.
         input_size: crop side S (default: from the checkpoint).
         detector, box_min_confidence, margin_px: where the crops' boxes come from
@@ -85,6 +109,8 @@ class FineTuneConfig:
     loss: dict = field(default_factory=dict)
     official_loss: bool = False
     threshold_px: float = 100.0
+    reference_width: float = 1920.0
+    holdout_fraction: float = 0.2
     min_confidence: float = 0.05
     unmatched: str = "drop"
     frames: list | None = None
@@ -107,6 +133,7 @@ class FineTuneConfig:
 
     # Fields whose change makes a resumed run differ from a straight one.
     RESUME_KEYS = ("batch_size", "lr", "amsgrad", "weight_decay", "seed", "loss", "official_loss", "threshold_px",
+                   "reference_width", "holdout_fraction",
                    "min_confidence", "unmatched", "frames", "input_size", "detector", "box_min_confidence",
                    "margin_px", "prior", "prior_path", "prior_tag", "body_source")
 
@@ -115,6 +142,10 @@ class FineTuneConfig:
             raise ValueError("steps must be >= 0 and batch_size >= 1")
         if self.checkpoint_every < 1 or self.log_every < 1 or self.feature_batch_size < 1:
             raise ValueError("checkpoint_every, log_every and feature_batch_size must be >= 1")
+        if not 0 <= self.holdout_fraction < 1:
+            raise ValueError(f"holdout_fraction must be in [0, 1), got {self.holdout_fraction}")
+        if not self.reference_width > 0:
+            raise ValueError(f"reference_width must be positive, got {self.reference_width}")
         if self.frames is not None:
             frames = list(self.frames)
             if len(frames) != 2 or not all(isinstance(x, (int, np.integer)) for x in frames) or frames[0] >= frames[1]:
@@ -166,6 +197,11 @@ class FineTuneResult:
         history: ``log.csv`` as lists (``step``, ``total``, ``j2d``, ...).
         keypoints: the agreement filter's counts (``kept``, ``disagree``, ...).
         config: the :class:`FineTuneConfig`; loss: the loss config used; seconds: wall time.
+        best_checkpoint, best_step, best_heldout_j2d: the model selection's choice
+            (``checkpoints/best.pt``; None without held-out frames).
+        selection: ``selection.csv`` as lists (``step``, ``heldout_j2d``, ..., ``diag_*``).
+        pixels: the per-view resolution scale and the derived threshold / 2D weight.
+        heldout_frames: frames held out for selection (with kept targets).
     """
 
     out_dir: Path
@@ -180,11 +216,18 @@ class FineTuneResult:
     loss: dict = field(default_factory=dict)
     stopped_early: bool = False
     seconds: float = 0.0
+    best_checkpoint: Path | None = None
+    best_step: int | None = None
+    best_heldout_j2d: float | None = None
+    selection: dict[str, list] = field(default_factory=dict)
+    pixels: dict = field(default_factory=dict)
+    heldout_frames: int = 0
 
     def to_json(self) -> dict:
         d = dataclasses.asdict(self)
         d["out_dir"] = str(self.out_dir)
         d["checkpoint"] = str(self.checkpoint) if self.checkpoint else None
+        d["best_checkpoint"] = str(self.best_checkpoint) if self.best_checkpoint else None
         return d
 
 
@@ -210,22 +253,24 @@ def _tensor_digest(tensors: Mapping[str, torch.Tensor]) -> str:
     return h.hexdigest()
 
 
-def _feature_fingerprint(model, seq, cfg: FineTuneConfig, input_size: int) -> str:
+def _feature_fingerprint(model, seq, cfg: FineTuneConfig, input_size: int, K_net: np.ndarray) -> str:
     backbone = {k: v for k, v in model.state_dict().items() if k.startswith("backbone.")}
     h = hashlib.sha256(_tensor_digest(backbone).encode())
     files = [(str(p), p.stat().st_size, p.stat().st_mtime_ns) for imgs in seq.images for p in imgs.paths]
     h.update(json.dumps({"input_size": input_size, "detector": cfg.detector, "box": [cfg.box_min_confidence,
                          cfg.margin_px], "frames": np.asarray(seq.frames).tolist(), "images": files,
-                         "dtype": str(model.init_beta.dtype)}).encode())
+                         "dtype": str(model.init_beta.dtype),
+                         "K_net": np.asarray(K_net, np.float64).tolist()}).encode())
     h.update(np.ascontiguousarray(seq.keypoints[cfg.detector]).tobytes())
     return h.hexdigest()
 
 
-def _feature_cache(model, seq, cfg: FineTuneConfig, input_size: int, out_dir: Path, progress: bool) -> dict:
+def _feature_cache(model, seq, cfg: FineTuneConfig, input_size: int, K_net: np.ndarray, out_dir: Path,
+                   progress: bool) -> dict:
     from .predict import sequence_features
 
     path = out_dir / "feature_cache.pt"
-    fp = _feature_fingerprint(model, seq, cfg, input_size)
+    fp = _feature_fingerprint(model, seq, cfg, input_size, K_net)
     if path.is_file():
         try:
             cached = torch.load(path, map_location="cpu", weights_only=True)
@@ -235,31 +280,37 @@ def _feature_cache(model, seq, cfg: FineTuneConfig, input_size: int, out_dir: Pa
             pass
     arrays = sequence_features(model, seq, input_size=input_size, detector=cfg.detector,
                                batch_size=cfg.feature_batch_size, box_min_confidence=cfg.box_min_confidence,
-                               margin_px=cfg.margin_px, progress=progress)
+                               margin_px=cfg.margin_px, K_net=K_net, progress=progress)
     with atomic_path(path) as tmp:
         torch.save({"fingerprint": fp, "arrays": {k: torch.from_numpy(np.asarray(v)) for k, v in arrays.items()}},
                    tmp)
     return arrays
 
 
-def _step_terms(model, loss_fn, feat, P, targets, K, input_size: int) -> dict[str, torch.Tensor]:
+def _step_terms(model, loss_fn, feat, P, targets, K, input_size: int, K_net=None,
+                pixel_scale=None) -> dict[str, torch.Tensor]:
     from airpose_lib.model import to_smplx_params
 
     from .predict import regress_features
 
     out = regress_features(model, feat, P, input_size)
-    pred = to_smplx_params(out, P, K.expand(feat.shape[0], -1, -1, -1), input_size)
-    return loss_fn(pred, targets, K)
+    # P lives in the virtual camera K_net (a weak camera converts there); the body projects with K.
+    K_p = K if K_net is None else K_net
+    pred = to_smplx_params(out, P, K_p.expand(feat.shape[0], *K.shape[-3:]), input_size)
+    return loss_fn(pred, targets, K, pixel_scale=pixel_scale)
 
 
 @torch.no_grad()
 def evaluate_finetune_loss(model: nn.Module, loss_fn: nn.Module, features: torch.Tensor, P: torch.Tensor,
                            targets: torch.Tensor, K: torch.Tensor, input_size: int,
-                           batch_size: int = 256) -> dict[str, float]:
+                           batch_size: int = 256, K_net: torch.Tensor | None = None,
+                           pixel_scale: torch.Tensor | None = None) -> dict[str, float]:
     """Mean loss terms over frames in eval mode (no dropout), VPoser at the posterior mean.
 
     Args:
         features: ``(F, V, C)``; P: ``(F, V, 3)``; targets: ``(F, V, 25, 3)``; K: ``(V, 3, 3)``.
+        K_net: ``(V, 3, 3)`` the virtual camera of P (default K).
+        pixel_scale: ``(V,)`` resolution scale of the 2D residuals (``FineTuneLoss.forward``).
 
     Returns:
         term -> frame-weighted mean (the ``FineTuneLoss`` keys).
@@ -275,7 +326,7 @@ def evaluate_finetune_loss(model: nn.Module, loss_fn: nn.Module, features: torch
     try:
         for a in range(0, n, batch_size):
             sl = slice(a, a + batch_size)
-            terms = _step_terms(model, det, features[sl], P[sl], targets[sl], K, input_size)
+            terms = _step_terms(model, det, features[sl], P[sl], targets[sl], K, input_size, K_net, pixel_scale)
             k = features[sl].shape[0]
             for key, v in terms.items():
                 sums[key] = sums.get(key, 0.0) + float(v) * k
@@ -293,6 +344,44 @@ def _stream_seed(seed: int) -> int:
 def _set_train_mode(model: nn.Module) -> None:
     model.train()
     model.backbone.eval()  # frozen: never run here anyway, but keep its BatchNorm out of training
+
+
+def heldout_split(num_frames: int, fraction: float) -> tuple[np.ndarray, np.ndarray]:
+    """Positions ``0..F-1`` split in time: the first ``F - n`` train, the last ``n`` are held out,
+    ``n = round(fraction F)`` (at least 1 when ``fraction > 0`` and ``F >= 2``).
+
+    Returns:
+        ``train (F - n,)`` and ``heldout (n,)`` int64 positions.
+    """
+    n = int(round(fraction * num_frames))
+    if fraction > 0 and num_frames >= 2:
+        n = min(max(n, 1), num_frames - 1)
+    cut = num_frames - n
+    return np.arange(cut, dtype=np.int64), np.arange(cut, num_frames, dtype=np.int64)
+
+
+def _isolated(diagnostic: Callable, model: nn.Module) -> dict[str, float]:
+    """Run a diagnostic so that it cannot change the run: eval mode, no gradients, the RNG
+    state and the model's mode restored afterwards; its values are only logged."""
+    from airpose_lib.train.checkpoint import capture_rng_state, restore_rng_state
+
+    rng = capture_rng_state()
+    was_training = model.training
+    model.eval()
+    try:
+        with torch.no_grad():
+            values = dict(diagnostic(model) or {})
+    finally:
+        model.train(was_training)
+        restore_rng_state(rng)
+    return {f"diag_{k}": float(v) for k, v in values.items()}
+
+
+def _write_selection(out_dir: Path, rows: list[dict]) -> None:
+    import pandas as pd
+
+    with atomic_path(out_dir / "selection.csv") as tmp:
+        pd.DataFrame(rows).to_csv(tmp, index=False)
 
 
 def _check_resume(saved: Mapping, cfg: FineTuneConfig, base_fp: str) -> None:
@@ -326,7 +415,8 @@ def _history(log_path: Path) -> dict[str, list]:
 # -- entry point ----------------------------------------------------------------------------------
 def finetune(checkpoint: str | Path, sequence_root: str | Path, out_dir: str | Path,
              config: FineTuneConfig | None = None, resume: bool = True, progress: bool = False, *,
-             prior=None, body_model=None, stop_at: int | None = None) -> FineTuneResult:
+             prior=None, body_model=None, stop_at: int | None = None,
+             diagnostic: Callable[[nn.Module], Mapping[str, float]] | None = None) -> FineTuneResult:
     """Fine-tune a trained network on a recording's 2D detections.
 
     Args:
@@ -341,6 +431,9 @@ def finetune(checkpoint: str | Path, sequence_root: str | Path, out_dir: str | P
         prior: a :class:`~airpose_lib.prior.VPoser` to use instead of ``config.prior``.
         body_model: the neutral ``smplx.SMPLX`` of the loss instead of ``config.body_source``'s.
         stop_at: stop (with a checkpoint) once this step is reached, as if interrupted there.
+        diagnostic: ``f(model) -> {name: value}`` run at every model-selection point (e.g. the
+            test person's 2D and 3D errors); logged as ``diag_<name>`` in ``selection.csv``, never
+            used for the choice (it runs after it, isolated: eval mode, RNG state restored).
 
     Returns:
         :class:`FineTuneResult`.
@@ -354,14 +447,14 @@ def finetune(checkpoint: str | Path, sequence_root: str | Path, out_dir: str | P
         torch.set_num_threads(cfg.num_threads)
     try:
         return _finetune(Path(checkpoint), Path(sequence_root), Path(out_dir), cfg, resume, progress, prior,
-                         body_model, stop_at)
+                         body_model, stop_at, diagnostic)
     finally:
         torch.set_num_threads(threads)
         restore_rng_state(caller_rng)
 
 
 def _finetune(checkpoint: Path, root: Path, out_dir: Path, cfg: FineTuneConfig, resume: bool, progress: bool,
-              prior, body_model, stop_at) -> FineTuneResult:
+              prior, body_model, stop_at, diagnostic) -> FineTuneResult:
     from airpose_lib.train.checkpoint import (
         capture_rng_state,
         checkpoint_dir,
@@ -373,9 +466,13 @@ def _finetune(checkpoint: Path, root: Path, out_dir: Path, cfg: FineTuneConfig, 
     from airpose_lib.train.logger import RunLogger
     from airpose_lib.train.sampling import epoch_permutation, seed_everything
 
-    from .keypoints import agreement_masks, agreement_summary, agreement_targets
+    from airpose_lib.train.checkpoint import FORMAT_VERSION as CHECKPOINT_FORMAT
+    from airpose_lib.train.checkpoint import kit_version
+
+    from .keypoints import agreement_masks, agreement_summary, agreement_targets, pixel_settings, resolution_scales
     from .loss import FineTuneLoss, finetune_loss_config
     from .network import load_network
+    from .predict import image_sizes
 
     t0 = time.time()
     if cfg.device == "auto":
@@ -384,26 +481,39 @@ def _finetune(checkpoint: Path, root: Path, out_dir: Path, cfg: FineTuneConfig, 
         device = torch.device(cfg.device)
     seed_everything(cfg.seed)
     model, train_cfg, input_size = load_network(checkpoint, device, cfg.input_size)
+    K_net_np = np.asarray(model.camera_K, np.float64)
     base_fp = _tensor_digest(model.state_dict())
     seq = _load_frames(root, cfg)
-    masks = agreement_masks(seq.keypoints["openpose"], seq.keypoints["alphapose"], threshold_px=cfg.threshold_px,
+    scales = resolution_scales(image_sizes(seq), cfg.reference_width)  # (V,)
+    threshold = cfg.threshold_px * scales
+    masks = agreement_masks(seq.keypoints["openpose"], seq.keypoints["alphapose"], threshold_px=threshold,
                             min_confidence=cfg.min_confidence, unmatched=cfg.unmatched)
     targets_np = agreement_targets(seq.keypoints["openpose"], seq.keypoints["alphapose"],
-                                   threshold_px=cfg.threshold_px, min_confidence=cfg.min_confidence,
+                                   threshold_px=threshold, min_confidence=cfg.min_confidence,
                                    unmatched=cfg.unmatched)
     out_dir.mkdir(parents=True, exist_ok=True)
-    cache = _feature_cache(model, seq, cfg, input_size, out_dir, progress)
-    usable = np.flatnonzero(targets_np[..., 2].sum(axis=(1, 2)) > 0)
+    cache = _feature_cache(model, seq, cfg, input_size, K_net_np, out_dir, progress)
+    train_pos, held_pos = heldout_split(len(seq.frames), cfg.holdout_fraction)
+    has_targets = targets_np[..., 2].sum(axis=(1, 2)) > 0
+    usable = train_pos[has_targets[train_pos]]
+    held = held_pos[has_targets[held_pos]]
     n = len(usable)
     if n < cfg.batch_size and cfg.steps > 0:
-        raise ValueError(f"{root}: {n} frames have kept 2D targets, fewer than one batch of {cfg.batch_size}; "
-                         "lower batch_size, select more frames or relax the agreement filter")
+        raise ValueError(f"{root}: {n} training frames have kept 2D targets (after holding out "
+                         f"{len(held_pos)} for model selection), fewer than one batch of {cfg.batch_size}; "
+                         "lower batch_size or holdout_fraction, select more frames or relax the agreement filter")
 
     dtype = model.init_beta.dtype
     as_t = lambda a: torch.as_tensor(np.asarray(a)).to(device=device, dtype=dtype)  # noqa: E731
     feats, P = as_t(cache["features"][usable]), as_t(cache["P"][usable])
     targets = as_t(targets_np[usable])
+    h_feats, h_P, h_targets = as_t(cache["features"][held]), as_t(cache["P"][held]), as_t(targets_np[held])
     K = as_t(seq.K)
+    K_net = as_t(np.broadcast_to(K_net_np, K.shape).copy())
+    r_px = as_t(scales)
+    pixels = {**pixel_settings(scales, cfg.threshold_px, finetune_loss_config(train_cfg.variant, cfg.official_loss,
+                                                                              **cfg.loss).w_j2d),
+              "reference_width": cfg.reference_width}
 
     for p in model.backbone.parameters():
         p.requires_grad_(False)
@@ -422,8 +532,13 @@ def _finetune(checkpoint: Path, root: Path, out_dir: Path, cfg: FineTuneConfig, 
     loss_fn = FineTuneLoss(loss_cfg, body_model=body_model, prior=prior).to(device)
     optimizer = torch.optim.Adam(params, lr=cfg.lr, amsgrad=cfg.amsgrad, weight_decay=cfg.weight_decay)
 
+    def evaluate(f, p_, t):
+        return evaluate_finetune_loss(model, loss_fn, f, p_, t, K, input_size, cfg.eval_batch_size, K_net, r_px)
+
     step = epoch = batch_in_epoch = 0
     ckpt_path = last_checkpoint(out_dir) if resume else None
+    selection: dict = {"rows": [], "best_step": None, "best_heldout_j2d": None}
+    best_path = checkpoint_dir(out_dir) / "best.pt"
     if ckpt_path is not None:
         state = load_checkpoint(ckpt_path)
         if "finetune" not in state:
@@ -433,25 +548,50 @@ def _finetune(checkpoint: Path, root: Path, out_dir: Path, cfg: FineTuneConfig, 
         optimizer.load_state_dict(state["optimizer"])
         step, epoch, batch_in_epoch = state["step"], state["epoch"], state["batch_in_epoch"]
         initial = state["finetune"]["initial"]
+        selection = dict(state["finetune"].get("selection") or selection)
         restore_rng_state(state["rng"][0])
     else:
         for old in checkpoint_dir(out_dir).glob("*.pt"):
             old.unlink()
-        initial = evaluate_finetune_loss(model, loss_fn, feats, P, targets, K, input_size, cfg.eval_batch_size)
-        seed_everything(_stream_seed(cfg.seed))  # the dropout / VPoser-sample stream
+        initial = evaluate(feats, P, targets)
     (out_dir / "config.json").write_text(json.dumps(cfg.to_dict(), indent=2, sort_keys=True))
     logger = RunLogger(out_dir, resume_step=step if ckpt_path is not None else None, tensorboard=False)
     info = {"config": cfg.to_dict(), "loss": loss_cfg.to_dict(), "base_checkpoint": str(checkpoint),
             "base_fingerprint": base_fp, "sequence": str(root),
             "frames": [int(seq.frames[0]), int(seq.frames[-1])], "num_frames": n,
-            "keypoints": agreement_summary(masks), "initial": initial}
+            "heldout_frames": [int(seq.frames[held_pos[0]]), int(seq.frames[held_pos[-1]])] if len(held_pos) else [],
+            "num_heldout": len(held), "keypoints": agreement_summary(masks), "pixels": pixels,
+            "camera_K": K_net_np.tolist(), "initial": initial, "selection": selection}
+
+    def state_dict() -> dict:
+        return {"model": model.state_dict(), "optimizer": optimizer.state_dict(), "rng": [capture_rng_state()],
+                "step": step, "epoch": epoch, "batch_in_epoch": batch_in_epoch, "config": train_cfg.to_dict(),
+                "world_size": 1, "input_size": input_size, "camera_K": K_net_np.tolist(), "finetune": info}
 
     def save() -> Path:
-        return save_checkpoint(out_dir, {
-            "model": model.state_dict(), "optimizer": optimizer.state_dict(), "rng": [capture_rng_state()],
-            "step": step, "epoch": epoch, "batch_in_epoch": batch_in_epoch, "config": train_cfg.to_dict(),
-            "world_size": 1, "input_size": input_size, "finetune": info}, keep=cfg.keep_checkpoints)
+        return save_checkpoint(out_dir, state_dict(), keep=cfg.keep_checkpoints)
 
+    def select() -> None:
+        """Held-out 2D loss of the current weights (the only input of the choice), then the
+        diagnostic (logged only); the best weights so far go to best.pt."""
+        if not len(held):
+            return
+        terms = evaluate(h_feats, h_P, h_targets)
+        row = {"step": step, "heldout_j2d": terms["j2d"], "heldout_total": terms["total"]}
+        best = selection["best_heldout_j2d"]
+        if best is None or terms["j2d"] < best:
+            selection["best_step"], selection["best_heldout_j2d"] = step, terms["j2d"]
+            with atomic_path(best_path) as tmp:
+                torch.save({"format_version": CHECKPOINT_FORMAT, "kit_version": kit_version(), **state_dict()}, tmp)
+        if diagnostic is not None:
+            row.update(_isolated(diagnostic, model))
+        row["selected"] = selection["best_step"]
+        selection["rows"] = [r for r in selection["rows"] if r["step"] != step] + [row]
+        _write_selection(out_dir, selection["rows"])
+
+    if ckpt_path is None:
+        select()  # the network before fine-tuning is a candidate too
+        seed_everything(_stream_seed(cfg.seed))  # the dropout / VPoser-sample stream
     bar = None
     if progress:
         from tqdm.auto import tqdm
@@ -467,7 +607,7 @@ def _finetune(checkpoint: Path, root: Path, out_dir: Path, cfg: FineTuneConfig, 
             order = epoch_permutation(n, cfg.seed, epoch)
             for b in range(batch_in_epoch, n // B):
                 idx = order[b * B:(b + 1) * B].to(device)
-                terms = _step_terms(model, loss_fn, feats[idx], P[idx], targets[idx], K, input_size)
+                terms = _step_terms(model, loss_fn, feats[idx], P[idx], targets[idx], K, input_size, K_net, r_px)
                 optimizer.zero_grad(set_to_none=True)
                 terms["total"].backward()
                 optimizer.step()
@@ -483,6 +623,8 @@ def _finetune(checkpoint: Path, root: Path, out_dir: Path, cfg: FineTuneConfig, 
                     bar.set_postfix(loss=f"{values['total']:.4g}")
                 done = step >= cfg.steps
                 stopped = stop_at is not None and step >= stop_at and not done
+                if step % cfg.checkpoint_every == 0 or done:
+                    select()  # not at an interruption: a resumed run selects where a straight one does
                 if step % cfg.checkpoint_every == 0 or done or stopped:
                     checkpoint_out = save()
                 if done or stopped:
@@ -497,12 +639,16 @@ def _finetune(checkpoint: Path, root: Path, out_dir: Path, cfg: FineTuneConfig, 
             bar.close()
         logger.close()
 
-    final = None if stopped else evaluate_finetune_loss(model, loss_fn, feats, P, targets, K, input_size,
-                                                        cfg.eval_batch_size)
+    final = None if stopped else evaluate(feats, P, targets)
+    rows = selection["rows"]
     result = FineTuneResult(out_dir=out_dir, checkpoint=checkpoint_out, step=step, num_frames=n, initial=initial,
                             final=final, history=_history(out_dir / "log.csv"), keypoints=info["keypoints"],
                             config=cfg.to_dict(), loss=loss_cfg.to_dict(), stopped_early=stopped,
-                            seconds=time.time() - t0)
+                            seconds=time.time() - t0,
+                            best_checkpoint=best_path if selection["best_step"] is not None else None,
+                            best_step=selection["best_step"], best_heldout_j2d=selection["best_heldout_j2d"],
+                            selection={k: [r.get(k) for r in rows] for k in dict.fromkeys(k for r in rows for k in r)},
+                            pixels=pixels, heldout_frames=len(held))
     with atomic_path(out_dir / "result.json") as tmp:
         tmp.write_text(json.dumps(result.to_json(), indent=2, default=str))
     return result

@@ -13,6 +13,8 @@ from .crop import (
     full_to_crop_pixels,
     full_to_crop_translation,
     translation_to_weak_perspective,
+    virtual_camera_map,
+    virtual_crop,
     weak_perspective_to_translation,
 )
 from .rotations import (
@@ -59,6 +61,8 @@ __all__ = [
     "full_to_crop_translation",
     "weak_perspective_to_translation",
     "translation_to_weak_perspective",
+    "virtual_camera_map",
+    "virtual_crop",
     # transforms
     "make_transform",
     "split_transform",

@@ -33,6 +33,14 @@ Substituting (1) into (2): ``fx x / z = fx x_c / z + bx cx``, hence
 where the body origin lies for a camera with the *full-image* focal length and the principal point
 at the crop centre (the crop magnifies by s, so the person looks as if at depth ``z / s``); the
 lateral offset re-centres from the crop centre to the principal point.
+
+One rule for any camera: the network's virtual camera
+-----------------------------------------------------
+A network learns P and the crop for the camera of its training data (``K_net``: f = 1475 px,
+1920x1080). :func:`virtual_crop` forms them for any other camera ``K`` in a *virtual* camera with
+the same centre and orientation and intrinsics ``K_net``: the real image mapped by
+``H = K_net K^-1`` (a scale ``f_net / f`` about the principal point, moved to ``K_net``'s).
+See its docstring for why the predicted translation is then the real camera's.
 """
 
 from __future__ import annotations
@@ -52,6 +60,8 @@ __all__ = [
     "full_to_crop_translation",
     "weak_perspective_to_translation",
     "translation_to_weak_perspective",
+    "virtual_camera_map",
+    "virtual_crop",
 ]
 
 
@@ -302,3 +312,64 @@ def translation_to_weak_perspective(
     tx = x - bx * cx * z / fx
     ty = y - by * cy * z / fy
     return torch.stack(torch.broadcast_tensors(sw, tx, ty), dim=-1)
+
+
+def virtual_camera_map(K: Tensor, K_net: Tensor) -> Tensor:
+    """Homogeneous map ``H = K_net K^-1`` from pixels of camera K to pixels of the virtual camera
+    ``K_net`` with the same centre and orientation (skew ignored, as in :func:`split_intrinsics`).
+
+    ``u' = (fx' / fx) (u - cx) + cx'`` (same for v): both cameras see the ray of ``u`` at ``u'``.
+
+    Args:
+        K: ``(..., 3, 3)`` intrinsics of the real image.
+        K_net: ``(..., 3, 3)`` intrinsics of the virtual (the network's training) camera.
+
+    Returns:
+        ``(..., 3, 3)``.
+    """
+    fx, fy, cx, cy = split_intrinsics(K)
+    gx, gy, dx, dy = split_intrinsics(K_net)
+    kx, ky = gx / fx, gy / fy
+    kx, ky, tx, ty = torch.broadcast_tensors(kx, ky, dx - kx * cx, dy - ky * cy)
+    zero, one = torch.zeros_like(kx), torch.ones_like(kx)
+    rows = (torch.stack((kx, zero, tx), dim=-1), torch.stack((zero, ky, ty), dim=-1),
+            torch.stack((zero, zero, one), dim=-1))
+    return torch.stack(rows, dim=-2)
+
+
+def virtual_crop(bbox: Tensor, K: Tensor, K_net: Tensor, input_size: float = 224) -> tuple[Tensor, Tensor]:
+    """The network input of a box seen by any camera: crop map and P formed in the virtual camera.
+
+    The box is mapped into the virtual camera ``K_net`` (:func:`virtual_camera_map`, ``H``), and
+    the crop and ``P`` are those of the mapped box there: ``A = crop_affine_matrix(H bbox) H``
+    (real-image pixels -> crop pixels) and ``P = crop_vector(H bbox, K_net)``.
+
+    Why this is the right input, and why the output needs no correction: the virtual camera has
+    the real camera's centre and orientation, so a point has the same camera-frame coordinates in
+    both; only the pixels it lands on differ, by ``H``. A person at ``tau`` therefore gives, in
+    the virtual camera, exactly the box and P that a training camera (``K_net``) would give for a
+    person at ``tau``; the crop content is the same as in the real image (cropping scales the box
+    to S pixels anyway, so ``H``'s scale cancels; only a non-square-pixel ``K`` is resampled
+    anisotropically to square pixels). The network, trained on ``K_net``, sees a training-like
+    input and predicts ``tau`` in the virtual camera's frame, which *is* the real camera's frame:
+    no focal term to undo. With ``K = K_net`` this is :func:`crop_affine_matrix` and
+    :func:`crop_vector` unchanged. The weak-perspective conversion must then use ``K_net`` with
+    this P (:func:`weak_perspective_to_translation`); projecting the predicted body uses ``K``.
+
+    Args:
+        bbox: ``(..., 4)`` ``[x0, y0, x1, y1]`` in pixels of the real image.
+        K: ``(..., 3, 3)`` intrinsics of the real image.
+        K_net: ``(..., 3, 3)`` intrinsics of the camera the network was trained with.
+        input_size: crop side S.
+
+    Returns:
+        ``A (..., 3, 3)`` real-image pixels -> crop pixels (``A[:2]`` for ``cv2.warpAffine``) and
+        ``P (..., 3)`` ``[bx, by, s]`` in the virtual camera.
+    """
+    H = virtual_camera_map(K, K_net).to(bbox.dtype)
+    kx, ky, tx, ty = H[..., 0, 0], H[..., 1, 1], H[..., 0, 2], H[..., 1, 2]
+    x0, y0, x1, y1 = bbox.unbind(-1)
+    box_v = torch.stack(torch.broadcast_tensors(kx * x0 + tx, ky * y0 + ty, kx * x1 + tx, ky * y1 + ty), dim=-1)
+    A = crop_affine_matrix(box_v, input_size) @ H
+    P = crop_vector(box_v, K_net.to(bbox.dtype), input_size)
+    return A, P

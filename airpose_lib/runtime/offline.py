@@ -23,7 +23,8 @@ __all__ = ["offline_inputs", "offline_staged", "offline_batched", "max_abs_diffe
 
 
 def offline_inputs(source, frame_index: np.ndarray, input_size: int, boxes: np.ndarray | None = None,
-                   min_confidence: float = 0.2, margin_px: float = 20.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                   min_confidence: float = 0.2, margin_px: float = 20.0,
+                   K_net: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Crops and crop vectors of the given frames.
 
     Args:
@@ -32,6 +33,7 @@ def offline_inputs(source, frame_index: np.ndarray, input_size: int, boxes: np.n
         input_size: S.
         boxes: optional ``(F, V, 4)`` boxes to use (e.g. the drones' records); default: from the
             detections of each frame (a frame without one keeps the previous row's box).
+        K_net: the network's camera (:func:`~.source.crop_input`; default ``network_camera()``).
 
     Returns:
         ``crops (F, V, 3, S, S)`` float32, ``P (F, V, 3)`` float32, ``boxes (F, V, 4)``.
@@ -53,7 +55,7 @@ def offline_inputs(source, frame_index: np.ndarray, input_size: int, boxes: np.n
             if box is None:
                 raise ValueError(f"view {v} frame {i}: no detection and no earlier box; pass the boxes")
             last = box
-            c, p = crop_input(image, box, view.K, input_size)
+            c, p = crop_input(image, box, view.K, input_size, K_net)
             crops[f, v], P[f, v], out_boxes[f, v] = c[0], p[0], box
     return crops, P, out_boxes
 

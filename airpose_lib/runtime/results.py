@@ -10,8 +10,9 @@ per-stage list of drones whose messages were used, the :data:`FLAGS`, the crop (
 and this view's outputs with the network's keys (``phi6d (6)``, ``theta6d (21, 6)``,
 ``beta (10)``, ``tau (3)`` or ``cam (3)``). :func:`predictions` turns a file into the same dict
 of tensors as ``AirPoseNet.forward`` for one view (leading ``(N,)``), plus ``P (N, 3)`` and
-``K (N, 3, 3)``, so ``model.to_smplx_params(pred, pred["P"], pred["K"])`` and ``eval`` read it
-like offline predictions; :func:`merge_views` joins the drones' files into ``(F, V, ...)``.
+``K (N, 3, 3)`` (the camera's) and ``K_net (N, 3, 3)`` (the network's virtual camera that P
+refers to, :func:`~.source.crop_input`), so ``model.to_smplx_params(pred, pred["P"], pred["K_net"])``
+and ``eval`` read it like offline predictions; :func:`merge_views` joins the drones' files into ``(F, V, ...)``.
 """
 from __future__ import annotations
 
@@ -22,6 +23,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+
+from .source import network_camera
 
 __all__ = [
     "FLAGS",
@@ -234,7 +237,8 @@ def predictions(res: NodeResults, valid_only: bool = True) -> dict:
     """One drone's outputs as the network's output dict with a leading ``(N,)``.
 
     Returns torch tensors ``phi6d (N, 6)``, ``theta6d (N, 21, 6)``, ``beta (N, 10)``,
-    ``tau (N, 3)`` or ``cam (N, 3)``, ``P (N, 3)``, ``K (N, 3, 3)`` and numpy ``frame_index``,
+    ``tau (N, 3)`` or ``cam (N, 3)``, ``P (N, 3)``, ``K (N, 3, 3)``, ``K_net (N, 3, 3)`` (the
+    virtual camera of P: convert a weak camera with it) and numpy ``frame_index``,
     ``stamp``, ``slot``, ``flags``; ``input_size`` (int). With ``valid_only`` only frames completed
     in time (and not skipped) are kept.
     """
@@ -247,6 +251,8 @@ def predictions(res: NodeResults, valid_only: bool = True) -> dict:
             out[key] = torch.from_numpy(np.ascontiguousarray(res.frames[key][keep]))
     K = np.asarray(res.meta.get("K", np.eye(3)), np.float32)
     out["K"] = torch.from_numpy(np.broadcast_to(K, (int(keep.sum()), 3, 3)).copy())
+    K_net = np.asarray(res.meta.get("K_net", network_camera()), np.float32)
+    out["K_net"] = torch.from_numpy(np.broadcast_to(K_net, (int(keep.sum()), 3, 3)).copy())
     for key in ("frame_index", "stamp", "slot", "flags"):
         out[key] = res.frames[key][keep]
     out["input_size"] = int(res.meta.get("input_size", 224))
@@ -261,7 +267,7 @@ def merge_views(results: list[NodeResults], valid_only: bool = True) -> dict:
     Returns numpy ``slot (F,)``, ``frame_index (F, V)``, ``stamp (F, V)``, ``flags (F, V)``,
     ``used_s2 / used_s3 (F, V)`` (masks), ``bbox (F, V, 4)`` and
     the params ``phi6d (F, V, 6)``, ``theta6d (F, V, 21, 6)``, ``beta``, ``tau``/``cam``, ``P``,
-    plus ``K (V, 3, 3)``.
+    plus ``K (V, 3, 3)`` and ``K_net (V, 3, 3)`` (the virtual camera of P).
     """
     results = sorted(results, key=lambda r: r.meta.get("view", 0))
     rows = []
@@ -285,4 +291,5 @@ def merge_views(results: list[NodeResults], valid_only: bool = True) -> dict:
             cols.append(col)
         out[key] = np.stack(cols, axis=1)
     out["K"] = np.stack([np.asarray(r.meta.get("K", np.eye(3)), np.float64) for r in results])
+    out["K_net"] = np.stack([np.asarray(r.meta.get("K_net", network_camera()), np.float64) for r in results])
     return out

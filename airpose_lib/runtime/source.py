@@ -11,8 +11,11 @@ the views of
   need no data on disk.
 
 :func:`person_box` turns detections into the person box and :func:`crop_input` turns the image
-and the box into the normalised ``(1, 3, S, S)`` crop and ``P (1, 3)`` (``geometry.crop_vector``),
-the same preprocessing as the still-frame training samples (aspect-preserving, black padding).
+and the box into the normalised ``(1, 3, S, S)`` crop and ``P (1, 3)``, the same preprocessing as
+the still-frame training samples (aspect-preserving, black padding), formed in the network's
+virtual camera (``geometry.virtual_crop``): any camera gives the input a training camera
+(:func:`network_camera`, f = 1475 px at 1920x1080) would give, and the predicted translation is
+in the real camera's frame.
 """
 from __future__ import annotations
 
@@ -30,6 +33,7 @@ __all__ = [
     "open_source",
     "person_box",
     "crop_input",
+    "network_camera",
     "IMAGENET_MEAN",
     "IMAGENET_STD",
 ]
@@ -259,28 +263,42 @@ def person_box(keypoints: np.ndarray | None, image_size: tuple[int, int], min_co
     return box
 
 
-def crop_input(image: np.ndarray, bbox: np.ndarray, K: np.ndarray, input_size: int) -> tuple[np.ndarray, np.ndarray]:
+def network_camera() -> np.ndarray:
+    """``(3, 3)`` intrinsics of the camera every kit and official network is trained with: the
+    still-frame data's (``data.scene.SceneConfig``: f = 1475 px, 1920x1080, principal point at
+    the image centre). A network trained otherwise records its own (``finetune.network``)."""
+    from airpose_lib.data.scene import SceneConfig
+
+    return SceneConfig().K
+
+
+def crop_input(image: np.ndarray, bbox: np.ndarray, K: np.ndarray, input_size: int,
+               K_net: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """The network input of one view.
 
     Args:
         image: ``(H, W, 3)`` uint8 RGB full frame.
         bbox: ``(4,)`` ``[x0, y0, x1, y1]`` full-frame pixels.
-        K: ``(3, 3)`` full-frame intrinsics.
+        K: ``(3, 3)`` full-frame intrinsics of ``image``.
         input_size: S.
+        K_net: ``(3, 3)`` intrinsics the network was trained with (default :func:`network_camera`).
 
     Returns:
-        ``crop (1, 3, S, S)`` float32 (RGB/255, ImageNet mean/std) and ``P (1, 3)`` float32
-        (``geometry.crop_vector``). The box is resized keeping its aspect ratio into the centre of
-        the S x S square (``geometry.crop_affine_matrix``) and everything outside the box is black.
+        ``crop (1, 3, S, S)`` float32 (RGB/255, ImageNet mean/std) and ``P (1, 3)`` float32, both
+        formed in the virtual camera ``K_net`` (``geometry.virtual_crop``; convert a weak camera
+        to a translation with ``K_net``). The box is resized keeping its aspect ratio into the
+        centre of the S x S square and everything outside the box is black.
     """
     import cv2
     import torch
 
-    from airpose_lib.geometry import crop_affine_matrix, crop_vector
+    from airpose_lib.geometry import virtual_crop
 
     box_t = torch.as_tensor(np.asarray(bbox, np.float64))
-    A = crop_affine_matrix(box_t, input_size).numpy()
-    P = crop_vector(box_t, torch.as_tensor(np.asarray(K, np.float64)), input_size).numpy()
+    K_net = network_camera() if K_net is None else K_net
+    A, P = virtual_crop(box_t, torch.as_tensor(np.asarray(K, np.float64)),
+                        torch.as_tensor(np.asarray(K_net, np.float64)), input_size)
+    A, P = A.numpy(), P.numpy()
     crop = cv2.warpAffine(image, A[:2], (input_size, input_size), flags=cv2.INTER_LINEAR,
                           borderMode=cv2.BORDER_CONSTANT, borderValue=0)
     # Black outside the box itself (the paper pads the resized box; warpAffine would show the

@@ -51,7 +51,7 @@ def _relative(a: np.ndarray, b: np.ndarray) -> float:
     return float(np.linalg.norm(a - b) / np.linalg.norm(b))
 
 
-def test_int8_graph_is_quantised_per_channel_in_the_backbone_only(exported):
+def test_int8_graph_is_quantised_per_channel_in_the_backbone_only(exported, tiny_still):
     folder, _ = exported
     graph = onnx.load(str(folder / "stage1_int8.onnx")).graph
     inits = {i.name: i for i in graph.initializer}
@@ -70,7 +70,9 @@ def test_int8_graph_is_quantised_per_channel_in_the_backbone_only(exported):
             assert all(produced_by.get(i) is None or produced_by[i].op_type != "DequantizeLinear" for i in n.input)
     meta = json.loads((folder / "meta.json").read_text())
     info = meta["stage1"]["int8"]
-    assert info["settings"] == QuantSettings().to_dict() and info["calibration"]["crops"] == 16
+    images, P = calibration_crops(tiny_still, S, samples=8)
+    assert info["settings"] == QuantSettings().to_dict() and info["calibration"]["crops"] == len(images) >= 8
+    assert info["calibration"]["sha256"] == calibration_digest(images, P)
 
 
 def test_int8_agrees_with_float32_on_fixed_inputs(exported, tiny_still):

@@ -100,7 +100,7 @@ def _latency(runtimes, backbone: str, size: int, repeat: int, threads: int, fold
     P = np.array([[0.1, -0.1, 1.0]], np.float32)
     args = {rt: ((torch.from_numpy(x), torch.from_numpy(P)) if rt.startswith("torch") else (x, P)) for rt in runtimes}
     result: dict[str, dict] = {rt: {} for rt in runtimes}
-    for n in (threads, 1):
+    for n in sorted({threads, 1}, reverse=True):
         torch.set_num_threads(n)  # torch's threads are per process: every torch node uses n
         nodes = _nodes(runtimes, backbone, size, n, folders)
         for rt, node in nodes.items():
@@ -111,7 +111,7 @@ def _latency(runtimes, backbone: str, size: int, repeat: int, threads: int, fold
             s23 = _interleaved_ms({rt: _later(node) for rt, node in nodes.items()}, max(repeat * 10, 50))
             for rt in runtimes:
                 result[rt]["s1"], result[rt]["s23"] = s1[rt], s23[rt]
-        else:
+        if n == 1:
             for rt in runtimes:
                 result[rt]["s1_cpu1"] = s1[rt][2]
     torch.set_num_threads(threads)

@@ -53,6 +53,9 @@ def main() -> int:
     parser.add_argument("--max-samples", type=int, default=None, help="(default: the whole split)")
     parser.add_argument("--calibration", default=None, help="still-frame dataset of the calibration crops")
     parser.add_argument("--calibration-samples", type=int, default=32)
+    parser.add_argument("--calibration-method", choices=("minmax", "percentile", "entropy"), default="minmax")
+    parser.add_argument("--quantize-regressor", action="store_true",
+                        help="quantise the regressor's layers too (default: backbone only)")
     parser.add_argument("--threads", type=int, default=2)
     args = parser.parse_args()
     if not Path(args.checkpoint).is_file():
@@ -64,6 +67,7 @@ def main() -> int:
     import pandas as pd
 
     from airpose_lib.eval import paper_table, per_view_table
+    from airpose_lib.model.quantize import QuantSettings
     from airpose_lib.runtime.backends import BackendSpec, make_stage_model
     from airpose_lib.runtime.edge import ensure_export
     from airpose_lib.train.evaluate import load_trained_model, predict
@@ -73,8 +77,9 @@ def main() -> int:
     dataset = default_dataset_factory(prepare_data(cfg, progress=False), args.split)
     spec = BackendSpec(kind="onnx-int8", checkpoint=args.checkpoint, threads=args.threads)
     t = time.time()
+    settings = QuantSettings(calibration=args.calibration_method, backbone_only=not args.quantize_regressor)
     folder = ensure_export(spec, calibration_root=args.calibration, calibration_samples=args.calibration_samples,
-                           progress=True)
+                           settings=settings, progress=True)
     print(f"export {folder} ({time.time() - t:.0f} s); load average {os.getloadavg()[0]:.2f}")
     runs = {"torch fp32": model,
             "ONNX fp32": StagedOnnx(make_stage_model(BackendSpec(**{**spec.to_dict(), "kind": "onnx",
@@ -88,7 +93,8 @@ def main() -> int:
         print(f"{name}: {len(tables[name])} views in {time.time() - t:.0f} s", flush=True)
 
     n = len(tables["ONNX int8"]) // max(dataset.num_views, 1)
-    print(f"\n{args.checkpoint}: {cfg.variant}, {cfg.backbone}, {args.split} split, {n} samples")
+    print(f"\n{args.checkpoint}: {cfg.variant}, {cfg.backbone}, {args.split} split, {n} samples; int8 "
+          f"settings {settings.to_dict()}, {args.calibration_samples} calibration samples")
     table = paper_table(pd.concat(tables.values()))
     print(table.to_string(float_format=lambda x: f"{x:.4f}"))
     mean = {k: t[["mpjpe_m", "mpe_m", "pa_mpjpe_m"]].mean() for k, t in tables.items()}

@@ -218,6 +218,8 @@ def add_export_arguments(p: argparse.ArgumentParser) -> None:
                    help="evenly spaced train samples, every view (default: 32)")
     p.add_argument("--calibration-method", choices=("minmax", "percentile", "entropy"), default="minmax")
     p.add_argument("--per-tensor", action="store_true", help="one weight scale per tensor, not per channel")
+    p.add_argument("--quantize-regressor", action="store_true",
+                   help="quantise stage 1's regressor layers too (default: the backbone only)")
     p.add_argument("--variant", default="airpose", help="(random weights) network variant")
     p.add_argument("--backbone", default="resnet18", help="(random weights) resnet18 | resnet34 | resnet50")
     p.add_argument("--input-size", type=int, default=128, help="crop side S (a checkpoint's own wins)")
@@ -250,7 +252,8 @@ def run_export(args: argparse.Namespace) -> int:
     spec = BackendSpec(kind="onnx-int8" if precision == "int8" else "onnx", variant=args.variant,
                        backbone=args.backbone, input_size=args.input_size, seed=args.seed,
                        checkpoint=args.checkpoint)
-    settings = QuantSettings(per_channel=not args.per_tensor, calibration=args.calibration_method)
+    settings = QuantSettings(per_channel=not args.per_tensor, calibration=args.calibration_method,
+                             backbone_only=not args.quantize_regressor)
     try:
         folder = ensure_export(spec, precision, args.calibration, args.calibration_samples, settings,
                                root=args.out, force=args.force, progress=True)

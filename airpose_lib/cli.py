@@ -502,6 +502,20 @@ def _add_launch(sub) -> None:
     launch.set_defaults(func=run_launch)
 
 
+def _add_export(sub) -> None:
+    from airpose_lib.runtime.options import add_export_arguments, run_export
+
+    export = sub.add_parser(
+        "export", help="export a network's drone stages to ONNX (optionally int8), cached",
+        description="Export stage 1 and stages 2+ of a network to ONNX, and with --quantize int8 a "
+                    "statically quantised stage 1 calibrated on the kit's still-frame crops, into "
+                    "<cache>/onnx/<name>-<key>/ keyed by the checkpoint's bytes, the calibration crops "
+                    "and the settings (reused when they match). Prints the folder, for "
+                    "`airpose node --backend onnx|onnx-int8 --onnx-dir DIR`.")
+    add_export_arguments(export)
+    export.set_defaults(func=run_export)
+
+
 # -- reproduce ------------------------------------------------------------------------------------
 def _cmd_reproduce(args: argparse.Namespace) -> int:
     from airpose_lib.reproduce import ReproductionError, load_catalog, load_profile, run_profile
@@ -558,7 +572,8 @@ def _add_reproduce(sub) -> None:
 from airpose_lib.finetune.cli import _add_finetune, _add_predict  # noqa: E402 - argparse only
 
 _SUBCOMMANDS: tuple[Callable, ...] = (_add_body, _add_data, _add_pretrain, _add_train, _add_eval, _add_prior, _add_fit,
-                                       _add_finetune, _add_predict, _add_node, _add_launch, _add_reproduce)
+                                       _add_finetune, _add_predict, _add_node, _add_launch, _add_export,
+                                       _add_reproduce)
 
 
 def build_parser() -> argparse.ArgumentParser:

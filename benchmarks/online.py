@@ -58,14 +58,11 @@ def _sequence(args) -> tuple[str, bool]:
     return str(path), True
 
 
-def _export(spec, out_dir: Path) -> str:
-    from airpose_lib.model.onnx_export import export_onnx
-    from airpose_lib.runtime.backends import build_torch_model
+def _export(spec, calibration: str | None = None) -> str:
+    """The cached export of ``spec``'s network (``airpose export``), int8 stage 1 for ``onnx-int8``."""
+    from airpose_lib.runtime.edge import ensure_export
 
-    d = out_dir / f"onnx_{spec.backbone}_{spec.input_size}_{spec.seed}"
-    if not (d / "meta.json").is_file():
-        export_onnx(build_torch_model(spec), d, spec.input_size)
-    return str(d)
+    return str(ensure_export(spec, calibration_root=calibration, progress=True))
 
 
 class Accuracy:
@@ -240,12 +237,16 @@ def main() -> None:
                         "a sequence folder with as many views as drones (default: generate)")
     p.add_argument("--sequence-frames", type=int, default=450, help="frames of the generated sequence (30 fps)")
     p.add_argument("--seconds", type=float, default=10.0, help="schedule length of each run")
-    p.add_argument("--backends", default="torch,onnx")
-    p.add_argument("--drones", default="2,3")
+    p.add_argument("--backends", default="torch,onnx", help="comma-separated: torch, onnx, onnx-int8")
+    p.add_argument("--calibration", default=None,
+                   help="still-frame dataset of the onnx-int8 calibration (default: the checkpoint's "
+                        "training data, else the smoke profile's)")
+    p.add_argument("--drones", default="2,3", help="comma-separated drone counts (ResNet-50: only the "
+                   "ONNX backends run more than 2)")
     p.add_argument("--no-r50", action="store_true", help="skip the ResNet-50 runs")
     p.add_argument("--no-accuracy", action="store_true")
     p.add_argument("--quick", action="store_true", help="2 drones, ResNet-18, 5 s runs")
-    p.add_argument("--checkpoint", default=None, help="trained weights (torch backend)")
+    p.add_argument("--checkpoint", default=None, help="trained weights (every backend)")
     p.add_argument("--f16-frames", type=int, default=40, help="frames for the float16 accuracy cost")
     p.add_argument("--out", default=str(ROOT / "runs" / "online_bench"))
     p.add_argument("--keep", action="store_true", help="keep the drones' .jsonl streams")
@@ -265,26 +266,27 @@ def main() -> None:
     configs = []
     extra = {"checkpoint": args.checkpoint} if args.checkpoint else {}
     for backbone, size in [("resnet18", 128)] + ([] if args.no_r50 else [("resnet50", 224)]):
-        if "onnx" in backends:
-            onnx[(backbone, size)] = _export(BackendSpec(kind="torch", backbone=backbone, input_size=size,
-                                                         checkpoint=args.checkpoint), out)
+        for backend in backends:
+            if backend.startswith("onnx"):
+                onnx[(backend, backbone, size)] = _export(BackendSpec(
+                    kind=backend, backbone=backbone, input_size=size, checkpoint=args.checkpoint), args.calibration)
         for backend in backends:
             for n in map(int, args.drones.split(",")):
-                if backbone == "resnet50" and n > 2:
+                if backbone == "resnet50" and n > 2 and not backend.startswith("onnx"):
                     continue
                 modes = [("fixed", {}), ("pipelined", {})]
                 if backbone == "resnet50":  # 20 fps cannot fit: the fastest pipelined rate that does
-                    modes.append(("pipelined", {"rate": 10.0, "latency_budget_ms": 250.0} if backend == "onnx"
+                    modes.append(("pipelined", {"rate": 10.0, "latency_budget_ms": 250.0} if backend.startswith("onnx")
                                   else {"rate": 5.0, "latency_budget_ms": 300.0}))
                 for mode, more in modes:
                     tag = f"_{more['rate']:g}hz" if more else ""
                     configs.append({"name": f"{backend}_{backbone}_{n}d_{mode}{tag}", "drones": n, "mode": mode,
                                     "backend": backend, "backbone": backbone, "size": size,
                                     "seconds": args.seconds,
-                                    "onnx_dir": onnx.get((backbone, size)) if backend == "onnx" else None,
+                                    "onnx_dir": onnx.get((backend, backbone, size)),
                                     "extra": {**extra, **more}})
     b0 = backends[-1]
-    od = onnx.get(("resnet18", 128)) if b0 == "onnx" else None
+    od = onnx.get((b0, "resnet18", 128))
     configs.append({"name": f"{b0}_resnet18_2d_pipelined_f16", "drones": 2, "mode": "pipelined", "backend": b0,
                     "backbone": "resnet18", "size": 128, "seconds": args.seconds, "dtype": "float16", "onnx_dir": od,
                     "extra": dict(extra)})

@@ -10,7 +10,9 @@ Two graphs per variant, static batch 1 (what runs on a drone):
 ``other`` is the mean of the other drones' messages (:func:`staged.fuse_message_list`). Inputs a
 variant does not use (P for the weak-camera variants, other for Baseline and Fullcam) stay in
 the signature and are ignored. ``meta.json`` next to the graphs records the variant, input size,
-number of stages and the mean message (the "other view" when no message arrives).
+number of stages, the mean message (the "other view" when no message arrives) and, under
+``stage1``, the stage-1 graph of each precision (``fp32``; ``int8`` once
+:func:`~.quantize.quantize_stage1` has run on the folder).
 
 Exported with PyTorch's TorchScript-based exporter (``dynamo=False``): the newer exporter needs
 the ``onnxscript`` package, which the kit does not install.
@@ -93,6 +95,7 @@ def export_onnx(model: AirPoseNet, out_dir: str | Path, input_size: int = 224) -
         "feature_dim": model.backbone.feature_dim,
         "state_dim": STATE_DIM,
         "mean_message": model.mean_message((1,))[0].tolist(),
+        "stage1": {"fp32": {"file": "stage1.onnx"}},
     }
     paths["meta"].write_text(json.dumps(meta, indent=1))
     return paths
@@ -105,18 +108,25 @@ class OnnxDroneNode:
         out_dir: folder written by :func:`export_onnx`.
         num_threads: intra-op threads of the ONNX Runtime sessions.
         message_dtype: ``"float32"`` or ``"float16"`` for the emitted messages.
+        precision: stage-1 graph to run, ``"fp32"`` or ``"int8"`` (:func:`~.quantize.quantize_stage1`);
+            stages 2+ are float32 either way.
     """
 
-    def __init__(self, out_dir: str | Path, num_threads: int = 2, message_dtype="float32"):
+    def __init__(self, out_dir: str | Path, num_threads: int = 2, message_dtype="float32", precision: str = "fp32"):
         import onnxruntime as ort
 
         out_dir = Path(out_dir)
         self.meta = json.loads((out_dir / "meta.json").read_text())
+        files = self.meta.get("stage1", {"fp32": {"file": "stage1.onnx"}})  # older exports: fp32 only
+        if precision not in files:
+            raise FileNotFoundError(f"{out_dir}: no {precision} stage 1 (has {sorted(files)}); make it with "
+                                    f"`airpose export --quantize {precision}`")
+        self.precision = precision
         opts = ort.SessionOptions()
         opts.intra_op_num_threads = num_threads
         opts.inter_op_num_threads = 1
         providers = ["CPUExecutionProvider"]
-        self._s1 = ort.InferenceSession(str(out_dir / "stage1.onnx"), opts, providers=providers)
+        self._s1 = ort.InferenceSession(str(out_dir / files[precision]["file"]), opts, providers=providers)
         self._sk = ort.InferenceSession(str(out_dir / "stage_next.onnx"), opts, providers=providers)
         self._s1_inputs = {i.name for i in self._s1.get_inputs()}
         self._sk_inputs = {i.name for i in self._sk.get_inputs()}

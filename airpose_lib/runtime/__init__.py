@@ -6,7 +6,8 @@ liveness), ``source`` (frame sources: the official-layout sequences of ``airpose
 procedural stand-in; person box and crop), ``backends`` (the staged-model protocol: torch,
 ONNX Runtime or a fast fake), ``node`` (one drone: ``airpose node``), ``launcher`` (N drones on
 loopback: ``airpose launch``), ``results`` (the per-drone record stream and its readers),
-``offline`` (the same frames computed in one process, the reference), ``options`` (CLI).
+``offline`` (the same frames computed in one process, the reference), ``edge`` (the cached,
+optionally int8-quantised ONNX export of a drone's network), ``options`` (CLI).
 
 Names are imported lazily, so ``import airpose_lib.runtime`` is cheap (the CLI builds its parser
 from ``options`` without importing ZeroMQ or torch).
@@ -16,5 +17,5 @@ from __future__ import annotations
 from airpose_lib._lazy import lazy_namespace
 
 _MODULES = ("wire", "transport", "sync", "source", "backends", "node", "launcher", "results", "offline",
-            "options")
+            "edge", "options")
 __getattr__, __dir__ = lazy_namespace(__name__, globals(), _MODULES)

@@ -1,11 +1,15 @@
 """What a drone runs: anything with the staged API of :class:`airpose_lib.model.DroneNode`.
 
-:class:`StageModel` is that API as a protocol. Three backends provide it:
+:class:`StageModel` is that API as a protocol. Four backends provide it:
 
 * ``torch``: :class:`airpose_lib.model.DroneNode` around an :class:`~airpose_lib.model.AirPoseNet`
   (random weights from a seed, or a checkpoint);
 * ``onnx``: :class:`airpose_lib.model.onnx_export.OnnxDroneNode` on graphs written by
   ``export_onnx`` (ONNX Runtime, no torch at inference);
+* ``onnx-int8``: the same with stage 1 statically quantised to int8
+  (:mod:`airpose_lib.model.quantize`, calibrated on the kit's crops);
+  without ``onnx_dir`` both ONNX kinds export (and calibrate) the network into the kit cache
+  on first use (:func:`airpose_lib.runtime.edge.ensure_export`);
 * ``fake``: :class:`FakeStageModel`, a few small matrix products with the same inputs, outputs and
   message dependence, so that the runtime's tests run in milliseconds per frame.
 
@@ -25,6 +29,7 @@ import numpy as np
 from .wire import MESSAGE_VALUES
 
 __all__ = [
+    "ONNX_PRECISIONS",
     "StageModel",
     "BackendSpec",
     "FakeStageModel",
@@ -35,6 +40,9 @@ __all__ = [
     "to_numpy",
     "warm_up",
 ]
+
+#: stage-1 precision of each ONNX Runtime backend kind.
+ONNX_PRECISIONS = {"onnx": "fp32", "onnx-int8": "int8"}
 
 
 @runtime_checkable
@@ -154,15 +162,17 @@ class BackendSpec:
     """How a node builds its :class:`StageModel` (all drones of a run use the same spec).
 
     Args:
-        kind: ``"torch"``, ``"onnx"`` or ``"fake"``.
+        kind: ``"torch"``, ``"onnx"``, ``"onnx-int8"`` or ``"fake"``.
         variant: network variant (torch): ``"airpose"`` (default), ``"fullcam"``, ...
         backbone: ``"resnet18"``, ``"resnet34"`` or ``"resnet50"`` (torch).
         input_size: crop side S in pixels.
         seed: seed of the random weights when no checkpoint is given (torch, fake).
         checkpoint: a ``state_dict`` file (``torch.save``; a dict with ``model`` or
             ``state_dict`` inside is unwrapped, e.g. a training checkpoint, whose ``config``
-            then gives variant, backbone and crop size) for the torch backend.
-        onnx_dir: folder written by ``model.onnx_export.export_onnx`` (onnx backend).
+            then gives variant, backbone and crop size) for the torch backend, and for the ONNX
+            backends when ``onnx_dir`` is not given.
+        onnx_dir: folder written by ``model.onnx_export.export_onnx`` (``onnx``), with
+            ``stage1_int8.onnx`` for ``onnx-int8`` (``airpose export --quantize int8``).
         threads: intra-op threads (torch / ONNX Runtime).
         message_dtype: ``"float32"`` (paper) or ``"float16"``.
         fake_compute_ms: sleep per stage 1 of the fake backend.
@@ -237,13 +247,20 @@ def make_stage_model(spec: BackendSpec) -> StageModel:
 
         torch.set_num_threads(spec.threads)
         return DroneNode(build_torch_model(spec), message_dtype=spec.message_dtype)
-    if spec.kind == "onnx":
+    if spec.kind in ONNX_PRECISIONS:
         from airpose_lib.model.onnx_export import OnnxDroneNode
 
-        if not spec.onnx_dir or not (Path(spec.onnx_dir) / "meta.json").exists():
-            raise FileNotFoundError(f"onnx backend needs an export folder with meta.json, got {spec.onnx_dir!r}")
-        return OnnxDroneNode(spec.onnx_dir, num_threads=spec.threads, message_dtype=spec.message_dtype)
-    raise ValueError(f"unknown backend {spec.kind!r}: choose torch, onnx or fake")
+        folder = spec.onnx_dir
+        if not folder:
+            from .edge import ensure_export
+
+            folder = ensure_export(spec)
+        elif not (Path(folder) / "meta.json").exists():
+            raise FileNotFoundError(f"{spec.kind} backend: no meta.json in {folder} (make the folder with "
+                                    f"`airpose export`, or leave --onnx-dir out to export into the cache)")
+        return OnnxDroneNode(folder, num_threads=spec.threads, message_dtype=spec.message_dtype,
+                             precision=ONNX_PRECISIONS[spec.kind])
+    raise ValueError(f"unknown backend {spec.kind!r}: choose torch, onnx, onnx-int8 or fake")
 
 
 def warm_up(model: StageModel, input_size: int) -> None:

@@ -1,4 +1,4 @@
-"""Command-line options of ``airpose node`` and ``airpose launch`` (argparse only at import time,
+"""Command-line options of ``airpose node``, ``airpose launch`` and ``airpose export`` (argparse only at import time,
 so that ``airpose --help`` stays fast; the runtime is imported by the handlers)."""
 from __future__ import annotations
 
@@ -15,6 +15,8 @@ __all__ = [
     "config_from_args",
     "run_node",
     "run_launch",
+    "add_export_arguments",
+    "run_export",
 ]
 
 
@@ -72,13 +74,15 @@ def add_node_arguments(p: argparse.ArgumentParser) -> None:
                    help="decode the replayed frames into memory before the start (a camera delivers "
                         "raw frames; without it JPEG decoding counts as acquisition)")
     m = p.add_argument_group("network")
-    m.add_argument("--backend", choices=("torch", "onnx", "fake"), default="torch")
+    m.add_argument("--backend", choices=("torch", "onnx", "onnx-int8", "fake"), default="torch",
+                   help="onnx / onnx-int8: ONNX Runtime with a float32 / int8 stage 1, from --onnx-dir or "
+                        "exported (and calibrated) into the kit cache on first use (`airpose export`)")
     m.add_argument("--variant", default="airpose")
     m.add_argument("--backbone", default="resnet18", help="resnet18 | resnet34 | resnet50 (default: resnet18)")
     m.add_argument("--input-size", type=int, default=128, help="crop side S in pixels (default: 128)")
     m.add_argument("--seed", type=int, default=0, help="seed of the random weights when no checkpoint is given")
-    m.add_argument("--checkpoint", default=None, help="model state_dict (torch backend)")
-    m.add_argument("--onnx-dir", default=None, help="folder written by model.onnx_export.export_onnx")
+    m.add_argument("--checkpoint", default=None, help="model state_dict or training checkpoint")
+    m.add_argument("--onnx-dir", default=None, help="folder written by `airpose export`")
     m.add_argument("--threads", type=int, default=1, help="intra-op threads per drone (default: 1)")
     m.add_argument("--message-dtype", choices=("float32", "float16"), default="float32")
     m.add_argument("--fake-compute-ms", type=float, default=0.0, help=argparse.SUPPRESS)
@@ -197,3 +201,64 @@ def format_summaries(summaries: dict[int, dict]) -> str:
                     f"{ms(s['latency_p50'])}  {ms(s['latency_p95'])}  {s['fallback_frames']:<8}  "
                     f"{s['bytes_per_frame'] or 0:<11.0f}  {json.dumps(s['rejected'])}")
     return "\n".join(rows)
+
+
+# -- export ------------------------------------------------------------------------------------
+def add_export_arguments(p: argparse.ArgumentParser) -> None:
+    """Options of ``airpose export``."""
+    p.add_argument("--checkpoint", default=None,
+                   help="training checkpoint or state_dict (default: random weights from --seed)")
+    p.add_argument("--quantize", choices=("none", "int8"), default="none",
+                   help="int8: also write a statically quantised stage 1 (ONNX Runtime QDQ, per-channel "
+                        "weights) calibrated on still-frame crops (default: none)")
+    p.add_argument("--calibration", default=None, metavar="DIR",
+                   help="still-frame dataset of the calibration crops (default: the checkpoint's training "
+                        "data, else the smoke profile's dataset)")
+    p.add_argument("--calibration-samples", type=int, default=32,
+                   help="evenly spaced train samples, every view (default: 32)")
+    p.add_argument("--calibration-method", choices=("minmax", "percentile", "entropy"), default="minmax")
+    p.add_argument("--per-tensor", action="store_true", help="one weight scale per tensor, not per channel")
+    p.add_argument("--quantize-regressor", action="store_true",
+                   help="quantise stage 1's regressor layers too (default: the backbone only)")
+    p.add_argument("--variant", default="airpose", help="(random weights) network variant")
+    p.add_argument("--backbone", default="resnet18", help="(random weights) resnet18 | resnet34 | resnet50")
+    p.add_argument("--input-size", type=int, default=128, help="crop side S (a checkpoint's own wins)")
+    p.add_argument("--seed", type=int, default=0, help="(random weights) seed")
+    p.add_argument("--out", default=None, help="parent folder (default: <cache>/onnx)")
+    p.add_argument("--force", action="store_true", help="rebuild even if the folder exists")
+
+
+def run_export(args: argparse.Namespace) -> int:
+    """Handler of ``airpose export``: prints the export folder (use it as --onnx-dir)."""
+    import sys
+    from pathlib import Path
+
+    from .backends import BackendSpec
+
+    if args.checkpoint and not Path(args.checkpoint).is_file():
+        print(f"airpose export: error: no checkpoint at {args.checkpoint} (pass a checkpoints/*.pt of "
+              "`airpose train`)", file=sys.stderr)
+        return 2
+    if args.calibration and not (Path(args.calibration) / "manifest.yaml").is_file():
+        print(f"airpose export: error: {args.calibration} is not a still-frame dataset (no manifest.yaml); "
+              "make one with `airpose data generate --profile smoke`", file=sys.stderr)
+        return 2
+    from airpose_lib.data.manifest import DatasetError
+    from airpose_lib.model.quantize import QuantSettings
+
+    from .edge import ensure_export
+
+    precision = "int8" if args.quantize == "int8" else "fp32"
+    spec = BackendSpec(kind="onnx-int8" if precision == "int8" else "onnx", variant=args.variant,
+                       backbone=args.backbone, input_size=args.input_size, seed=args.seed,
+                       checkpoint=args.checkpoint)
+    settings = QuantSettings(per_channel=not args.per_tensor, calibration=args.calibration_method,
+                             backbone_only=not args.quantize_regressor)
+    try:
+        folder = ensure_export(spec, precision, args.calibration, args.calibration_samples, settings,
+                               root=args.out, force=args.force, progress=True)
+    except (FileNotFoundError, DatasetError) as e:
+        print(f"airpose export: error: {e}", file=sys.stderr)
+        return 2
+    print(folder)
+    return 0

@@ -151,8 +151,8 @@ def _populate(plotter, scene: RecordingScene, i: int) -> dict:
         if scene.estimates is not None:
             data[f"est{v}"] = pv.PolyData(scene.estimates[i, v].copy(), _faces_pv(scene.faces))
             plotter.add_mesh(data[f"est{v}"], color=colour, opacity=0.55, smooth_shading=True,
-                             label=f"{scene.method} from UAV{v + 1}")
-    plotter.add_legend(bcolor="white", face="rectangle", size=(0.28, 0.2))
+                             label=f"UAV{v + 1}: {scene.method}")
+    plotter.add_legend(bcolor="white", face="rectangle", size=(0.34, 0.22), loc="lower right")
     return data
 
 
@@ -165,14 +165,19 @@ def _update(data: dict, scene: RecordingScene, i: int) -> None:
             data[f"est{v}"].points = scene.estimates[i, v]
 
 
-def _set_view(plotter, scene: RecordingScene, i: int) -> None:
-    """Look at the person from above and behind UAV1 (Y up)."""
-    target = scene.person_path[i] if i is not None else scene.person_path.mean(0)
-    c1 = scene.camera_centres()[i, 0]
-    back = c1 - target
-    back[1] = 0
-    back = back / (np.linalg.norm(back) + 1e-9)
-    eye = target + 14.0 * back + np.array([0.0, 9.0, 0.0])
+def _set_view(plotter, scene: RecordingScene) -> None:
+    """One fixed view of the whole recording: from the side of the line between the drones,
+    raised 35 degrees, far enough to see both drones and the person (Y up)."""
+    centres = scene.camera_centres()
+    target = scene.person_path.mean(0)
+    across = (centres[:, 0] - centres[:, 1]).mean(0)
+    side = np.cross(across, [0.0, 1.0, 0.0])
+    side[1] = 0.0
+    side = side / (np.linalg.norm(side) + 1e-9)
+    extent = float(np.ptp(np.concatenate([centres.reshape(-1, 3), scene.person_path]), axis=0).max())
+    dist = 1.8 * extent + 6.0
+    elev = np.deg2rad(35.0)
+    eye = target + dist * (np.cos(elev) * side + np.array([0.0, np.sin(elev), 0.0]))
     plotter.camera_position = [tuple(eye), tuple(target), (0.0, 1.0, 0.0)]
 
 
@@ -184,7 +189,7 @@ def show_interactive(scene: RecordingScene, window_size: tuple[int, int] = (900,
     pv.set_jupyter_backend("trame")
     plotter = pv.Plotter(notebook=True, off_screen=False, window_size=list(window_size))
     data = _populate(plotter, scene, 0)
-    _set_view(plotter, scene, 0)
+    _set_view(plotter, scene)
     slider = widgets.IntSlider(value=0, min=0, max=scene.num_frames - 1, step=1, description="frame",
                                continuous_update=False, layout=widgets.Layout(width="60%"))
     label = widgets.Label()
@@ -214,9 +219,9 @@ def plot_static_frames(scene: RecordingScene, n_frames: int = 3, image_size: tup
     plotter = pv.Plotter(off_screen=True, window_size=list(image_size))
     try:
         data = _populate(plotter, scene, int(idx[0]))
+        _set_view(plotter, scene)
         for ax, i in zip(axes[0], idx):
             _update(data, scene, int(i))
-            _set_view(plotter, scene, int(i))
             ax.imshow(plotter.screenshot(return_img=True))
             ax.set_title(f"image {int(scene.frames[i])} ({scene.time_s[i]:.1f} s)")
             ax.set_axis_off()

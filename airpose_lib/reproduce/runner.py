@@ -263,13 +263,17 @@ def notebook_outputs(path: Path) -> list[int]:
 def kernel_environment(extra: dict[str, str] | None = None) -> Iterator[dict[str, str]]:
     """Temporarily set the environment the notebook kernels inherit, then restore it.
 
-    VTK renders through EGL without an X server, matplotlib uses Agg, and the checkout is put on
-    ``PYTHONPATH`` so the kernel imports this kit even when it is not pip-installed.
+    VTK renders through EGL without an X server, matplotlib uses Agg, progress bars print a text
+    line every few seconds (a widget bar would be saved as a dead widget), interactive views draw
+    their static fallback, and the checkout is put on ``PYTHONPATH`` so the kernel imports this kit
+    even when it is not pip-installed.
     """
     env = {
         "PYVISTA_OFF_SCREEN": "true",
         "VTK_DEFAULT_OPENGL_WINDOW": "vtkEGLRenderWindow",
         "MPLBACKEND": "Agg",
+        "AIRPOSE_PROGRESS": "log",
+        "AIRPOSE_INTERACTIVE": "0",
     }
     if (REPO_ROOT / "airpose_lib").is_dir():
         paths = [str(REPO_ROOT)] + [p for p in os.environ.get("PYTHONPATH", "").split(os.pathsep) if p]

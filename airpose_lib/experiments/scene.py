@@ -62,7 +62,7 @@ def recording_scene(sequence, estimate: Mapping | None = None, method: str | Non
                            image_size=image_size.astype(np.int64),
                            person_path=np.asarray(gt["pelvis_world"], np.float64)[idx, 0]
                            if np.asarray(gt["pelvis_world"]).ndim == 3 else np.asarray(gt["pelvis_world"])[idx])
-    scene.ground_truth = scene.to_world(gt_cam, 0)
+    scene.ground_truth = scene.to_world(gt_cam, 0).astype(np.float32)  # float32: a long recording stays small
     if est is not None:
-        scene.estimates = np.stack([scene.to_world(est[:, v], v) for v in range(scene.num_views)], axis=1)
+        scene.estimates = np.stack([scene.to_world(est[:, v], v) for v in range(scene.num_views)], axis=1).astype(np.float32)
     return scene

@@ -124,7 +124,7 @@ def _hex_rgb(color: str) -> tuple[float, float, float]:
 def _ground_extent(scene: RecordingScene) -> tuple[np.ndarray, float]:
     pts = np.concatenate([scene.person_path, scene.camera_centres().reshape(-1, 3)])
     centre = 0.5 * (pts.min(0) + pts.max(0))
-    size = float(max(np.ptp(pts[:, 0]), np.ptp(pts[:, 2]))) + 4.0
+    size = float(max(np.ptp(pts[:, 0]), np.ptp(pts[:, 2]))) + 2.0
     return np.array([centre[0], 0.0, centre[2]]), size
 
 
@@ -139,21 +139,27 @@ def _populate(plotter, scene: RecordingScene, i: int) -> dict:
     plotter.add_mesh(pv.lines_from_points(scene.person_path), color=_hex_rgb(VIEW_COLORS["ground truth"]),
                      line_width=2)
     data = {"gt": pv.PolyData(scene.ground_truth[i].copy(), _faces_pv(scene.faces))}
-    plotter.add_mesh(data["gt"], color=_hex_rgb(VIEW_COLORS["ground truth"]), smooth_shading=True,
-                     label="ground truth")
+    plotter.add_mesh(data["gt"], color=_hex_rgb(VIEW_COLORS["ground truth"]), smooth_shading=True)
     for v in range(scene.num_views):
         colour = _hex_rgb(VIEW_COLORS[f"camera {v + 1}"])
         pts, lines = camera_frustum(scene.K[v], scene.image_size[v], scene.R_cw[i, v], scene.t_cw[i, v])
         data[f"cam{v}"] = pv.PolyData(pts, lines=_lines_pv(lines))
-        plotter.add_mesh(data[f"cam{v}"], color=colour, line_width=3, label=f"UAV{v + 1} camera")
+        plotter.add_mesh(data[f"cam{v}"], color=colour, line_width=3)
         plotter.add_mesh(pv.lines_from_points(scene.camera_centres()[:, v]), color=colour, line_width=1,
                          opacity=0.5)
         if scene.estimates is not None:
             data[f"est{v}"] = pv.PolyData(scene.estimates[i, v].copy(), _faces_pv(scene.faces))
-            plotter.add_mesh(data[f"est{v}"], color=colour, opacity=0.55, smooth_shading=True,
-                             label=f"UAV{v + 1}: {scene.method}")
-    plotter.add_legend(bcolor="white", face="rectangle", size=(0.34, 0.22), loc="lower right")
+            plotter.add_mesh(data[f"est{v}"], color=colour, opacity=0.55, smooth_shading=True)
     return data
+
+
+def _legend_entries(scene: RecordingScene) -> list[tuple[str, str]]:
+    """(label, colour) of everything drawn."""
+    entries = [("true body and path", VIEW_COLORS["ground truth"])]
+    for v in range(scene.num_views):
+        entries.append((f"UAV{v + 1} camera" + (f" and its {scene.method} estimate" if scene.estimates is not None
+                                                 else ""), VIEW_COLORS[f"camera {v + 1}"]))
+    return entries
 
 
 def _update(data: dict, scene: RecordingScene, i: int) -> None:
@@ -175,10 +181,14 @@ def _set_view(plotter, scene: RecordingScene) -> None:
     side[1] = 0.0
     side = side / (np.linalg.norm(side) + 1e-9)
     extent = float(np.ptp(np.concatenate([centres.reshape(-1, 3), scene.person_path]), axis=0).max())
-    dist = 1.8 * extent + 6.0
+    dist = 1.25 * extent + 4.0
     elev = np.deg2rad(35.0)
     eye = target + dist * (np.cos(elev) * side + np.array([0.0, np.sin(elev), 0.0]))
     plotter.camera_position = [tuple(eye), tuple(target), (0.0, 1.0, 0.0)]
+    pts = np.concatenate([centres.reshape(-1, 3), scene.person_path, np.zeros((1, 3)) + target * [1, 0, 1]])
+    lo, hi = pts.min(0) - 1.0, pts.max(0) + 1.0  # frame the drones and the person, not the whole ground
+    plotter.reset_camera(bounds=(lo[0], hi[0], lo[1], hi[1], lo[2], hi[2]))
+    plotter.camera.zoom(1.7)  # reset_camera fits the bounding sphere: generous for a flat scene
 
 
 def show_interactive(scene: RecordingScene, window_size: tuple[int, int] = (900, 600)):
@@ -189,6 +199,8 @@ def show_interactive(scene: RecordingScene, window_size: tuple[int, int] = (900,
     pv.set_jupyter_backend("trame")
     plotter = pv.Plotter(notebook=True, off_screen=False, window_size=list(window_size))
     data = _populate(plotter, scene, 0)
+    plotter.add_legend(labels=[[label, colour] for label, colour in _legend_entries(scene)], bcolor="white",
+                       face="rectangle", size=(0.4, 0.15), loc="lower right")
     _set_view(plotter, scene)
     slider = widgets.IntSlider(value=0, min=0, max=scene.num_frames - 1, step=1, description="frame",
                                continuous_update=False, layout=widgets.Layout(width="60%"))
@@ -215,7 +227,7 @@ def plot_static_frames(scene: RecordingScene, n_frames: int = 3, image_size: tup
     from .render import DEFAULT_BACKGROUND  # noqa: F401 - selects the EGL window before VTK starts
 
     idx = np.linspace(0, scene.num_frames - 1, n_frames).round().astype(int)
-    fig, axes = plt.subplots(1, n_frames, figsize=(3.6 * n_frames, 3.0), squeeze=False)
+    fig, axes = plt.subplots(1, n_frames, figsize=(3.6 * n_frames, 3.3), squeeze=False, layout="constrained")
     plotter = pv.Plotter(off_screen=True, window_size=list(image_size))
     try:
         data = _populate(plotter, scene, int(idx[0]))
@@ -227,8 +239,11 @@ def plot_static_frames(scene: RecordingScene, n_frames: int = 3, image_size: tup
             ax.set_axis_off()
     finally:
         plotter.close()
+    from matplotlib.patches import Patch
+
+    fig.legend(handles=[Patch(color=c, label=lab) for lab, c in _legend_entries(scene)],
+               loc="outside lower center", ncol=scene.num_views + 1)
     if title:
         fig.suptitle(title)
-    fig.tight_layout()
     return fig
 

@@ -196,8 +196,10 @@ def show_interactive(scene: RecordingScene, window_size: tuple[int, int] = (900,
     import ipywidgets as widgets
     import pyvista as pv
 
+    from .render import DEFAULT_BACKGROUND  # noqa: F401 - EGL window: trame renders on the server, no X needed
+
     pv.set_jupyter_backend("trame")
-    plotter = pv.Plotter(notebook=True, off_screen=False, window_size=list(window_size))
+    plotter = pv.Plotter(notebook=True, off_screen=True, window_size=list(window_size))
     data = _populate(plotter, scene, 0)
     plotter.add_legend(labels=[[label, colour] for label, colour in _legend_entries(scene)], bcolor="white",
                        face="rectangle", size=(0.4, 0.15), loc="lower right")

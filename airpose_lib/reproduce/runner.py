@@ -296,9 +296,10 @@ def _ipc_kernel_manager():
 
     nbclient's default TCP transport makes ipykernel (>= 7) warn "Kernel is running over TCP
     without encryption" in every executed notebook; local sockets are neither exposed nor warned
-    about. The socket files live under the system's temporary folder, never in the checkout.
+    about. The socket files live in one private temporary folder of this process (removed at
+    exit), never in the checkout; the kernel manager deletes each kernel's sockets when it ends.
     """
-    import tempfile
+    import uuid
 
     from jupyter_client.manager import AsyncKernelManager
     from traitlets import default
@@ -310,9 +311,24 @@ def _ipc_kernel_manager():
 
         @default("ip")
         def _ip_default(self) -> str:
-            return str(Path(tempfile.mkdtemp(prefix="airpose-kernel-")) / "kernel")
+            return str(_socket_dir() / f"kernel-{uuid.uuid4().hex[:8]}")
 
     return IPCKernelManager
+
+
+_SOCKET_DIR: Path | None = None
+
+
+def _socket_dir() -> Path:
+    """This process's folder for kernel sockets, created on first use and removed at exit."""
+    global _SOCKET_DIR
+    if _SOCKET_DIR is None:
+        import atexit
+        import tempfile
+
+        _SOCKET_DIR = Path(tempfile.mkdtemp(prefix="airpose-kernels-"))
+        atexit.register(shutil.rmtree, _SOCKET_DIR, ignore_errors=True)
+    return _SOCKET_DIR
 
 
 def _kit_version() -> str:

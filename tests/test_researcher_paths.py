@@ -132,3 +132,20 @@ def test_camera_frustum_corners_project_to_the_image_corners():
     uv = uv * [K[0, 0], K[1, 1]] + [K[0, 2], K[1, 2]]
     assert np.allclose(uv, [[0, 0], [1920, 0], [1920, 1080], [0, 1080]])
     assert np.allclose(cam[1:, 2], 2.0) and lines.shape == (8, 2)
+
+
+def test_detections_grid_keeps_its_title():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from airpose_lib.viz.sequences import plot_detections_grid
+
+    img = np.zeros((40, 40, 3), np.uint8)
+    det = np.zeros((2, 2, 25, 3))
+    det[..., :2], det[..., 2] = 20.0, 1.0
+    fig = plot_detections_grid([[img, img], [img, img]], {"openpose": det}, frame_labels=["a", "b"],
+                               title="person2: detections")
+    assert fig._suptitle.get_text() == "person2: detections"
+    plt.close(fig)

@@ -72,8 +72,7 @@ def plot_detections_grid(
                 g = ground_truth[i, v]
                 ax.scatter(g[:, 0], g[:, 1], marker="+", s=16, lw=0.8, color=DETECTOR_COLORS["ground truth"],
                            label="ground truth" if (i, v) == (0, 0) else None)
-            title = f"UAV{v + 1}" + (f", {frame_labels[i]}" if frame_labels else "")
-            ax.set_title(title, fontsize=8)
+            ax.set_title(f"UAV{v + 1}" + (f", {frame_labels[i]}" if frame_labels else ""), fontsize=8)
             ax.set_xticks([])
             ax.set_yticks([])
             ax.grid(False)

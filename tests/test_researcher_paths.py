@@ -149,3 +149,43 @@ def test_detections_grid_keeps_its_title():
                                title="person2: detections")
     assert fig._suptitle.get_text() == "person2: detections"
     plt.close(fig)
+
+
+def test_online_figures_draw_from_node_records(tmp_path):
+    """The notebook-06 figures from stand-in node records (the real ones need drone processes)."""
+    import types
+
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from airpose_lib.runtime import results as R
+    from airpose_lib.viz.online import (SLOT_STATES, plot_fault_states, plot_latency, plot_online_vs_offline,
+                                        plot_timeline, slot_states)
+
+    class Node(types.SimpleNamespace):
+        def __len__(self):
+            return len(self.frames["target"])
+
+    def node(view: int, n: int = 12) -> Node:
+        marks = {f"marks_{k}": np.full(n, 0.01 * (i + 1)) for i, k in enumerate(
+            ("wake", "captured", "acquired", "stage1_start", "stage1_end", "stage2_start", "stage2_end",
+             "stage3_start", "stage3_end"))}
+        frames = {"target": np.arange(n) * 0.24, "latency": np.full(n, 0.12), "slot": np.arange(n),
+                  "flags": np.array([0, R.FALLBACK_S2, R.NO_PEERS, R.INVALID] * (n // 4)), **marks}
+        valid = np.ones(n, bool)
+        valid[3] = False
+        return Node(frames=frames, valid=valid, meta={"view": view, "drone": view + 1})
+
+    res = [node(v) for v in range(2)]
+    states = slot_states(res[0].frames, 14, R)
+    assert list(states[:4]) == [0, 1, 2, 3] and states[-1] == len(SLOT_STATES) - 1  # no record: not running
+    figs = [plot_timeline(res, res), plot_latency({"fixed": res, "pipelined": res}, {"fixed": 4.1, "pipelined": 9.0}),
+            plot_online_vs_offline(np.tile(np.arange(12)[:, None], (1, 2)), np.ones((12, 2, 3)), np.ones((12, 2, 3))),
+            plot_fault_states(np.stack([states, states]), 0.05, "20 % loss")]
+    labels = figs[1].axes[1].get_legend_handles_labels()[1]
+    assert any("4.17 fps" in lab for lab in labels)  # the window line is in the legend
+    for f in figs:
+        f.savefig(tmp_path / "f.png")
+        plt.close(f)

@@ -24,7 +24,7 @@ PROFILES = tuple(sorted(p.stem for p in (Path(__file__).parent / "reproduce" / "
 
 
 class CLIError(Exception):
-    """A user-facing error: printed without a traceback, exit status 1."""
+    """A user-facing error: printed on one line without a traceback, exit status 1."""
 
 
 def parse_range(text: str | None, what: str = "image numbers",
@@ -101,7 +101,7 @@ def _cmd_data_sequence(args: argparse.Namespace) -> int:
     root = args.out if args.out is not None else default_sequence_root(args.profile)
     try:
         paths = ensure_sequences(args.profile, root, configs=configs, only=args.only, force=args.force,
-                                 progress=True)
+                                 progress=not args.quiet)
     except ValueError as e:
         raise CLIError(str(e)) from None
     for name, path in paths.items():
@@ -123,6 +123,7 @@ def _add_data_sequence(dsub) -> None:
                      help="parent folder of the recordings (default: <cache>/data/sequences_<profile>)")
     seq.add_argument("--only", nargs="+", metavar="NAME", help="only these recordings (e.g. person1)")
     seq.add_argument("--force", action="store_true", help="regenerate even if a complete copy exists")
+    seq.add_argument("--quiet", action="store_true", help="no progress bar")
     seq.set_defaults(func=_cmd_data_sequence)
 
 
@@ -137,7 +138,7 @@ def _cmd_data_generate(args: argparse.Namespace) -> int:
         root = args.out if args.out is not None else default_root(args.profile)
         workers = args.workers if args.workers is not None else (os.cpu_count() or 1)
         manifest = generate_still_dataset(config, root, workers=workers, profile=args.profile,
-                                          progress=True, record=True)
+                                          progress=not args.quiet, record=True)
     except DatasetError as e:
         raise CLIError(str(e)) from None
     t = manifest["totals"]
@@ -162,6 +163,7 @@ def _add_data_generate(dsub) -> None:
     gen.add_argument("--workers", type=int, default=None,
                      help="parallel rendering processes (default: number of CPU cores); the result "
                           "does not depend on it")
+    gen.add_argument("--quiet", action="store_true", help="no progress bar")
     gen.set_defaults(func=_cmd_data_generate)
 
 
@@ -187,23 +189,88 @@ def _add_data(sub) -> None:
 VARIANTS = ("baseline", "multiview", "fullcam", "airpose")
 
 
-def _parse_sets(items) -> dict:
-    """``KEY=VALUE`` pairs (VALUE parsed as YAML; ``model.dropout=0`` sets a key of a dict field)."""
+def _type_name(tp) -> str:
+    return getattr(tp, "__name__", str(tp).replace("typing.", ""))
+
+
+def _check_value(item: str, value, annotation) -> object:
+    """``value`` if it fits the field type ``annotation`` (ints widen to floats), else CLIError."""
+    import types
+    import typing
+
+    options = typing.get_args(annotation) if typing.get_origin(annotation) in (typing.Union, types.UnionType) \
+        else (annotation,)
+    if value is None and type(None) in options:
+        return None
+    for tp in options:
+        base = typing.get_origin(tp) or tp
+        if base is typing.Any:
+            return value
+        if base is float and isinstance(value, (int, float)) and not isinstance(value, bool):
+            return float(value)
+        if base is int and isinstance(value, int) and not isinstance(value, bool):
+            return value
+        if base in (bool, str, dict, list) and isinstance(value, base):
+            return value
+        if base is tuple and isinstance(value, list):
+            return tuple(value)
+    wanted = " or ".join(_type_name(t) for t in options)
+    raise CLIError(f"--set {item}: expected {wanted}, got {value!r} ({type(value).__name__})")
+
+
+def _parse_sets(items, config_cls=None, nested: dict | None = None) -> dict:
+    """``KEY=VALUE`` pairs -> ``{key: value}`` (VALUE parsed as YAML; ``loss.w_V=10`` sets a key of a
+    dict field, returned as ``{"loss": {"w_V": 10.0}}``).
+
+    With ``config_cls`` (a dataclass) every key must be one of its fields and every value must fit
+    the field's type; ``nested`` maps a dict field to the dataclass its keys belong to (``{"loss":
+    LossConfig}``), whose fields and types check the dotted keys. A bad key or value is a one-line
+    :class:`CLIError` naming it, the expected type and, for a typo, the closest key.
+    """
+    import dataclasses
+    import difflib
+    import typing
+
     import yaml
 
+    def fields_of(cls) -> dict:
+        hints = typing.get_type_hints(cls)
+        return {f.name: hints.get(f.name, typing.Any) for f in dataclasses.fields(cls)}
+
+    def unknown(item: str, key: str, known: dict, where: str) -> CLIError:
+        close = difflib.get_close_matches(key, list(known), n=1)
+        hint = f"; did you mean {close[0]!r}?" if close else f"; known: {', '.join(sorted(known))}"
+        return CLIError(f"--set {item}: unknown key {key!r} of {where}{hint}")
+
+    top = fields_of(config_cls) if config_cls is not None else None
     out: dict = {}
     for item in items or ():
         key, sep, value = item.partition("=")
         if not sep or not key:
             raise CLIError(f"--set expects KEY=VALUE, got {item!r}")
-        parsed = yaml.safe_load(value)
+        try:
+            parsed = yaml.safe_load(value) if value else None
+        except yaml.YAMLError:
+            parsed = value  # not YAML: keep the text, the type check below decides
         if isinstance(parsed, str):  # YAML 1.1 reads "1e-4" as a string
             try:
                 parsed = float(parsed)
             except ValueError:
                 pass
-        if "." in key:
-            field_name, sub = key.split(".", 1)
+        field_name, dot, sub = key.partition(".")
+        if top is not None:
+            if field_name not in top:
+                raise unknown(item, field_name, top, config_cls.__name__)
+            if not dot:
+                parsed = _check_value(item, parsed, top[field_name])
+            elif typing.get_origin(top[field_name]) not in (dict,) and top[field_name] is not dict:
+                raise CLIError(f"--set {item}: {field_name!r} is not a dict option; write {field_name}=VALUE")
+            elif nested and field_name in nested:
+                sub_fields = fields_of(nested[field_name])
+                if sub not in sub_fields:
+                    raise unknown(item, sub, sub_fields, f"{field_name} ({nested[field_name].__name__})")
+                parsed = _check_value(item, parsed, sub_fields[sub])
+        if dot:
             out.setdefault(field_name, {})[sub] = parsed
         else:
             out[key] = parsed
@@ -211,16 +278,19 @@ def _parse_sets(items) -> dict:
 
 
 def _cmd_train(args: argparse.Namespace) -> int:
-    from airpose_lib.train import load_train_config, train
+    from airpose_lib.losses import LossConfig
+    from airpose_lib.train import TrainConfig, load_train_config, train
 
-    overrides = _parse_sets(args.set)
+    overrides = _parse_sets(args.set, TrainConfig, {"loss": LossConfig})
+    if args.quiet:
+        overrides["progress"] = False
     for name in ("steps", "batch_size", "world_size", "num_workers", "device"):
         if getattr(args, name) is not None:
             overrides[name] = getattr(args, name)
     try:
         cfg = load_train_config(args.profile, args.variant, args.seed, **{
             k: v for k, v in overrides.items() if not isinstance(v, dict)})
-    except ValueError as e:
+    except (ValueError, TypeError) as e:
         raise CLIError(str(e)) from None
     for k, v in overrides.items():  # dict fields: merge into the profile's dicts
         if isinstance(v, dict):
@@ -278,7 +348,8 @@ def _add_train(sub) -> None:
     tr.add_argument("--profile", choices=PROFILES, default="smoke", help="(default: smoke)")
     tr.add_argument("--seed", type=int, default=None, help="(default: the profile's)")
     tr.add_argument("--out", type=Path, default=None,
-                    help="run folder (default: runs/train/<profile>/<variant>/seed<seed>)")
+                    help="run folder (default: <runs>/train/<profile>/<variant>/seed<seed>; <runs> is "
+                         "$AIRPOSE_RUNS or runs/ at the checkout root, whatever the current folder)")
     tr.add_argument("--resume", action=argparse.BooleanOptionalAction, default=True,
                     help="continue from <out>/checkpoints/last.pt if present (default: yes)")
     tr.add_argument("--steps", type=int, default=None, help="override the profile's step count")
@@ -287,7 +358,9 @@ def _add_train(sub) -> None:
     tr.add_argument("--num-workers", type=int, default=None, help="DataLoader workers per process")
     tr.add_argument("--device", default=None, help="auto, cpu or cuda")
     tr.add_argument("--set", nargs="+", metavar="KEY=VALUE",
-                    help="any other training option, e.g. lr=1e-4 model.dropout=0 loss.vertex_subsample=2000")
+                    help="any other TrainConfig option, e.g. lr=1e-4 model.dropout=0 loss.vertex_subsample=2000 "
+                         "(keys and value types are checked)")
+    tr.add_argument("--quiet", action="store_true", help="no progress bar")
     tr.set_defaults(func=_cmd_train)
 
 
@@ -375,8 +448,8 @@ def _add_prior(sub) -> None:
         description="Train the prior on poses of airpose_lib.data.poses and data.motions, report the "
                     "held-out reconstruction error and the share of N(0, I) samples inside the joint "
                     "limits, and save <cache>/prior/<profile>/vposer.pt (atomic, with provenance).")
-    tr.add_argument("--profile", choices=PROFILES, default="cpu",
-                    help="smoke: seconds; cpu: a few minutes; paper: longer (default: cpu)")
+    tr.add_argument("--profile", choices=PROFILES, default="smoke",
+                    help="smoke: seconds; cpu: a few minutes; paper: longer (default: smoke)")
     tr.add_argument("--steps", type=int, default=None, help="override the profile's step count")
     tr.add_argument("--seed", type=int, default=None, help="(default: the profile's)")
     tr.add_argument("--threads", type=int, default=None,
@@ -461,8 +534,8 @@ def _add_fit(sub) -> None:
     fit.add_argument("--sequence", type=Path, required=True, help="sequence folder (official layout)")
     fit.add_argument("--init", type=Path, required=True, help="network outputs (.npz, see above)")
     fit.add_argument("--out", type=Path, default=None, help="(default: <init>_airpose_plus.npz)")
-    fit.add_argument("--profile", choices=PROFILES, default="cpu",
-                     help="iterations/weights from the profile's `fitting:` section (default: cpu)")
+    fit.add_argument("--profile", choices=PROFILES, default="smoke",
+                     help="iterations/weights from the profile's `fitting:` section (default: smoke)")
     fit.add_argument("--frames", default=None, metavar="START:STOP",
                      help="a slice of the sequence's frames (positions, e.g. 0:1000)")
     fit.add_argument("--prior", choices=("kit", "vposer"), default="kit",
@@ -530,14 +603,18 @@ def _cmd_reproduce(args: argparse.Namespace) -> int:
     try:
         report = run_profile(args.profile, only=args.only, out_dir=args.out, figures_dir=args.figures,
                              kernel_name=args.kernel, keep_going=args.keep_going,
-                             log_output=args.log_output)
+                             log_output=args.log_output and not args.quiet, verbose=not args.quiet,
+                             data_source=args.data_source)
     except ReproductionError as e:
         raise CLIError(str(e)) from None
     if not report.ok:
         print(f"\nreproduction FAILED (report: {report.run_dir}/report.json)", file=sys.stderr)
         print(report.failure_message(), file=sys.stderr)
         return 1
-    print(f"figures collected in {report.figures_dir}")
+    if args.quiet:
+        print(report.figures_dir)
+    else:
+        print(f"figures collected in {report.figures_dir}")
     return 0
 
 
@@ -554,15 +631,22 @@ def _add_reproduce(sub) -> None:
     rep.add_argument("--only", nargs="+", metavar="NAME",
                      help="run only these notebooks (names or unique prefixes, e.g. 00_body_model or 00)")
     rep.add_argument("--out", type=Path, default=None,
-                     help="run folder (default: runs/ at the checkout root)")
+                     help="run folder (default: $AIRPOSE_RUNS, else runs/ at the checkout root; training "
+                          "runs of `airpose train` are found there too)")
     rep.add_argument("--figures", type=Path, default=None,
-                     help="where figures are collected (default: figures/ at the checkout root)")
+                     help="where figures are collected (default: figures/<profile>/ at the checkout root)")
+    rep.add_argument("--data-source", choices=("generated", "official"), default=None,
+                     help="data_source of every notebook that takes one (official: the official assets, "
+                          "see `airpose data list`); a profile's per-notebook data_source wins "
+                          "(default: each notebook's, generated)")
     rep.add_argument("--kernel", default="python3", help="Jupyter kernel name (default: python3)")
     rep.add_argument("--keep-going", action="store_true",
                      help="run the remaining notebooks after a failure")
     rep.add_argument("--log-output", action="store_true", help="stream the notebooks' cell output")
     rep.add_argument("--list", action="store_true",
                      help="list the notebooks and the profile's parameters, run nothing")
+    rep.add_argument("--quiet", action="store_true",
+                     help="print only failures and where the figures are (no per-notebook lines or table)")
     rep.set_defaults(func=_cmd_reproduce)
 
 

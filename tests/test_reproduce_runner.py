@@ -222,3 +222,22 @@ def test_smoke_body_model_notebook_end_to_end(tmp_path):
     for fig in load_catalog(CATALOG_PATH)[0].figures:
         assert (tmp_path / "figures" / fig).stat().st_size > 1000
     assert report.results[0].wall_s < 60, "the smoke run of 00_body_model must stay under a minute"
+
+
+def test_data_source_reaches_only_notebooks_that_declare_it(kit, tmp_path):
+    from airpose_lib.reproduce.runner import _data_source_parameter
+
+    root, run = kit
+    with pytest.raises(ReproductionError, match="data_source must be one of"):
+        run(data_source="bogus")
+    declares = tmp_path / "declares.ipynb"
+    _write_nb(declares, "pass", params=PARAMS + 'data_source = "generated"\n')
+    assert _data_source_parameter(declares, "official") == {"data_source": "official"}
+    assert _data_source_parameter(root / "notebooks" / "00_ok.ipynb", "official") == {}
+    assert _data_source_parameter(declares, None) == {}
+
+
+def test_kernels_use_ipc_sockets_outside_the_checkout():
+    km = __import__("airpose_lib.reproduce.runner", fromlist=["x"])._ipc_kernel_manager()(kernel_name="python3")
+    assert km.transport == "ipc"
+    assert not Path(km.ip).resolve().is_relative_to(NOTEBOOKS_DIR.parent)

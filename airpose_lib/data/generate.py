@@ -620,9 +620,9 @@ def generate_still_dataset(
 
     bar = None
     if progress and todo:
-        from tqdm.auto import tqdm
+        from airpose_lib.progress import progress_bar
 
-        bar = tqdm(total=config.num_samples, initial=manifest["totals"]["samples"], unit="sample",
+        bar = progress_bar(total=config.num_samples, initial=manifest["totals"]["samples"], unit="sample",
                    desc=f"still frames -> {root.name}", smoothing=0.1)
 
     def finished(rec: dict) -> None:

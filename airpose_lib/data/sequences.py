@@ -710,9 +710,9 @@ def generate_sequence(config: SequenceConfig, root: str | Path, *, progress: boo
     t0 = time.perf_counter()
     bar = None
     if progress:
-        from tqdm.auto import tqdm
+        from airpose_lib.progress import progress_bar
 
-        bar = tqdm(total=sim.num_frames, desc=f"render {config.person_spec.name}", unit="frame")
+        bar = progress_bar(total=sim.num_frames, desc=f"render {config.person_spec.name}", unit="frame")
     with SequenceRenderer(sim, body_model, anti_aliasing=config.anti_aliasing) as renderer:
         for i, images in renderer.render_frames():
             writer.write_frame(i, images)

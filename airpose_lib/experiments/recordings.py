@@ -51,8 +51,10 @@ OFFICIAL_REAL_CHECKPOINTS = {"Baseline": "hmr_real_ckpt", "AirPose": "copenet_tw
 
 
 def default_experiment_dir(profile: str) -> Path:
-    """``runs/recordings/<profile>`` (relative to the working directory, like training runs)."""
-    return Path("runs") / "recordings" / profile
+    """``<runs>/recordings/<profile>`` (:func:`airpose_lib.paths.runs_root`, like training runs)."""
+    from airpose_lib.paths import run_path
+
+    return run_path("recordings", profile)
 
 
 @dataclass

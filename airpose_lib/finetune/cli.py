@@ -27,10 +27,11 @@ def _frame_range(text: str | None) -> tuple[int | None, int | None] | None:
 # -- finetune -------------------------------------------------------------------------------------
 def _cmd_finetune(args: argparse.Namespace) -> int:
     from airpose_lib.cli import CLIError, _parse_sets
-    from airpose_lib.finetune.train import finetune, finetune_config
+    from airpose_lib.finetune.loss import FineTuneLossConfig
+    from airpose_lib.finetune.train import FineTuneConfig, finetune, finetune_config
     from airpose_lib.prior import PriorError
 
-    overrides = _parse_sets(args.set)
+    overrides = _parse_sets(args.set, FineTuneConfig, {"loss": FineTuneLossConfig})
     for name, field in (("steps", "steps"), ("batch_size", "batch_size"), ("seed", "seed"), ("threads", "num_threads"),
                         ("prior", "prior"), ("input_size", "input_size"), ("device", "device")):
         if getattr(args, name) is not None:
@@ -84,8 +85,8 @@ def _add_finetune(sub) -> None:
     ft.add_argument("--checkpoint", type=Path, required=True, help="a checkpoints/*.pt of `airpose train`")
     ft.add_argument("--sequence", type=Path, required=True, help="recording folder (official layout)")
     ft.add_argument("--out", type=Path, required=True, help="run folder")
-    ft.add_argument("--profile", choices=_profiles(), default="cpu",
-                    help="sizes from the profile's `finetune:` section; defaults where it has none (default: cpu)")
+    ft.add_argument("--profile", choices=_profiles(), default="smoke",
+                    help="sizes from the profile's `finetune:` section; defaults where it has none (default: smoke)")
     ft.add_argument("--frames", default=None, metavar="START:STOP",
                     help="train on the images numbered START..STOP-1 (paper: 0:7000); default: the profile's or all")
     ft.add_argument("--steps", type=int, default=None, help="override the profile's step count")
@@ -102,7 +103,8 @@ def _add_finetune(sub) -> None:
     ft.add_argument("--resume", action=argparse.BooleanOptionalAction, default=True,
                     help="continue from <out>/checkpoints/last.pt if present (default: yes)")
     ft.add_argument("--set", nargs="+", metavar="KEY=VALUE",
-                    help="any other option of FineTuneConfig, e.g. lr=1e-4 threshold_px=50 loss.w_vposer=0.5")
+                    help="any other option of FineTuneConfig, e.g. lr=1e-4 threshold_px=50 loss.w_vposer=0.5 "
+                         "(keys and value types are checked)")
     ft.add_argument("--quiet", action="store_true", help="no progress bars")
     ft.set_defaults(func=_cmd_finetune)
 

@@ -286,9 +286,9 @@ def sequence_features(model: nn.Module, sequence, *, input_size: int, detector: 
     feats, Ps = [], []
     chunks = range(0, len(pos), batch_size)
     if progress:
-        from tqdm.auto import tqdm
+        from airpose_lib.progress import progress_bar
 
-        chunks = tqdm(chunks, desc="features", unit="batch")
+        chunks = progress_bar(chunks, desc="features", unit="batch")
     try:
         for a in chunks:
             rows = pos[a:a + batch_size]

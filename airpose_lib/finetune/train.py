@@ -594,9 +594,9 @@ def _finetune(checkpoint: Path, root: Path, out_dir: Path, cfg: FineTuneConfig, 
         seed_everything(_stream_seed(cfg.seed))  # the dropout / VPoser-sample stream
     bar = None
     if progress:
-        from tqdm.auto import tqdm
+        from airpose_lib.progress import progress_bar
 
-        bar = tqdm(total=cfg.steps, initial=step, desc=f"finetune {train_cfg.variant}", dynamic_ncols=True)
+        bar = progress_bar(total=cfg.steps, initial=step, desc=f"finetune {train_cfg.variant}")
     checkpoint_out: Path | None = ckpt_path
     stopped = False
     B = cfg.batch_size

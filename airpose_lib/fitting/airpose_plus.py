@@ -514,9 +514,9 @@ def _optimise(cfg, prior, kbody, xy, w, gather, K, start, kept, progress) -> Air
     theta_fixed = None
     bar = None
     if progress:
-        from tqdm.auto import tqdm
+        from airpose_lib.progress import progress_bar
 
-        bar = tqdm(total=cfg.iterations, desc=f"AirPose+ ({n} frames)", unit="it")
+        bar = progress_bar(total=cfg.iterations, desc=f"AirPose+ ({n} frames)", unit="it")
     t0 = time.perf_counter()
     for it in range(cfg.iterations + 1):  # the extra pass only records the final loss
         latent_on = it >= cfg.latent_start

@@ -180,9 +180,9 @@ def train_prior(
     hist: dict = {"config": cfg.to_dict(), "step": [], "loss": [], "rot_deg": [], "kl": []}
     bar = None
     if progress:
-        from tqdm.auto import tqdm
+        from airpose_lib.progress import progress_bar
 
-        bar = tqdm(total=cfg.steps, desc="prior", unit="step")
+        bar = progress_bar(total=cfg.steps, desc="prior", unit="step")
     t0 = time.perf_counter()
     for step in range(cfg.steps):
         if pos + batch > data.shape[0]:

@@ -19,6 +19,7 @@ from airpose_lib.reproduce.runner import (
     notebook_outputs,
     run_profile,
 )
+from airpose_lib.reproduce.notebook import notebook_defaults
 
 __all__ = [
     "CATALOG_PATH",
@@ -31,6 +32,7 @@ __all__ = [
     "list_profiles",
     "load_catalog",
     "load_profile",
+    "notebook_defaults",
     "notebook_outputs",
     "run_profile",
 ]

@@ -7,12 +7,17 @@ size, epochs ...). For every catalogued notebook the runner
 1. checks that it has a cell tagged ``parameters`` that declares ``output_dir`` and every
    parameter the profile sets for it (so a typo in a profile fails before anything runs);
 2. executes it in-process with papermill, injecting ``profile``, ``output_dir`` (a fresh per-run
-   folder) and the profile's parameters, with an environment that renders off-screen;
-3. checks that the expected figures exist, copies them into the figures folder and records
-   wall time, status and parameters in ``<out>/<profile>/report.json``.
+   folder), ``data_source`` when asked for, and the profile's parameters, with an environment
+   that renders off-screen and a kernel that talks over local (IPC) sockets;
+3. checks that the expected figures exist, copies them into ``figures/<profile>/`` and records
+   wall time, status and parameters in ``<runs>/<profile>/report.json``.
+
+``<runs>`` is :func:`airpose_lib.paths.runs_root` (the checkout's ``runs/`` or ``$AIRPOSE_RUNS``),
+the folder training runs and notebooks run by hand use too.
 
 It stops at the first failure (later notebooks may consume earlier outputs) unless asked to keep
-going. This module imports nothing else of the kit: it must be able to run any notebook.
+going. This module imports nothing else of the kit but :mod:`airpose_lib.paths` (a leaf): it must
+be able to run any notebook.
 """
 
 from __future__ import annotations
@@ -29,6 +34,8 @@ from pathlib import Path
 
 import nbformat
 import yaml
+
+from airpose_lib.paths import figures_root, runs_root
 
 __all__ = [
     "CATALOG_PATH",
@@ -58,6 +65,8 @@ NOTEBOOKS_DIR = REPO_ROOT / "notebooks"
 
 #: Parameters the runner itself injects into every notebook.
 RESERVED_PARAMETERS = ("profile", "output_dir")
+#: Values of the notebooks' ``data_source`` parameter (``reproduce --data-source``).
+DATA_SOURCES = ("generated", "official")
 
 
 class ReproductionError(RuntimeError):
@@ -254,13 +263,17 @@ def notebook_outputs(path: Path) -> list[int]:
 def kernel_environment(extra: dict[str, str] | None = None) -> Iterator[dict[str, str]]:
     """Temporarily set the environment the notebook kernels inherit, then restore it.
 
-    VTK renders through EGL without an X server, matplotlib uses Agg, and the checkout is put on
-    ``PYTHONPATH`` so the kernel imports this kit even when it is not pip-installed.
+    VTK renders through EGL without an X server, matplotlib uses Agg, progress bars print a text
+    line every few seconds (a widget bar would be saved as a dead widget), interactive views draw
+    their static fallback, and the checkout is put on ``PYTHONPATH`` so the kernel imports this kit
+    even when it is not pip-installed.
     """
     env = {
         "PYVISTA_OFF_SCREEN": "true",
         "VTK_DEFAULT_OPENGL_WINDOW": "vtkEGLRenderWindow",
         "MPLBACKEND": "Agg",
+        "AIRPOSE_PROGRESS": "log",
+        "AIRPOSE_INTERACTIVE": "0",
     }
     if (REPO_ROOT / "airpose_lib").is_dir():
         paths = [str(REPO_ROOT)] + [p for p in os.environ.get("PYTHONPATH", "").split(os.pathsep) if p]
@@ -276,6 +289,46 @@ def kernel_environment(extra: dict[str, str] | None = None) -> Iterator[dict[str
                 os.environ.pop(k, None)
             else:
                 os.environ[k] = v
+
+
+def _ipc_kernel_manager():
+    """A kernel manager whose kernel listens on IPC sockets in a private temporary folder.
+
+    nbclient's default TCP transport makes ipykernel (>= 7) warn "Kernel is running over TCP
+    without encryption" in every executed notebook; local sockets are neither exposed nor warned
+    about. The socket files live in one private temporary folder of this process (removed at
+    exit), never in the checkout; the kernel manager deletes each kernel's sockets when it ends.
+    """
+    import uuid
+
+    from jupyter_client.manager import AsyncKernelManager
+    from traitlets import default
+
+    class IPCKernelManager(AsyncKernelManager):
+        @default("transport")
+        def _transport_default(self) -> str:
+            return "ipc"
+
+        @default("ip")
+        def _ip_default(self) -> str:
+            return str(_socket_dir() / f"kernel-{uuid.uuid4().hex[:8]}")
+
+    return IPCKernelManager
+
+
+_SOCKET_DIR: Path | None = None
+
+
+def _socket_dir() -> Path:
+    """This process's folder for kernel sockets, created on first use and removed at exit."""
+    global _SOCKET_DIR
+    if _SOCKET_DIR is None:
+        import atexit
+        import tempfile
+
+        _SOCKET_DIR = Path(tempfile.mkdtemp(prefix="airpose-kernels-"))
+        atexit.register(shutil.rmtree, _SOCKET_DIR, ignore_errors=True)
+    return _SOCKET_DIR
 
 
 def _kit_version() -> str:
@@ -347,7 +400,7 @@ def _run_one(entry: CatalogEntry, nb_path: Path, params: dict, run_dir: Path, fi
             papermill.execute_notebook(
                 str(nb_path), str(executed), parameters=params, kernel_name=kernel_name,
                 cwd=str(nb_path.parent), progress_bar=False, log_output=log_output,
-                execution_timeout=cell_timeout_s)
+                execution_timeout=cell_timeout_s, kernel_manager_class=_ipc_kernel_manager())
     except Exception as e:  # noqa: BLE001 - any failure is reported with the notebook's name
         result.wall_s = time.perf_counter() - t0
         result.status, result.error = "failed", _execution_error(e, executed)
@@ -372,6 +425,15 @@ def _run_one(entry: CatalogEntry, nb_path: Path, params: dict, run_dir: Path, fi
     return result
 
 
+def _data_source_parameter(nb_path: Path, data_source: str | None) -> dict:
+    """``{"data_source": ...}`` for a notebook that declares the parameter, else ``{}``."""
+    if data_source is None or not nb_path.is_file():
+        return {}
+    import papermill
+
+    return {"data_source": data_source} if "data_source" in papermill.inspect_notebook(str(nb_path)) else {}
+
+
 def run_profile(
     profile: str,
     only: Sequence[str] | None = None,
@@ -385,6 +447,7 @@ def run_profile(
     keep_going: bool = False,
     log_output: bool = False,
     verbose: bool = True,
+    data_source: str | None = None,
 ) -> RunReport:
     """Execute the catalogued notebooks with a profile's parameters.
 
@@ -392,13 +455,19 @@ def run_profile(
         profile: ``smoke``, ``cpu``, ``paper`` (or a path to a profile YAML file).
         only: notebook names (or unique prefixes such as ``00``) to run; default all, in order.
         out_dir: run root; executed notebooks go to ``<out>/<profile>/notebooks/``, each notebook's
-            figures to ``<out>/<profile>/<notebook name>/``. Default ``<checkout>/runs``.
-        figures_dir: where the expected figures are collected. Default ``<checkout>/figures``.
+            figures to ``<out>/<profile>/<notebook name>/``. Default
+            :func:`airpose_lib.paths.runs_root` (``<checkout>/runs`` or ``$AIRPOSE_RUNS``).
+        figures_dir: where the expected figures are collected. Default
+            ``<checkout>/figures/<profile>`` (one folder per profile: a smoke run does not
+            overwrite the cpu figures).
         kernel_name: Jupyter kernel to execute with.
         notebooks_dir: folder of the notebooks (default: the checkout's ``notebooks/``).
         keep_going: run the remaining notebooks after a failure instead of stopping.
         log_output: stream the notebooks' cell outputs to the log while they run.
         verbose: print the summary table.
+        data_source: ``generated`` or ``official``: injected as ``data_source`` into every selected
+            notebook that declares it (a profile's own ``data_source`` for a notebook wins, so it can
+            be set per notebook). None: each notebook's default.
 
     Returns:
         A :class:`RunReport` (also written to ``<out>/<profile>/report.json``); check ``.ok`` or
@@ -406,10 +475,11 @@ def run_profile(
         profile entry for a notebook not in the catalog) raise :class:`ReproductionError` at once.
     """
     notebooks_dir = Path(notebooks_dir) if notebooks_dir is not None else NOTEBOOKS_DIR
-    root = notebooks_dir.resolve().parent
-    out_dir = Path(out_dir) if out_dir is not None else root / "runs"
-    figures_dir = Path(figures_dir) if figures_dir is not None else root / "figures"
+    if data_source is not None and data_source not in DATA_SOURCES:
+        raise ReproductionError(f"data_source must be one of {DATA_SOURCES}, got {data_source!r}")
     prof = load_profile(profile, Path(profiles_dir))
+    out_dir = Path(out_dir) if out_dir is not None else runs_root()
+    figures_dir = Path(figures_dir) if figures_dir is not None else figures_root() / prof["name"]
     catalog = load_catalog(Path(catalog_path))
     unknown = sorted(set(prof["notebooks"]) - {e.name for e in catalog})
     if unknown:
@@ -428,6 +498,7 @@ def run_profile(
     stop = False
     for i, entry in enumerate(selected):
         params = {"profile": prof["name"], "output_dir": str(run_dir / entry.name),
+                  **_data_source_parameter(notebooks_dir / entry.file, data_source),
                   **prof["notebooks"].get(entry.name, {})}
         if stop:
             report.results[i].parameters = params

@@ -7,6 +7,8 @@ import json
 import math
 import time
 
+from airpose_lib.paths import run_path  # a leaf module: `airpose --help` stays fast
+
 __all__ = [
     "parse_peers",
     "add_node_arguments",
@@ -92,7 +94,8 @@ def add_node_arguments(p: argparse.ArgumentParser) -> None:
     n.add_argument("--link-bandwidth-mbps", type=float, default=None, help="e.g. 50 (the paper's Wi-Fi)")
     n.add_argument("--link-loss", type=float, default=0.0, help="packet loss probability")
     n.add_argument("--link-seed", type=int, default=0)
-    p.add_argument("--out", default="runs/online", help="result folder (default: runs/online)")
+    p.add_argument("--out", default=None,
+                   help="result folder (default: <runs>/online, <runs> = $AIRPOSE_RUNS or runs/ at the checkout root)")
 
 
 def build_node_parser(p: argparse.ArgumentParser | None = None) -> argparse.ArgumentParser:
@@ -131,7 +134,7 @@ def config_from_args(args: argparse.Namespace, drone_id: int, port: int, peers: 
                       margin_ms=args.margin_ms, clock_offset_ms=clock_offset_ms, fallback=args.fallback,
                       comm_timeout_ms=args.comm_timeout_ms, peer_timeout_ms=args.peer_timeout_ms,
                       heartbeat_ms=args.heartbeat_ms, frames=args.frames, start_s=args.start_s, t0=t0,
-                      out_dir=args.out, link=link, host=host, max_runtime_s=args.max_runtime_s,
+                      out_dir=args.out if args.out is not None else str(run_path("online")), link=link, host=host, max_runtime_s=args.max_runtime_s,
                       detector=args.detector, min_confidence=args.min_confidence,
                       box_margin_px=args.box_margin_px, preload=args.preload)
 

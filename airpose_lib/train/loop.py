@@ -245,9 +245,12 @@ class TrainResult:
 
 
 def default_out_dir(profile: str | Path | None, variant: str, seed: int) -> Path:
-    """``runs/train/<profile>/<variant>/seed<seed>`` (relative to the working directory)."""
+    """``<runs>/train/<profile>/<variant>/seed<seed>``, ``<runs>`` = :func:`airpose_lib.paths.runs_root`
+    (the checkout's ``runs/`` or ``$AIRPOSE_RUNS``, whatever the working directory)."""
+    from airpose_lib.paths import run_path
+
     name = Path(str(profile)).stem if profile is not None else "default"
-    return Path("runs") / "train" / name / variant / f"seed{seed}"
+    return run_path("train", name, variant, f"seed{seed}")
 
 
 # -- entry point ----------------------------------------------------------------------------------
@@ -382,7 +385,7 @@ def run_training(cfg: TrainConfig, out_dir: Path, resume: bool, model_factory: C
 
 def _run_training(cfg: TrainConfig, out_dir: Path, resume: bool, model_factory: Callable,
                   dataset_factory: Callable, loss_factory: Callable, stop_at: int | None) -> TrainResult:
-    from tqdm.auto import tqdm
+    from airpose_lib.progress import progress_bar
 
     distributed = dist.is_available() and dist.is_initialized()
     rank = dist.get_rank() if distributed else 0
@@ -471,8 +474,7 @@ def _run_training(cfg: TrainConfig, out_dir: Path, resume: bool, model_factory: 
         return result
 
     step_fn = TASK_FORWARD[cfg.task]
-    bar = tqdm(total=cfg.steps, initial=step, disable=not (cfg.progress and rank == 0), desc=f"train {cfg.variant}",
-               dynamic_ncols=True)
+    bar = progress_bar(total=cfg.steps, initial=step, enabled=cfg.progress and rank == 0, desc=f"train {cfg.variant}")
     t_start = time.time()
     last_values: dict[str, float] | None = None
     val_losses: dict[str, float] | None = None

@@ -29,6 +29,7 @@ def plot_detections_grid(
     frame_labels: Sequence[str] | None = None,
     min_confidence: float = 0.05,
     edges: Mapping[str, Sequence[tuple[int, int]]] | None = None,
+    title: str | None = None,
 ):
     """Frames (rows) x views (columns), zoomed on the person, with every detector's keypoints.
 
@@ -39,6 +40,7 @@ def plot_detections_grid(
         frame_labels: one title per row.
         min_confidence: keypoints below it are not drawn.
         edges: detector name -> limb pairs to draw (default: BODY_25 limbs for ``openpose``).
+        title: figure title (wrapped to the figure's width).
     Returns:
         the matplotlib figure.
     """
@@ -46,7 +48,7 @@ def plot_detections_grid(
 
     edges = dict(edges or {"openpose": BODY_25_EDGES})
     n, V = len(images), len(images[0])
-    fig, axes = plt.subplots(n, V, figsize=(3.2 * V, 3.2 * n), squeeze=False)
+    fig, axes = plt.subplots(n, V, figsize=(3.2 * V, 3.2 * n + 0.5), squeeze=False, layout="constrained")
     for i in range(n):
         for v in range(V):
             ax, img = axes[i, v], images[i][v]
@@ -70,13 +72,15 @@ def plot_detections_grid(
                 g = ground_truth[i, v]
                 ax.scatter(g[:, 0], g[:, 1], marker="+", s=16, lw=0.8, color=DETECTOR_COLORS["ground truth"],
                            label="ground truth" if (i, v) == (0, 0) else None)
-            title = f"UAV{v + 1}" + (f", {frame_labels[i]}" if frame_labels else "")
-            ax.set_title(title, fontsize=8)
+            ax.set_title(f"UAV{v + 1}" + (f", {frame_labels[i]}" if frame_labels else ""), fontsize=8)
             ax.set_xticks([])
             ax.set_yticks([])
             ax.grid(False)
-    fig.legend(loc="lower center", ncol=len(detections) + 1, frameon=False)
-    fig.tight_layout(rect=(0, 0.04, 1, 1))
+    fig.legend(loc="outside lower center", ncol=len(detections) + 1, frameon=False)
+    if title:
+        import textwrap
+
+        fig.suptitle("\n".join(textwrap.wrap(title, width=int(13 * 3.2 * V))))
     return fig
 
 
@@ -92,15 +96,15 @@ def plot_recording_overview(camera_centres: np.ndarray, person_positions: np.nda
     """
     import matplotlib.pyplot as plt
 
-    fig, (a, b) = plt.subplots(1, 2, figsize=(10, 4))
+    fig, (a, b) = plt.subplots(1, 2, figsize=(10, 4), layout="constrained")
     a.plot(person_positions[:, 0], person_positions[:, 2], color=VIEW_COLORS["ground truth"], label="person")
     for v in range(camera_centres.shape[1]):
         c = camera_centres[:, v]
         a.plot(c[:, 0], c[:, 2], color=VIEW_COLORS[f"camera {v + 1}"], label=f"UAV{v + 1}")
         a.scatter(c[0, 0], c[0, 2], color=VIEW_COLORS[f"camera {v + 1}"], marker="^")
     a.set_aspect("equal")
-    a.set_xlabel("x (m)")
-    a.set_ylabel("z (m)")
+    a.set_xlabel("x [m]")
+    a.set_ylabel("z [m]")
     a.set_title("paths seen from above (triangles: start)")
     a.legend(fontsize=7)
     t = timestamps - timestamps[0, 0]
@@ -110,11 +114,10 @@ def plot_recording_overview(camera_centres: np.ndarray, person_positions: np.nda
     centre = float(np.round(offsets.mean(), 3))
     b.set_ylim(min(centre - 5.0, offsets.min() - 1.0), max(centre + 5.0, offsets.max() + 1.0))
     b.ticklabel_format(useOffset=False)
-    b.set_xlabel("UAV1 time (s)")
-    b.set_ylabel("shutter offset (ms)")
+    b.set_xlabel("UAV1 time [s]")
+    b.set_ylabel("shutter offset [ms]")
     b.set_title(f"time stamps of matching frames (mean offset {centre:.1f} ms)")
     b.legend(fontsize=7)
     if title:
         fig.suptitle(title)
-    fig.tight_layout()
     return fig

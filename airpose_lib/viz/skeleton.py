@@ -107,9 +107,9 @@ def plot_skeleton_3d(
     ax.set_box_aspect((1, 1, 1))
     for axis in (ax.xaxis, ax.yaxis, ax.zaxis):
         axis.set_major_locator(MaxNLocator(4))
-    ax.set_xlabel("X (m)")
-    ax.set_ylabel("-Z (m)")
-    ax.set_zlabel("Y (m)")
+    ax.set_xlabel("X [m]")
+    ax.set_ylabel("-Z [m]")
+    ax.set_zlabel("Y [m]")
     return ax
 
 

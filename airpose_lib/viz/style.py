@@ -1,8 +1,13 @@
 """One figure style for every kit figure, and the colours that stand for methods and views.
 
 Colours follow the Okabe-Ito palette (distinguishable with the common colour-vision
-deficiencies). The per-camera colours keep the paper's convention for 3D scenes (Fig. 4): red for
-the estimate from the first camera, blue for the second, green for the ground truth.
+deficiencies), chosen so that the methods drawn together stay apart: Baseline grey, AirPose blue,
+AirPose+ vermillion (the real-data figures); Baseline, Multi-view orange, Fullcam purple, AirPose
+(Table I). The per-camera colours keep the paper's convention for 3D scenes (Fig. 4): red for the
+estimate from the first camera, blue for the second, green for the ground truth.
+
+Axis labels write units in brackets, ``"depth [m]"``, ``"latency [ms]"``. Every figure saved with
+:func:`save_figure` names the profile and data source that made it in a footer.
 """
 
 from __future__ import annotations
@@ -18,7 +23,9 @@ __all__ = [
     "VIEW_COLORS",
     "SIDE_COLORS",
     "MESH_COLOR",
+    "PAPER_COLOR",
     "method_color",
+    "figure_footer",
     "use_kit_style",
     "save_figure",
     "kit_version",
@@ -26,14 +33,17 @@ __all__ = [
 
 #: One colour per method of the paper's tables and plots, plus the ground truth.
 METHOD_COLORS: dict[str, str] = {
-    "Baseline": "#E69F00",             # orange
-    "Baseline+Multi-view": "#56B4E9",  # sky blue
+    "Baseline": "#7A7A7A",             # grey
+    "Baseline+Multi-view": "#E69F00",  # orange
     "Baseline+Fullcam": "#CC79A7",     # reddish purple
     "AirPose": "#0072B2",              # blue
     "AirPose+": "#D55E00",             # vermillion
     "SPIN-style": "#000000",           # black: the crop-only weak-perspective regressor
     "Ground truth": "#009E73",         # bluish green
 }
+
+#: Bars and lines of the paper's own numbers next to the kit's.
+PAPER_COLOR = "#BBBBBB"
 
 #: Estimates per camera in 3D scenes, as in the paper's figures.
 VIEW_COLORS: dict[str, str] = {"camera 1": "#D55E00", "camera 2": "#0072B2",
@@ -96,23 +106,57 @@ def kit_version() -> str:
     return __version__
 
 
+def figure_footer(params: Mapping | None) -> str:
+    """``"profile smoke · data generated · airpose_lib 0.1.0"`` from a figure's ``params``
+    (``profile``, ``data_source``, else ``source``; absent keys are left out)."""
+    params = dict(params or {})
+    parts = []
+    if params.get("notebook"):
+        parts.append(str(params["notebook"]))
+    if params.get("profile") is not None:
+        parts.append(f"profile {Path(str(params['profile'])).stem}")
+    data = params.get("data_source", params.get("source"))
+    if data is not None:
+        parts.append(f"data {data}")
+    parts.append(f"airpose_lib {kit_version()}")
+    return " \u00b7 ".join(parts)
+
+
+def _add_footer(fig, text: str) -> None:
+    """``text`` right-aligned just above everything drawn (titles included): the saved (tight)
+    bounding box grows to include it and nothing is covered."""
+    dpi = mpl.rcParams["savefig.dpi"]
+    if dpi != "figure":  # lay out at the saving resolution: "outside" legends move with the dpi
+        fig.set_dpi(float(dpi))
+    fig.canvas.draw()  # lays out the figure (constrained layout included) so that its extent is final
+    box = fig.get_tightbbox(fig.canvas.get_renderer())  # inches
+    w, h = fig.get_size_inches()
+    fig.text(box.x1 / w, box.y1 / h + 2 / 72 / h, text, ha="right", va="bottom", fontsize=6.5, color="0.4")
+
+
 def save_figure(fig, path: str | Path, *, params: Mapping | None = None, show: bool = True,
-                close: bool = True) -> Path:
+                close: bool = True, footer: bool = True) -> Path:
     """Save a matplotlib figure as a kit artefact and (in IPython) display the saved file.
 
-    The PNG's metadata carries the kit version and ``params`` (JSON), so a figure found on disk
-    says what made it. Displaying the saved file rather than the live figure makes the notebook
-    look the same under any matplotlib backend (the reproduction runner uses Agg).
+    The PNG's metadata carries the kit version and ``params`` (JSON), and a grey line over the
+    figure names the notebook, profile and data source (:func:`figure_footer`), so a figure found
+    on disk or pasted in a document says what made it. Displaying the saved file rather than the
+    live figure makes the notebook look the same under any matplotlib backend (the reproduction
+    runner uses Agg).
 
     Args:
         fig: a ``matplotlib.figure.Figure``.
         path: output file; parent folders are created.
-        params: parameters to record (JSON-serialisable).
+        params: parameters to record (JSON-serialisable); ``profile`` and ``data_source`` (or
+            ``source``) go into the footer.
         show: display the saved image when running inside IPython.
         close: close the figure afterwards (frees memory in long notebooks).
+        footer: draw the footer (when ``params`` is given).
     """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
+    if footer and params is not None:
+        _add_footer(fig, figure_footer(params))
     meta = {"Software": f"airpose_lib {kit_version()}"}
     if params is not None and path.suffix.lower() == ".png":
         meta["Description"] = json.dumps(dict(params), default=str, sort_keys=True)

@@ -56,8 +56,8 @@ def plot_person_positions(positions: Mapping[str, np.ndarray], time_s: np.ndarra
 
     V = next(iter(positions.values())).shape[1]
     names = list(view_names) if view_names is not None else [f"UAV{v + 1}" for v in range(V)]
-    fig, ax = plt.subplots(len(axes), V, figsize=(5.2 * V, 1.9 * len(axes) + 0.6), squeeze=False,
-                           sharex=True)
+    fig, ax = plt.subplots(len(axes), V, figsize=(5.2 * V, 1.9 * len(axes) + 1.0), squeeze=False,
+                           sharex=True, layout="constrained")
     for r, a in enumerate(axes):
         k = _AXES[a]
         for v in range(V):
@@ -71,10 +71,9 @@ def plot_person_positions(positions: Mapping[str, np.ndarray], time_s: np.ndarra
     for v in range(V):
         ax[-1, v].set_xlabel("time [s]")
     handles, labels = ax[0, 0].get_legend_handles_labels()
-    fig.legend(handles, labels, loc="lower center", ncol=min(len(labels), 6), frameon=False)
+    fig.legend(handles, labels, loc="outside lower center", ncol=min(len(labels), 6), frameon=False)
     if title:
         fig.suptitle(title)
-    fig.tight_layout(rect=(0, 0.06, 1, 1))
     return fig
 
 
@@ -89,7 +88,7 @@ def plot_relative_camera(positions: Mapping[str, np.ndarray], time_s: np.ndarray
     """
     import matplotlib.pyplot as plt
 
-    fig, ax = plt.subplots(1, 3, figsize=(13, 3.2), sharex=True)
+    fig, ax = plt.subplots(1, 3, figsize=(12, 3.4), sharex=True, layout="constrained")
     for k, a in enumerate("xyz"):
         if ground_truth is not None:
             ax[k].plot(time_s, ground_truth[:, k], label="Ground truth", **_gt_style())
@@ -99,10 +98,9 @@ def plot_relative_camera(positions: Mapping[str, np.ndarray], time_s: np.ndarray
         ax[k].set_xlabel("time [s]")
         ax[k].set_ylabel(f"{a} [m]")
     handles, labels = ax[0].get_legend_handles_labels()
-    fig.legend(handles, labels, loc="lower center", ncol=min(len(labels), 6), frameon=False)
+    fig.legend(handles, labels, loc="outside lower center", ncol=min(len(labels), 6), frameon=False)
     if title:
         fig.suptitle(title)
-    fig.tight_layout(rect=(0, 0.1, 1, 1))
     return fig
 
 
@@ -131,7 +129,8 @@ def _zoom(points: np.ndarray, shape: tuple[int, int], margin: float = 0.5) -> tu
 
 def plot_mesh_overlays(images: np.ndarray, vertices: Mapping[str, np.ndarray], faces: np.ndarray,
                        K: np.ndarray, frame_labels: Sequence[str] | None = None,
-                       zoom_points: np.ndarray | None = None):
+                       zoom_points: np.ndarray | None = None, title: str | None = None,
+                       panel_in: float = 1.9):
     """Meshes of several methods over the frames of each view (rendered off-screen).
 
     Args:
@@ -142,9 +141,13 @@ def plot_mesh_overlays(images: np.ndarray, vertices: Mapping[str, np.ndarray], f
         frame_labels: n row titles.
         zoom_points: optional ``(n, V, J, 2)`` pixels to zoom on (e.g. ground-truth joints);
             default: the first method's projected vertices.
+        title: figure title.
+        panel_in: side of one panel in inches (the figure stays within a page's width for up
+            to five methods).
 
     Returns:
-        the figure: rows = frames, columns = views x (image, one column per method).
+        the figure: rows = (frame, view), columns = methods (titled in the method's colour);
+        the row label (frame, UAV) is written in black on the left.
     """
     import matplotlib.pyplot as plt
 
@@ -153,7 +156,9 @@ def plot_mesh_overlays(images: np.ndarray, vertices: Mapping[str, np.ndarray], f
 
     n, V, H, W = images.shape[:4]
     methods = list(vertices)
-    fig, ax = plt.subplots(n, V * len(methods), figsize=(2.4 * V * len(methods), 2.5 * n), squeeze=False)
+    M = len(methods)
+    fig, ax = plt.subplots(n * V, M, figsize=(panel_in * M + 0.4, panel_in * n * V + 0.4), squeeze=False,
+                           layout="constrained")
     K = np.asarray(K, dtype=np.float64)
     with OffscreenRenderer((W, H), K.reshape(-1, 3, 3)[0]) as renderer:
         for i in range(n):
@@ -169,14 +174,16 @@ def plot_mesh_overlays(images: np.ndarray, vertices: Mapping[str, np.ndarray], f
                 for m, method in enumerate(methods):
                     rgb, depth = renderer.render(vertices[method][i, v], faces, MESH_COLOR, K=Kiv,
                                                  return_depth=True)
-                    a = ax[i, v * len(methods) + m]
+                    a = ax[i * V + v, m]
                     a.imshow(overlay_mesh(images[i, v], rgb, depth)[y0:y1, x0:x1])
                     a.set_xticks([])
                     a.set_yticks([])
                     a.grid(False)
-                    title = f"UAV{v + 1}: {method}"
-                    if frame_labels is not None and v == 0 and m == 0:
-                        title = f"{frame_labels[i]}\n{title}"
-                    a.set_title(title, fontsize=8, color=line_style(method)["color"])
-    fig.tight_layout()
+                    if i == 0 and v == 0:
+                        a.set_title(method, color=line_style(method)["color"], fontweight="bold")
+                    if m == 0:
+                        row = f"UAV{v + 1}" if frame_labels is None else f"{frame_labels[i]}\nUAV{v + 1}"
+                        a.set_ylabel(row, color="black")
+    if title:
+        fig.suptitle(title)
     return fig

@@ -372,6 +372,22 @@ def limb_weights(limb_weight: float, n_joints: int = NUM_BODY_JOINTS, offset: in
     return w
 
 
+#: Below this weak scale the guard continues as its tangent line (see :func:`scale_guard`).
+GUARD_LINEAR_BELOW = -0.5
+
+
+def scale_guard(s_w: Tensor) -> Tensor:
+    """The official Baseline's weak-camera guard ``exp(-10 s_w)^2`` (``hmr.py``), elementwise.
+
+    For ``s_w < -0.5`` it continues as its tangent line there (value ``e^10``, slope ``-20 e^10``):
+    the same push back towards positive scales, but finite where ``exp(-20 s_w)`` overflows float32
+    (``s_w < -4.4``), which one outlying sample of a batch is enough to reach.
+    """
+    s0 = torch.as_tensor(GUARD_LINEAR_BELOW, dtype=s_w.dtype, device=s_w.device)
+    e0 = torch.exp(-20.0 * s0)
+    return torch.where(s_w >= s0, torch.exp(-20.0 * s_w.clamp(min=GUARD_LINEAR_BELOW)), e0 * (1.0 - 20.0 * (s_w - s0)))
+
+
 def _reduce_views(per_view: Tensor, view_reduction: str) -> Tensor:
     return per_view.sum() if view_reduction == "sum" else per_view.mean()
 
@@ -539,7 +555,7 @@ class SupervisedLoss(nn.Module):
         if "beta" in cross:
             terms["beta"] = terms["beta"] + cross_view_mse(beta)
         cam = pred.get("cam")
-        terms["cam"] = (view_mse(torch.exp(-10.0 * cam[..., 0]), torch.zeros_like(cam[..., 0]), view_reduction=vr)
+        terms["cam"] = (_reduce_views(scale_guard(cam[..., 0]).transpose(0, 1).reshape(cam.shape[1], -1).mean(1), vr)
                         if cam is not None else J0.sum() * 0.0)
 
         if need_v:

@@ -24,6 +24,7 @@ from airpose_lib.data.dataset import PER_VIEW_KEYS, StillFrameDataset
 from airpose_lib.data.manifest import load_manifest
 from airpose_lib.data.shards import sha256_file
 from airpose_lib.model.backbone import build_backbone
+from airpose_lib.progress import progress_bar
 
 __all__ = ["feature_key", "ensure_features", "compute_features", "FeatureDataset", "load_backbone_file"]
 
@@ -58,12 +59,10 @@ def feature_key(backbone_file: str | Path, data_root: str | Path, split: str, cr
 def compute_features(backbone: torch.nn.Module, dataset: StillFrameDataset, batch_size: int = 64,
                      progress: bool = False) -> np.ndarray:
     """Features ``(N, V, C)`` float32 of every crop of ``dataset`` (in order, no augmentation)."""
-    from tqdm.auto import tqdm
-
     backbone = backbone.eval()
     loader = DataLoader(dataset, batch_size=batch_size, shuffle=False)
     out = []
-    for batch in tqdm(loader, disable=not progress, desc="features"):
+    for batch in progress_bar(loader, enabled=progress, desc="features"):
         x = batch["images"]
         B, V = x.shape[:2]
         out.append(backbone(x.flatten(0, 1)).reshape(B, V, -1).numpy())

@@ -31,6 +31,7 @@ from airpose_lib.data.shards import sha256_file
 from airpose_lib.eval.metrics import rotation_error
 from airpose_lib.geometry import rot6d_to_matrix
 from airpose_lib.model.pretrain import heading_bin
+from airpose_lib.paths import run_path
 
 from .checkpoint import kit_version, load_checkpoint
 from .config import TrainConfig, load_train_config
@@ -126,7 +127,7 @@ def ensure_backbone(profile: str, data_root: str | Path, data_fingerprint: str, 
         profile: reproduction profile (its ``pretrain:`` section).
         data_root: the still-frame dataset to pretrain on (train split; the test split gates).
         data_fingerprint: that dataset's configuration fingerprint (part of the key).
-        out_root: parent of the pretraining run folder (default ``runs/pretrain/<profile>``).
+        out_root: parent of the pretraining run folder (default ``<runs>/pretrain/<profile>``).
         overrides: TrainConfig fields over the ``pretrain:`` section.
     """
     from .loop import train  # the engine imports this module for its "regressor" task
@@ -142,7 +143,7 @@ def ensure_backbone(profile: str, data_root: str | Path, data_fingerprint: str, 
             shutil.copyfile(ref, target)
             shutil.copyfile(ref.with_suffix(".json"), target.with_suffix(".json"))
             return target
-        out = Path(out_root) if out_root is not None else Path("runs") / "pretrain" / profile
+        out = Path(out_root) if out_root is not None else run_path("pretrain", profile)
         t0 = time.time()
         run = train("pretrain", profile, out_dir=out / key, config=cfg.replace(progress=progress))
         wall = time.time() - t0

@@ -28,6 +28,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from airpose_lib.folder_lock import folder_lock
+
 __all__ = ["METHODS", "RecordingExperiment", "default_experiment_dir", "run_recording_experiment",
            "body_vertices", "official_recordings", "official_networks", "networks_for", "recordings_for", "depth_summary", "overlay_inputs", "airpose_plus_checks", "markdown_table"]
 
@@ -286,6 +288,13 @@ def run_recording_experiment(profile: str = "smoke", out_dir: str | Path | None 
             ``AirPose (pre-trained)``, ``Baseline``, ``AirPose``), kit ``.pt`` or official
             ``.ckpt`` (:func:`official_networks`); then nothing is trained or fine-tuned.
     """
+    out = Path(out_dir) if out_dir is not None else default_experiment_dir(profile)
+    with folder_lock(out, stale=(".*.tmp", "estimates/*/.*.tmp")):  # one writer of the cached steps
+        return _run_recording_experiment(profile, out, sequences, seed, fine_tune_on, networks, progress)
+
+
+def _run_recording_experiment(profile: str, out: Path, sequences: dict | None, seed: int | None,
+                              fine_tune_on: str, networks: dict | None, progress: bool) -> RecordingExperiment:
     import torch
 
     from airpose_lib.body import load_body_model
@@ -293,7 +302,6 @@ def run_recording_experiment(profile: str = "smoke", out_dir: str | Path | None 
     from airpose_lib.eval.recordings import body_joints, recording_table
     from airpose_lib.train.config import load_train_config
 
-    out = Path(out_dir) if out_dir is not None else default_experiment_dir(profile)
     if sequences is None:
         from airpose_lib.data.sequences import ensure_sequences
 

@@ -8,6 +8,8 @@ import math
 import time
 
 __all__ = [
+    "NodeOptionError",
+    "check_inputs",
     "parse_peers",
     "add_node_arguments",
     "build_node_parser",
@@ -16,6 +18,28 @@ __all__ = [
     "run_node",
     "run_launch",
 ]
+
+
+class NodeOptionError(ValueError):
+    """A node or launch option names something that is not there; the message names the flag."""
+
+
+def check_inputs(args: argparse.Namespace) -> None:
+    """Fail before any process starts when ``--source``, ``--checkpoint`` or ``--onnx-dir`` is
+    missing (their contents are checked when they are loaded)."""
+    from pathlib import Path
+
+    if not str(args.source).startswith("synthetic") and not Path(args.source).is_dir():
+        raise NodeOptionError(
+            f"--source {args.source}: no such folder; give a recording folder in the official layout "
+            "(machine_1/, machine_2/) or synthetic[:views=2,frames=300,...]")
+    if args.checkpoint is not None and not Path(args.checkpoint).is_file():
+        raise NodeOptionError(f"--checkpoint {args.checkpoint}: no such file; give a state_dict or a "
+                              "checkpoints/*.pt of `airpose train`")
+    if args.backend == "onnx" and (args.onnx_dir is None or not (Path(args.onnx_dir) / "meta.json").is_file()):
+        raise NodeOptionError(
+            f"--onnx-dir {args.onnx_dir}: {'no such folder' if not args.onnx_dir or not Path(args.onnx_dir).is_dir() else 'no meta.json in it'}; "
+            "give a folder written by airpose_lib.model.onnx_export.export_onnx")
 
 
 def parse_peers(items: list[str], host: str = "127.0.0.1") -> dict[int, str]:
@@ -136,6 +160,7 @@ def run_node(args: argparse.Namespace) -> int:
     """Handler of ``airpose node``."""
     from .node import DroneProcess
 
+    check_inputs(args)
     if args.t0 == "stdin":
         t0 = None
     elif args.t0 is None:
@@ -166,6 +191,7 @@ def run_launch(args: argparse.Namespace) -> int:
     """Handler of ``airpose launch``: start the drones on loopback, wait, print their summaries."""
     from .launcher import launch
 
+    check_inputs(args)
     # Every node option that differs from its default is passed on to the drones.
     node_defaults = vars(add_node_defaults())
     options = {k: v for k, v in vars(args).items()

@@ -11,6 +11,7 @@ that ``airpose --help`` stays fast.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import errno
 import sys
 import traceback
@@ -48,6 +49,7 @@ _USER_ERRORS = (
     "airpose_lib.reproduce.runner:ReproductionError",
     "airpose_lib.runtime.launcher:LaunchError",
     "airpose_lib.runtime.options:NodeOptionError",
+    "airpose_lib.runtime.keys:SwarmKeyError",
 )
 
 # errno -> how to fix an OSError about a path the user gave.
@@ -311,7 +313,7 @@ def _parse_sets(items) -> dict:
 
 
 def _cmd_train(args: argparse.Namespace) -> int:
-    from airpose_lib.train import load_train_config, train
+    from airpose_lib.train import load_train_config
 
     overrides = _parse_sets(args.set)
     for name in ("steps", "batch_size", "world_size", "num_workers", "device"):
@@ -325,13 +327,23 @@ def _cmd_train(args: argparse.Namespace) -> int:
     for k, v in overrides.items():  # dict fields: merge into the profile's dicts
         if isinstance(v, dict):
             cfg = cfg.replace(**{k: {**getattr(cfg, k), **v}})
-    from airpose_lib.data.manifest import DatasetError
+    from airpose_lib.folder_lock import folder_lock
     from airpose_lib.train import default_out_dir
-    from airpose_lib.train.checkpoint import last_checkpoint, load_checkpoint
 
     # The run folder and the checkpoint to resume from are checked before any data is prepared.
     out = args.out if args.out is not None else default_out_dir(args.profile, cfg.variant, cfg.seed)
     out.mkdir(parents=True, exist_ok=True)
+    # A second training into this folder is refused at once (the loop takes the lock again,
+    # re-entrant; with DDP only there, in the rank-0 process that writes).
+    with folder_lock(out) if cfg.world_size <= 1 else contextlib.nullcontext():
+        return _train_locked(args, cfg, out)
+
+
+def _train_locked(args: argparse.Namespace, cfg, out: Path) -> int:
+    from airpose_lib.data.manifest import DatasetError
+    from airpose_lib.train import train
+    from airpose_lib.train.checkpoint import last_checkpoint, load_checkpoint
+
     last = last_checkpoint(out) if args.resume else None
     if last is not None:
         from airpose_lib.errors import DamagedFileError
@@ -594,6 +606,27 @@ def _add_launch(sub) -> None:
     launch.set_defaults(func=run_launch)
 
 
+def _cmd_keys(args: argparse.Namespace) -> int:
+    from airpose_lib.runtime.keys import create_swarm_keys
+
+    folder = create_swarm_keys(args.out, range(1, args.drones + 1), force=args.force)
+    print(f"CURVE keys of drones 1..{args.drones} in {folder}: give drone d its drone_<d>.key_secret and "
+          f"every drone_<j>.key, then `airpose node --keys DIR` (or AIRPOSE_SWARM_KEYS=DIR)")
+    return 0
+
+
+def _add_keys(sub) -> None:
+    keys = sub.add_parser(
+        "keys", help="make the CurveZMQ keys of a drone swarm (for `airpose node --keys`)",
+        description="Make one CURVE key pair per drone (drone_<d>.key public, drone_<d>.key_secret "
+                    "secret) in a folder of mode 0700. `airpose launch` makes its own for a loopback "
+                    "swarm; this is for drones started by hand or on several machines.")
+    keys.add_argument("--drones", type=int, required=True, help="drones 1..N")
+    keys.add_argument("--out", type=Path, required=True, help="keys folder")
+    keys.add_argument("--force", action="store_true", help="replace existing key pairs")
+    keys.set_defaults(func=_cmd_keys)
+
+
 # -- reproduce ------------------------------------------------------------------------------------
 def _cmd_reproduce(args: argparse.Namespace) -> int:
     from airpose_lib.reproduce import ReproductionError, load_catalog, load_profile, run_profile
@@ -650,7 +683,8 @@ def _add_reproduce(sub) -> None:
 from airpose_lib.finetune.cli import _add_finetune, _add_predict  # noqa: E402 - argparse only
 
 _SUBCOMMANDS: tuple[Callable, ...] = (_add_body, _add_data, _add_train, _add_eval, _add_prior, _add_fit,
-                                       _add_finetune, _add_predict, _add_node, _add_launch, _add_reproduce)
+                                       _add_finetune, _add_predict, _add_node, _add_launch, _add_keys,
+                                       _add_reproduce)
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -10,7 +10,8 @@ Whoever acquires the lock is the folder's only live writer, so temp files left t
 ``.NAME.XXXX.tmp`` of :func:`airpose_lib.body.cache.atomic_path`, ``.shard_*.tmp``) belong to
 a writer that died midway; they are removed right after the lock is taken, never before.
 
-Within one process the lock is re-entrant (the training loop and its logger both hold it).
+Within one process the lock is re-entrant (the training loop and its logger both hold it). With
+DDP, rank 0 holds it (the process that writes).
 Imports nothing of the kit, so any layer may use it.
 """
 from __future__ import annotations

@@ -3,6 +3,7 @@ file, an output folder that cannot be created) ends in one line naming the file 
 status 2, no traceback; `--debug` adds the traceback."""
 from __future__ import annotations
 
+import pickle
 import shutil
 import subprocess
 import sys
@@ -40,9 +41,19 @@ def inputs(tmp_path_factory) -> dict[str, Path]:
     bad_seq = tmp / "bad_seq"
     shutil.copytree(seq, bad_seq)
     _truncate(bad_seq / "machine_1" / "openpose_res.pkl")
+    short_seq = tmp / "short_seq"  # detections of frame 0 only
+    shutil.copytree(seq, short_seq)
+    pkl = short_seq / "machine_1" / "openpose_res.pkl"
+    with open(pkl, "rb") as fh:
+        res = pickle.load(fh)
+    with open(pkl, "wb") as fh:
+        pickle.dump({k: v for k, v in res.items() if int(k) == 0}, fh)
     ckpt = tmp / "last.pt"
     torch.save({"model": {"w": torch.zeros(1000)}, "step": 3}, ckpt)
     _truncate(ckpt)
+    good_npz = tmp / "good_pred.npz"
+    np.savez(good_npz, phi=np.zeros((3, 2, 3, 3)), tau=np.zeros((3, 2, 3)), theta=np.zeros((3, 2, 21, 3, 3)),
+             beta=np.zeros((3, 2, 10)))
     npz = tmp / "pred.npz"
     np.savez(npz, phi=np.zeros((3, 2, 3, 3)), tau=np.zeros((3, 2, 3)))
     _truncate(npz)
@@ -54,12 +65,12 @@ def inputs(tmp_path_factory) -> dict[str, Path]:
     data = tmp / "data"  # a dataset folder whose manifest was cut short
     data.mkdir()
     (data / "manifest.yaml").write_text("kind: airpose-still-frames\nshards: [{index: 0, file: ")
-    return {"seq": seq, "bad_seq": bad_seq, "ckpt": ckpt, "npz": npz, "missing": tmp / "does_not_exist",
+    return {"seq": seq, "bad_seq": bad_seq, "short_seq": short_seq, "ckpt": ckpt, "npz": npz, "good_npz": good_npz, "missing": tmp / "does_not_exist",
             "uncreatable": a_file / "sub", "run": run, "data": data, "tmp": tmp}
 
 
 def _node(*extra: str) -> list[str]:
-    return ["node", "--id", "1", "--port", "5999", "--backend", "torch", *extra]
+    return ["node", "--id", "1", "--port", "5999", "--backend", "torch", "--insecure", *extra]
 
 
 # (name, argv from the inputs, the path the message must name)
@@ -105,9 +116,9 @@ TRUNCATED = [
                                          "--out", p["tmp"] / "ft2"], "ckpt"),
     ("train resume", lambda p: ["train", "--variant", "airpose", "--out", p["run"]], "run"),
     ("fit --init", lambda p: ["fit", "--sequence", p["seq"], "--init", p["npz"]], "npz"),
-    ("fit --sequence", lambda p: ["fit", "--sequence", p["bad_seq"], "--init", p["npz"]], "bad_seq"),
-    ("fit --prior-path", lambda p: ["fit", "--sequence", p["seq"], "--init", p["npz"], "--prior-path",
-                                    p["ckpt"]], "npz"),
+    ("fit --sequence", lambda p: ["fit", "--sequence", p["bad_seq"], "--init", p["good_npz"]], "bad_seq"),
+    ("fit --prior-path", lambda p: ["fit", "--sequence", p["seq"], "--init", p["good_npz"], "--prior-path",
+                                    p["ckpt"]], "ckpt"),
     ("prior info --path", lambda p: ["prior", "info", "--path", p["ckpt"]], "ckpt"),
     ("node --checkpoint", lambda p: _node("--checkpoint", p["ckpt"]), "ckpt"),
     ("node --source", lambda p: _node("--source", p["bad_seq"]), "bad_seq"),
@@ -146,6 +157,21 @@ def test_every_subcommand_reports_a_truncated_input_in_one_line(argv, named, inp
     code, err = _run(argv(inputs), capsys)
     _assert_one_line(code, err, inputs[named])
     assert "damaged" in err or "truncated" in err or "not" in err
+
+
+def test_node_without_keys_says_where_they_come_from(inputs, capsys, monkeypatch):
+    monkeypatch.delenv("AIRPOSE_SWARM_KEYS", raising=False)
+    code, err = _run(["node", "--id", "1", "--port", "5999", "--backend", "fake"], capsys)
+    assert code == 2 and "AIRPOSE_SWARM_KEYS" in err and "--keys" in err and len(err.strip().splitlines()) == 1
+    code, err = _run(["node", "--id", "1", "--port", "5999", "--peers", "2@6000", "--backend", "fake",
+                      "--keys", inputs["tmp"] / "no_keys"], capsys)
+    _assert_one_line(code, err, inputs["tmp"] / "no_keys")
+
+
+def test_short_detections_name_the_cli_flag(inputs, capsys):
+    code, err = _run(["fit", "--sequence", inputs["short_seq"], "--init", inputs["good_npz"]], capsys)
+    _assert_one_line(code, err, inputs["short_seq"] / "machine_1" / "openpose_res.pkl")
+    assert "--allow-missing-detections" in err
 
 
 def test_debug_shows_the_traceback(inputs, capsys):

@@ -106,6 +106,10 @@ def add_node_arguments(p: argparse.ArgumentParser) -> None:
     m.add_argument("--threads", type=int, default=1, help="intra-op threads per drone (default: 1)")
     m.add_argument("--message-dtype", choices=("float32", "float16"), default="float32")
     m.add_argument("--fake-compute-ms", type=float, default=0.0, help=argparse.SUPPRESS)
+    a = p.add_argument_group("authentication (CurveZMQ; see airpose_lib/runtime/keys.py)")
+    a.add_argument("--insecure", action="store_true",
+                   help="exchange messages without authentication (any process that reaches the "
+                        "sockets can speak for any drone; trusted networks only)")
     n = p.add_argument_group("link emulation (applied to received packets)")
     n.add_argument("--link-latency-ms", type=float, default=0.0)
     n.add_argument("--link-jitter-ms", type=float, default=0.0)
@@ -127,6 +131,9 @@ def build_node_parser(p: argparse.ArgumentParser | None = None) -> argparse.Argu
                    help="start time (epoch s, this drone's clock); 'stdin' = wait for 'START <t0>' "
                         "(the launcher); default: the next multiple of 10 s at least 5 s away")
     p.add_argument("--clock-offset-ms", type=float, default=0.0, help="emulated clock error of this drone")
+    p.add_argument("--keys", default=None, metavar="DIR",
+                   help="folder with this drone's drone_<id>.key_secret and the peers' drone_<j>.key "
+                        "(default: $AIRPOSE_SWARM_KEYS; make them with `airpose keys`)")
     add_node_arguments(p)
     return p
 
@@ -153,15 +160,19 @@ def config_from_args(args: argparse.Namespace, drone_id: int, port: int, peers: 
                       heartbeat_ms=args.heartbeat_ms, frames=args.frames, start_s=args.start_s, t0=t0,
                       out_dir=args.out, link=link, host=host, max_runtime_s=args.max_runtime_s,
                       detector=args.detector, min_confidence=args.min_confidence,
-                      box_margin_px=args.box_margin_px, preload=args.preload)
+                      box_margin_px=args.box_margin_px, preload=args.preload,
+                      keys=getattr(args, "keys", None), insecure=args.insecure)
 
 
 def run_node(args: argparse.Namespace) -> int:
     """Handler of ``airpose node``."""
+    from airpose_lib.process_guard import die_with_parent
+
     from .node import DroneProcess
 
     check_inputs(args)
-    if args.t0 == "stdin":
+    if args.t0 == "stdin":  # started by a launcher: never outlive it
+        die_with_parent()
         t0 = None
     elif args.t0 is None:
         t0 = math.ceil((time.time() + 5.0) / 10.0) * 10.0  # drones started by hand meet there

@@ -136,7 +136,7 @@ def test_reproduce_dispatch_and_exit_status(monkeypatch, capsys, ok):
 
 
 def test_reproduce_configuration_error_is_reported(monkeypatch, capsys):
-    assert cli.main(["reproduce", "--only", "99_not_there"]) == 1
+    assert cli.main(["reproduce", "--only", "99_not_there"]) == 2
     assert "99_not_there" in capsys.readouterr().err
 
 

@@ -238,3 +238,10 @@ def test_module_entry_prints_one_line_without_traceback(tmp_path):
                          capture_output=True, text=True, timeout=120, cwd=ROOT)
     assert res.returncode == 2 and "Traceback" not in res.stderr
     assert res.stderr.strip().count("\n") == 0 and str(tmp_path / "x.pt") in res.stderr
+
+
+def test_body_info_smplx_in_a_missing_folder(tmp_path, monkeypatch, capsys):
+    monkeypatch.setenv("AIRPOSE_SMPLX_DIR", str(tmp_path / "nope"))
+    code, err = _run(["body", "info", "--source", "smplx"], capsys)
+    _assert_one_line(code, err, tmp_path / "nope")
+    assert "AIRPOSE_SMPLX_DIR" in err

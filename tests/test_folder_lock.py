@@ -108,20 +108,38 @@ def test_run_logger_is_a_writer(holder):
 
 
 # -- no orphans ------------------------------------------------------------------------------------
-def _children(pid: int) -> set[int]:
-    import psutil
-
+def _stat(pid: int) -> tuple[str, int] | None:
+    """(state, ppid) of a process from /proc, None if it is gone."""
     try:
-        return {c.pid for c in psutil.Process(pid).children(recursive=True)}
-    except psutil.NoSuchProcess:
-        return set()
+        fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    except (OSError, IndexError):
+        return None
+    return fields[0], int(fields[1])
+
+
+def _children(pid: int) -> set[int]:
+    """All descendants of ``pid`` (Linux /proc)."""
+    parents = {}
+    for entry in Path("/proc").iterdir():
+        if entry.name.isdigit():
+            st = _stat(int(entry.name))
+            if st is not None:
+                parents[int(entry.name)] = st[1]
+    out, frontier = set(), {pid}
+    while frontier:
+        frontier = {c for c, pp in parents.items() if pp in frontier} - out
+        out |= frontier
+    return out
+
+
+def _alive(pid: int) -> bool:
+    st = _stat(pid)
+    return st is not None and st[0] != "Z"
 
 
 def test_pool_workers_die_with_a_killed_parent(tmp_path, open_model_files):
     """SIGKILL `airpose data generate --workers 2` mid-run: its two render workers and the
     multiprocessing resource tracker exit too (they used to run on, ~1.7 GB)."""
-    import psutil
-
     proc = subprocess.Popen([sys.executable, "-m", "airpose_lib", "data", "generate", "--profile", "smoke",
                              "--workers", "2", "--out", str(tmp_path / "data")], env=_env(),
                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
@@ -141,7 +159,7 @@ def test_pool_workers_die_with_a_killed_parent(tmp_path, open_model_files):
     alive = kids
     while alive and time.time() < t_end:
         time.sleep(0.25)
-        alive = {k for k in kids if psutil.pid_exists(k) and psutil.Process(k).status() != psutil.STATUS_ZOMBIE}
+        alive = {k for k in kids if _alive(k)}
     for k in alive:  # do not leak them into the machine if the test fails
         os.kill(k, signal.SIGKILL)
     assert not alive, f"orphans left: {alive}"

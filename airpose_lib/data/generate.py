@@ -454,8 +454,8 @@ def _limit_threads() -> None:
     torch.set_num_threads(1)
 
 
-def _worker_init(config_dict: dict, progress_queue) -> None:
-    die_with_parent()  # no orphaned renderers if the parent is killed
+def _worker_init(config_dict: dict, progress_queue, parent: int | None = None) -> None:
+    die_with_parent(parent)  # no orphaned renderers if the parent is killed (even before this runs)
     os.environ.setdefault("LP_NUM_THREADS", "1")  # Mesa llvmpipe: one raster thread per worker
     os.environ.setdefault("OMP_NUM_THREADS", "1")
     _limit_threads()
@@ -645,7 +645,7 @@ def _run_pool(config, root, todo, workers, bar, finished) -> None:
                 bar.update(n)
 
     ex = ProcessPoolExecutor(workers, mp_context=ctx, initializer=_worker_init,
-                             initargs=(config.to_dict(), q))
+                             initargs=(config.to_dict(), q, os.getpid()))
     try:
         pending = {ex.submit(_worker_shard, (k, str(root))) for k in todo}
         while pending:

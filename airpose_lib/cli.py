@@ -131,7 +131,9 @@ SEQUENCE_FOLDER = "a recording folder in the official layout (machine_1/, machin
 
 # -- body -----------------------------------------------------------------------------------------
 def _cmd_body_build(args: argparse.Namespace) -> int:
-    from airpose_lib import body
+    import importlib
+
+    body = importlib.import_module("airpose_lib.body")
 
     genders = GENDERS if args.gender == "all" else (args.gender,)
     damaged = []
@@ -197,10 +199,13 @@ def _cmd_data_sequence(args: argparse.Namespace) -> int:
         configs = profile_sequences(args.profile)
     except ValueError as e:
         raise CLIError(str(e)) from None
+    from airpose_lib.folder_lock import folder_lock
+
     root = args.out if args.out is not None else default_sequence_root(args.profile)
     try:
-        paths = ensure_sequences(args.profile, root, configs=configs, only=args.only, force=args.force,
-                                 progress=True)
+        with folder_lock(root, "recordings folder"):  # one writer; a killed one's temp files go
+            paths = ensure_sequences(args.profile, root, configs=configs, only=args.only, force=args.force,
+                                     progress=True)
     except ValueError as e:
         raise CLIError(str(e)) from None
     for name, path in paths.items():

@@ -87,6 +87,8 @@ def fake_body(monkeypatch):
 
     mod.build_open_model, mod.load_body_model, mod.body_model_info = (build_open_model, load_body_model,
                                                                       body_model_info)
+    mod.open_model_path = lambda gender: Path(f"/nonexistent/SMPLX_{gender.upper()}.npz")  # nothing cached
+    mod.BodyModelError = RuntimeError
     monkeypatch.setitem(sys.modules, "airpose_lib.body", mod)
     return calls
 

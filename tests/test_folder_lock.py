@@ -143,19 +143,17 @@ def test_pool_workers_die_with_a_killed_parent(tmp_path, open_model_files):
     proc = subprocess.Popen([sys.executable, "-m", "airpose_lib", "data", "generate", "--profile", "smoke",
                              "--workers", "2", "--out", str(tmp_path / "data")], env=_env(),
                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    data = tmp_path / "data"
     try:
-        t_end = time.time() + 240
-        kids: set[int] = set()
-        while time.time() < t_end and len(kids) < 3:  # 2 workers + the resource tracker
-            time.sleep(0.5)
-            kids = _children(proc.pid)
-        assert len(kids) >= 3, kids
-        time.sleep(3.0)  # let the workers get into their initializer and render
+        t_end = time.time() + 300
+        while time.time() < t_end and proc.poll() is None and not list(data.glob("shard_*")):
+            time.sleep(0.5)  # until the workers render (a first shard is finished)
         kids = _children(proc.pid)
+        assert len(kids) >= 3, kids  # 2 workers + the resource tracker
     finally:
         proc.send_signal(signal.SIGKILL)
         proc.wait()
-    t_end = time.time() + 30
+    t_end = time.time() + 60
     alive = kids
     while alive and time.time() < t_end:
         time.sleep(0.25)

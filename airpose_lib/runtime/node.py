@@ -61,9 +61,9 @@ import numpy as np
 import zmq
 
 from . import results as R
-from .keys import SwarmKeyError, keys_folder, load_swarm_keys
 from .backends import (BackendSpec, StageModel, checkpoint_settings, fresh_copy, make_stage_model, to_numpy,
                        warm_up)
+from .keys import KEYS_ENV, SwarmKeyError, keys_folder, load_swarm_keys
 from .source import crop_input, open_source, person_box
 from .sync import CameraReplay, Clock, Mailbox, PeerTable, Schedule
 from .transport import LinkConfig, Transport, endpoint
@@ -161,7 +161,7 @@ class DroneProcess:
             folder = keys_folder(c.keys)
             if folder is None:
                 raise SwarmKeyError(
-                    f"drone {c.drone_id}: no swarm keys; give --keys DIR or set {'AIRPOSE_SWARM_KEYS'} "
+                    f"drone {c.drone_id}: no swarm keys; give --keys DIR or set {KEYS_ENV} "
                     "(make them with `airpose keys --drones N --out DIR`; `airpose launch` makes its own), "
                     "or pass --insecure on a trusted network")
             self.keys = load_swarm_keys(folder, c.drone_id, c.peers)

@@ -6,6 +6,7 @@ import argparse
 import json
 import math
 import time
+from pathlib import Path
 
 __all__ = [
     "NodeOptionError",
@@ -27,8 +28,6 @@ class NodeOptionError(ValueError):
 def check_inputs(args: argparse.Namespace) -> None:
     """Fail before any process starts when ``--source``, ``--checkpoint`` or ``--onnx-dir`` is
     missing (their contents are checked when they are loaded)."""
-    from pathlib import Path
-
     if not str(args.source).startswith("synthetic") and not Path(args.source).is_dir():
         raise NodeOptionError(
             f"--source {args.source}: no such folder; give a recording folder in the official layout "
@@ -37,9 +36,9 @@ def check_inputs(args: argparse.Namespace) -> None:
         raise NodeOptionError(f"--checkpoint {args.checkpoint}: no such file; give a state_dict or a "
                               "checkpoints/*.pt of `airpose train`")
     if args.backend == "onnx" and (args.onnx_dir is None or not (Path(args.onnx_dir) / "meta.json").is_file()):
-        raise NodeOptionError(
-            f"--onnx-dir {args.onnx_dir}: {'no such folder' if not args.onnx_dir or not Path(args.onnx_dir).is_dir() else 'no meta.json in it'}; "
-            "give a folder written by airpose_lib.model.onnx_export.export_onnx")
+        what = "no meta.json in it" if args.onnx_dir and Path(args.onnx_dir).is_dir() else "no such folder"
+        raise NodeOptionError(f"--onnx-dir {args.onnx_dir}: {what}; give a folder written by "
+                              "airpose_lib.model.onnx_export.export_onnx")
 
 
 def parse_peers(items: list[str], host: str = "127.0.0.1") -> dict[int, str]:

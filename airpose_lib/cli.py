@@ -11,7 +11,10 @@ that ``airpose --help`` stays fast.
 from __future__ import annotations
 
 import argparse
+import contextlib
+import errno
 import sys
+import traceback
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
@@ -23,8 +26,61 @@ PROFILES = tuple(sorted(p.stem for p in (Path(__file__).parent / "reproduce" / "
                  ) or ("smoke", "cpu", "paper")
 
 
+EXIT_USER_ERROR = 2  # as argparse for a bad flag: the user can fix it
+
+
 class CLIError(Exception):
-    """A user-facing error: printed on one line without a traceback, exit status 1."""
+    """A user-facing error: printed on one line without a traceback, exit status 2."""
+
+
+# Kit exceptions that carry a message for the user (which file, what is wrong, the fix); checked
+# through sys.modules so that an error path never imports torch. Any other exception is a bug in
+# the kit and keeps its traceback.
+_USER_ERRORS = (
+    "airpose_lib.errors:DamagedFileError",
+    "airpose_lib.folder_lock:FolderBusyError",
+    "airpose_lib.assets.manifest:AssetError",
+    "airpose_lib.body.loader:BodyModelError",
+    "airpose_lib.data.manifest:DatasetError",
+    "airpose_lib.data.official_layout:SequenceFormatError",
+    "airpose_lib.finetune.predict:PredictionFormatError",
+    "airpose_lib.model.official:OfficialCheckpointError",
+    "airpose_lib.prior.checkpoint:PriorError",
+    "airpose_lib.reproduce.runner:ReproductionError",
+    "airpose_lib.runtime.launcher:LaunchError",
+    "airpose_lib.runtime.options:NodeOptionError",
+    "airpose_lib.runtime.keys:SwarmKeyError",
+)
+
+# errno -> how to fix an OSError about a path the user gave.
+_OS_FIXES = {
+    errno.ENOENT: "no such file or folder; check the path",
+    errno.ENOTDIR: "a part of the path is a file, not a folder; check the path",
+    errno.EISDIR: "is a folder where a file was expected; give a file",
+    errno.EACCES: "permission denied; choose a place you can read/write (e.g. another --out) or fix its permissions",
+    errno.EPERM: "operation not permitted; choose another place (e.g. another --out) or fix its permissions",
+    errno.EROFS: "read-only file system; choose another place (e.g. another --out)",
+    errno.ENOSPC: "no space left on the device; free some space or choose another --out",
+    errno.EEXIST: "already exists; remove it or choose another path",
+    errno.ENAMETOOLONG: "name too long; choose a shorter path",
+}
+
+
+def user_error_message(exc: BaseException) -> str | None:
+    """The one-line message for an error the user can fix, None for anything else (a bug)."""
+    if isinstance(exc, CLIError) or any(
+            isinstance(exc, cls) for cls in (_class(spec) for spec in _USER_ERRORS) if cls is not None):
+        return " ".join(str(exc).split()) or type(exc).__name__
+    if isinstance(exc, OSError) and exc.filename is not None and exc.errno in _OS_FIXES:
+        return f"{exc.filename}: {_OS_FIXES[exc.errno]}"
+    if isinstance(exc, FileNotFoundError):  # raised by the kit with its own message
+        return " ".join(str(exc).split())
+    return None
+
+
+def _class(spec: str) -> type | None:
+    module, _, name = spec.partition(":")
+    return getattr(sys.modules.get(module), name, None)
 
 
 def parse_range(text: str | None, what: str = "image numbers",
@@ -41,14 +97,59 @@ def parse_range(text: str | None, what: str = "image numbers",
         raise CLIError(f"--frames expects START:STOP {what} (e.g. {example}), got {text!r}") from None
 
 
+def require_file(path: Path | str | None, flag: str, what: str) -> Path | None:
+    """``path`` (None passes) if it is an existing file, else a :class:`CLIError` naming the flag."""
+    if path is None:
+        return None
+    p = Path(path)
+    if p.is_dir():
+        raise CLIError(f"{flag} {p} is a folder; give {what}")
+    if not p.is_file():
+        raise CLIError(f"{flag} {p}: no such file; give {what}")
+    return p
+
+
+def require_folder(path: Path | str | None, flag: str, what: str) -> Path | None:
+    """``path`` (None passes) if it is an existing folder, else a :class:`CLIError` naming the flag."""
+    if path is None:
+        return None
+    p = Path(path)
+    if not p.is_dir():
+        raise CLIError(f"{flag} {p}: {'not a folder' if p.exists() else 'no such folder'}; give {what}")
+    return p
+
+
+def require_path(path: Path | str | None, flag: str, what: str) -> Path | None:
+    """``path`` (None passes) if it exists (file or folder), else a :class:`CLIError` naming the flag."""
+    if path is not None and not Path(path).exists():
+        raise CLIError(f"{flag} {path}: no such file or folder; give {what}")
+    return None if path is None else Path(path)
+
+
+SEQUENCE_FOLDER = "a recording folder in the official layout (machine_1/, machine_2/ with openpose_res.pkl)"
+
+
 # -- body -----------------------------------------------------------------------------------------
 def _cmd_body_build(args: argparse.Namespace) -> int:
-    from airpose_lib.body import build_open_model
+    import importlib
+
+    body = importlib.import_module("airpose_lib.body")
 
     genders = GENDERS if args.gender == "all" else (args.gender,)
-    paths = build_open_model(genders=genders, force=args.force)
+    damaged = []
+    if not args.force:  # an existing file is verified before it is trusted
+        for gender in genders:
+            path = body.open_model_path(gender)
+            try:
+                if path.exists():
+                    body.check_model_file(path)
+            except body.BodyModelError:
+                damaged.append(gender)
+    paths = body.build_open_model(genders=genders, force=args.force)
+    if damaged:
+        paths.update(body.build_open_model(genders=damaged, force=True))
     for gender, path in paths.items():
-        print(f"{gender:<8} {path}")
+        print(f"{gender:<8} {path}" + ("  (the cached file was damaged: rebuilt)" if gender in damaged else ""))
     return 0
 
 
@@ -98,10 +199,13 @@ def _cmd_data_sequence(args: argparse.Namespace) -> int:
         configs = profile_sequences(args.profile)
     except ValueError as e:
         raise CLIError(str(e)) from None
+    from airpose_lib.folder_lock import folder_lock
+
     root = args.out if args.out is not None else default_sequence_root(args.profile)
     try:
-        paths = ensure_sequences(args.profile, root, configs=configs, only=args.only, force=args.force,
-                                 progress=not args.quiet)
+        with folder_lock(root, "recordings folder"):  # one writer; a killed one's temp files go
+            paths = ensure_sequences(args.profile, root, configs=configs, only=args.only, force=args.force,
+                                     progress=not args.quiet)
     except ValueError as e:
         raise CLIError(str(e)) from None
     for name, path in paths.items():
@@ -138,7 +242,7 @@ def _cmd_data_generate(args: argparse.Namespace) -> int:
         root = args.out if args.out is not None else default_root(args.profile)
         workers = args.workers if args.workers is not None else (os.cpu_count() or 1)
         manifest = generate_still_dataset(config, root, workers=workers, profile=args.profile,
-                                          progress=not args.quiet, record=True)
+                                          progress=not args.quiet, record=args.record_manifest)
     except DatasetError as e:
         raise CLIError(str(e)) from None
     t = manifest["totals"]
@@ -164,6 +268,9 @@ def _add_data_generate(dsub) -> None:
                      help="parallel rendering processes (default: number of CPU cores); the result "
                           "does not depend on it")
     gen.add_argument("--quiet", action="store_true", help="no progress bar")
+    gen.add_argument("--record-manifest", action="store_true",
+                     help="when complete, also copy the manifest to the checkout's "
+                          "data_manifests/generated_<profile>.yaml (a tracked file; off by default)")
     gen.set_defaults(func=_cmd_data_generate)
 
 
@@ -295,10 +402,34 @@ def _cmd_train(args: argparse.Namespace) -> int:
     for k, v in overrides.items():  # dict fields: merge into the profile's dicts
         if isinstance(v, dict):
             cfg = cfg.replace(**{k: {**getattr(cfg, k), **v}})
-    from airpose_lib.data.manifest import DatasetError
+    from airpose_lib.folder_lock import folder_lock
+    from airpose_lib.train import default_out_dir
 
+    # The run folder and the checkpoint to resume from are checked before any data is prepared.
+    out = args.out if args.out is not None else default_out_dir(args.profile, cfg.variant, cfg.seed)
+    out.mkdir(parents=True, exist_ok=True)
+    # A second training into this folder is refused at once (the loop takes the lock again,
+    # re-entrant; with DDP only there, in the rank-0 process that writes).
+    with folder_lock(out) if cfg.world_size <= 1 else contextlib.nullcontext():
+        return _train_locked(args, cfg, out)
+
+
+def _train_locked(args: argparse.Namespace, cfg, out: Path) -> int:
+    from airpose_lib.data.manifest import DatasetError
+    from airpose_lib.train import train
+    from airpose_lib.train.checkpoint import last_checkpoint, load_checkpoint
+
+    last = last_checkpoint(out) if args.resume else None
+    if last is not None:
+        from airpose_lib.errors import DamagedFileError
+
+        try:
+            load_checkpoint(last)
+        except DamagedFileError as e:
+            raise CLIError(f"cannot resume: {last} is damaged (cut short by a crash or a full disk?); copy the "
+                           f"newest {last.parent}/step_*.pt over it, or start afresh with --no-resume") from e
     try:
-        result = train(args.variant, args.profile, out_dir=args.out, resume=args.resume, config=cfg)
+        result = train(args.variant, args.profile, out_dir=out, resume=args.resume, config=cfg)
     except (ValueError, DatasetError) as e:
         raise CLIError(str(e)) from None
     print(f"step {result.step}  train loss {result.train_loss}  checkpoint {result.checkpoint}")
@@ -371,8 +502,7 @@ def _cmd_eval(args: argparse.Namespace) -> int:
 
     from airpose_lib.data.manifest import DatasetError
 
-    if not Path(args.checkpoint).is_file():
-        raise CLIError(f"no checkpoint at {args.checkpoint}")
+    require_file(args.checkpoint, "--checkpoint", "a checkpoints/*.pt of `airpose train`")
     try:
         tables = evaluate_checkpoint(args.checkpoint, split=args.split, method=args.method,
                                      batch_size=args.batch_size, device=args.device, max_samples=args.max_samples)
@@ -430,6 +560,7 @@ def _cmd_prior_info(args: argparse.Namespace) -> int:
 
     from airpose_lib.prior import PriorError, load_prior
 
+    require_path(args.path, "--path", "a prior checkpoint file or folder")
     try:
         _, prov = load_prior(args.source, args.path, tag=args.tag, return_provenance=True)
     except PriorError as e:
@@ -477,15 +608,23 @@ def _cmd_fit(args: argparse.Namespace) -> int:
     from airpose_lib.fitting import AirPosePlusConfig, airpose_plus, fitting_profile
     from airpose_lib.prior import PriorError, load_prior
 
+    from airpose_lib.errors import reading
+
+    require_folder(args.sequence, "--sequence", SEQUENCE_FOLDER)
+    require_file(args.init, "--init", "the .npz of `airpose predict`")
+    require_path(args.prior_path, "--prior-path", "a prior checkpoint file or folder")
     rng = parse_range(args.frames, "positions", "0:1000")
+    with reading(args.init, "an .npz of network outputs", "write it again with `airpose predict`"):
+        pred = np.load(args.init)
+        files = set(pred.files)
     seq = load_sequence(args.sequence, frames=None if rng is None else slice(*rng), ground_truth=False)
-    pred = np.load(args.init)
-    missing = {"phi", "tau", "theta", "beta"} - set(pred.files)
+    missing = {"phi", "tau", "theta", "beta"} - files
     if missing:
         raise CLIError(f"{args.init}: missing arrays {sorted(missing)} (need phi, tau, theta, beta)")
-    init = {k: pred[k] for k in ("phi", "tau", "theta", "beta")}
-    if "frames" in pred.files:
-        pf = np.asarray(pred["frames"])
+    with reading(args.init, "an .npz of network outputs", "write it again with `airpose predict`"):
+        init = {k: pred[k] for k in ("phi", "tau", "theta", "beta")}
+        pf = np.asarray(pred["frames"]) if "frames" in files else None
+    if pf is not None:
         sel = np.searchsorted(pf, seq.frames)
         if np.any(sel >= len(pf)) or np.any(pf[np.minimum(sel, len(pf) - 1)] != seq.frames):
             raise CLIError(f"{args.init}: its `frames` do not cover the sequence's frames")
@@ -589,6 +728,27 @@ def _add_export(sub) -> None:
     export.set_defaults(func=run_export)
 
 
+def _cmd_keys(args: argparse.Namespace) -> int:
+    from airpose_lib.runtime.keys import create_swarm_keys
+
+    folder = create_swarm_keys(args.out, range(1, args.drones + 1), force=args.force)
+    print(f"CURVE keys of drones 1..{args.drones} in {folder}: give drone d its drone_<d>.key_secret and "
+          f"every drone_<j>.key, then `airpose node --keys DIR` (or AIRPOSE_SWARM_KEYS=DIR)")
+    return 0
+
+
+def _add_keys(sub) -> None:
+    keys = sub.add_parser(
+        "keys", help="make the CurveZMQ keys of a drone swarm (for `airpose node --keys`)",
+        description="Make one CURVE key pair per drone (drone_<d>.key public, drone_<d>.key_secret "
+                    "secret) in a folder of mode 0700. `airpose launch` makes its own for a loopback "
+                    "swarm; this is for drones started by hand or on several machines.")
+    keys.add_argument("--drones", type=int, required=True, help="drones 1..N")
+    keys.add_argument("--out", type=Path, required=True, help="keys folder")
+    keys.add_argument("--force", action="store_true", help="replace existing key pairs")
+    keys.set_defaults(func=_cmd_keys)
+
+
 # -- reproduce ------------------------------------------------------------------------------------
 def _cmd_reproduce(args: argparse.Namespace) -> int:
     from airpose_lib.reproduce import ReproductionError, load_catalog, load_profile, run_profile
@@ -656,7 +816,7 @@ def _add_reproduce(sub) -> None:
 from airpose_lib.finetune.cli import _add_finetune, _add_predict  # noqa: E402 - argparse only
 
 _SUBCOMMANDS: tuple[Callable, ...] = (_add_body, _add_data, _add_pretrain, _add_train, _add_eval, _add_prior, _add_fit,
-                                       _add_finetune, _add_predict, _add_node, _add_launch, _add_export,
+                                       _add_finetune, _add_predict, _add_node, _add_launch, _add_export, _add_keys,
                                        _add_reproduce)
 
 
@@ -669,6 +829,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
     for add in _SUBCOMMANDS:
         add(sub)
+    _add_debug_flag(parser)
     return parser
 
 
@@ -685,17 +846,37 @@ class _VersionAction(argparse.Action):
         parser.exit()
 
 
+def _add_debug_flag(parser: argparse.ArgumentParser, top: bool = True) -> None:
+    """``--debug`` on the command and on every subcommand (``airpose train ... --debug`` works too)."""
+    parser.add_argument("--debug", action="store_true", default=False if top else argparse.SUPPRESS,
+                        help="on an error, show the Python traceback too")
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            for child in action.choices.values():
+                _add_debug_flag(child, top=False)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
-    """Run the command line; returns the exit status."""
+    """Run the command line; returns the exit status.
+
+    Errors the user can fix (missing, damaged or foreign files, bad values, a busy or unwritable
+    output folder) print one line ``airpose: error: <what, which file, the fix>`` and return 2;
+    ``--debug`` also prints the traceback. Anything else is a bug and raises.
+    """
     args = build_parser().parse_args(argv)
     try:
         return int(args.func(args) or 0)
-    except CLIError as e:
-        print(f"airpose: error: {e}", file=sys.stderr)
-        return 1
     except KeyboardInterrupt:
         print("airpose: interrupted", file=sys.stderr)
         return 130
+    except Exception as exc:  # noqa: BLE001 - sorted into user errors and bugs below
+        message = user_error_message(exc)
+        if message is None:
+            raise
+        if args.debug:
+            traceback.print_exception(exc)
+        print(f"airpose: error: {message}", file=sys.stderr)
+        return EXIT_USER_ERROR
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -87,6 +87,8 @@ def fake_body(monkeypatch):
 
     mod.build_open_model, mod.load_body_model, mod.body_model_info = (build_open_model, load_body_model,
                                                                       body_model_info)
+    mod.open_model_path = lambda gender: Path(f"/nonexistent/SMPLX_{gender.upper()}.npz")  # nothing cached
+    mod.BodyModelError = RuntimeError
     monkeypatch.setitem(sys.modules, "airpose_lib.body", mod)
     return calls
 
@@ -136,7 +138,7 @@ def test_reproduce_dispatch_and_exit_status(monkeypatch, capsys, ok):
 
 
 def test_reproduce_configuration_error_is_reported(monkeypatch, capsys):
-    assert cli.main(["reproduce", "--only", "99_not_there"]) == 1
+    assert cli.main(["reproduce", "--only", "99_not_there"]) == 2
     assert "99_not_there" in capsys.readouterr().err
 
 

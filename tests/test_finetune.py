@@ -469,7 +469,7 @@ def test_cli_predict_and_finetune(tiny_ckpt, smoke_root, tmp_path, body32, capsy
     assert "2D loss" in capsys.readouterr().out
     cfg = json.loads((tmp_path / "ft" / "config.json").read_text())
     assert (cfg["steps"], cfg["frames"], cfg["lr"], cfg["loss"]) == (2, [0, 4], 1e-4, {"w_beta": 4})
-    with pytest.raises(CLIError, match="no checkpoint"):
+    with pytest.raises(CLIError, match="--checkpoint .*nope.pt: no such file"):
         run(["predict", "--checkpoint", str(tmp_path / "nope.pt"), "--sequence", str(smoke_root), "--out", str(out)])
     with pytest.raises(CLIError, match="START:STOP"):
         run(["finetune", "--checkpoint", str(tiny_ckpt), "--sequence", str(smoke_root), "--out", str(tmp_path / "z"),

@@ -31,7 +31,7 @@ def test_prior_train_and_info(tmp_path, capsys, open_model_files):
 
 def test_prior_info_without_official_weights_is_a_clean_error(monkeypatch, capsys):
     monkeypatch.delenv("AIRPOSE_VPOSER_DIR", raising=False)
-    assert main(["prior", "info", "--source", "vposer"]) == 1
+    assert main(["prior", "info", "--source", "vposer"]) == 2
     assert "AIRPOSE_VPOSER_DIR" in capsys.readouterr().err
 
 
@@ -84,5 +84,5 @@ def test_fit_a_sequence_in_the_official_layout(tmp_path, capsys, open_model_file
     np.testing.assert_array_equal(res["frames"], np.arange(10, 10 + F))
     # Missing arrays in the initialisation are a clean error.
     np.savez(init, phi=phi.numpy())
-    assert main(["fit", "--sequence", str(root), "--init", str(init), "--prior-path", str(prior_file)]) == 1
+    assert main(["fit", "--sequence", str(root), "--init", str(init), "--prior-path", str(prior_file)]) == 2
     assert "missing arrays" in capsys.readouterr().err

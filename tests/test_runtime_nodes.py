@@ -12,7 +12,7 @@ import numpy as np
 import zmq
 
 from airpose_lib.runtime import results as R
-from airpose_lib.runtime.backends import BackendSpec
+from airpose_lib.runtime.backends import BackendSpec, FakeStageModel
 from airpose_lib.runtime.launcher import launch
 from airpose_lib.runtime.offline import offline_batched, offline_inputs, offline_staged
 from airpose_lib.runtime.transport import free_ports
@@ -169,21 +169,42 @@ def _packet(kind, drone, stage=0, slot=0, stamp=0.0, payload=b"", version=1, dty
     return head[:-4] + struct.pack("<I", crc) + payload
 
 
+def _pose_as(ctx, keys, me: int, port: int):
+    """A PUB socket speaking as drone ``me`` (its CURVE key pair from the launcher's keys folder)."""
+    import zmq.auth
+
+    pub = ctx.socket(zmq.PUB)
+    pub.setsockopt(zmq.LINGER, 0)
+    pub.curve_publickey, pub.curve_secretkey = zmq.auth.load_certificate(str(keys / f"drone_{me}.key_secret"))
+    pub.curve_server = True
+    pub.bind(f"tcp://127.0.0.1:{port}")
+    return pub
+
+
+def _listen_to(ctx, keys, me: int, drone: int, port: int):
+    """A SUB socket of drone ``me`` subscribed to drone ``drone``'s PUB (CURVE client)."""
+    import zmq.auth
+
+    sub = ctx.socket(zmq.SUB)
+    sub.setsockopt(zmq.LINGER, 0)
+    sub.curve_publickey, sub.curve_secretkey = zmq.auth.load_certificate(str(keys / f"drone_{me}.key_secret"))
+    sub.curve_serverkey = zmq.auth.load_certificate(str(keys / f"drone_{drone}.key"))[0]
+    sub.connect(f"tcp://127.0.0.1:{port}")
+    sub.setsockopt(zmq.SUBSCRIBE, b"")
+    return sub
+
+
 def test_malformed_packets_are_logged_not_fatal(tmp_path):
-    """The test poses as drone 2: it answers drone 1's stage messages (so drone 1 uses them) and
-    sends junk in between."""
+    """The test poses as drone 2 (with drone 2's key): it answers drone 1's stage messages (so
+    drone 1 uses them) and sends junk in between."""
     (port,) = free_ports(1)
     ctx = zmq.Context()
-    pub, sub = ctx.socket(zmq.PUB), ctx.socket(zmq.SUB)
-    pub.setsockopt(zmq.LINGER, 0)
-    sub.setsockopt(zmq.LINGER, 0)
-    pub.bind(f"tcp://127.0.0.1:{port}")
     options = {"backend": "fake", "source": SYN, "window_ms": 100, "frames": 20, "max_runtime_s": 30}
     fleet = launch(1, tmp_path, options, extra_peers={2: f"tcp://127.0.0.1:{port}"}, start=False)
+    pub = _pose_as(ctx, tmp_path / "keys", 2, port)
     try:
         fleet.start()
-        sub.connect(f"tcp://127.0.0.1:{fleet.ports[1]}")
-        sub.setsockopt(zmq.SUBSCRIBE, b"")
+        sub = _listen_to(ctx, tmp_path / "keys", 2, 1, fleet.ports[1])
         junk = [b"hello", b"\x00" * 60, _packet(2, 2, version=2), _packet(2, 2)[:-1] + b"\x00",
                 _packet(1, 2, stage=1, payload=b"\x00" * 100), _packet(2, 9), _packet(7, 2)]
         answered, n, t_end = 0, 0, time.time() + 25
@@ -206,8 +227,70 @@ def test_malformed_packets_are_logged_not_fatal(tmp_path):
     assert fleet.returncodes() == {1: 0}
     s = summaries[1]
     assert s["valid"] >= 15
-    assert set(s["rejected"]) == {"magic", "short", "version", "crc", "payload_size", "unknown_drone", "kind"}
+    # drone 9's HELLO came over drone 2's link: a spoof (before any check of the id itself)
+    assert set(s["rejected"]) == {"magic", "short", "version", "crc", "payload_size", "spoofed", "kind"}
     log = (tmp_path / "node_1.log").read_text()
     assert "rejected a" in log and "CRC mismatch" in log
     res = R.load_node_results(tmp_path / "node_1.npz")
     assert (res.frames["used_s2"][res.valid] == 2).mean() >= 0.7  # drone 2's answers were used
+
+
+def test_spoofed_and_replayed_packets_are_rejected_and_logged(tmp_path):
+    """Drone 1 of a swarm {1, 2, 3}: the test is drone 2 (answers every stage message, and sends
+    each answer twice: a replay) and drone 3, a member that claims to be drone 2 and sends other
+    numbers first. Only drone 2's own answers are used; the spoofs and replays are rejected,
+    logged and counted."""
+    p2, p3 = free_ports(2)
+    ctx = zmq.Context()
+    options = {"backend": "fake", "source": SYN, "window_ms": 100, "frames": 20, "max_runtime_s": 30}
+    fleet = launch(1, tmp_path, options, extra_peers={2: f"tcp://127.0.0.1:{p2}", 3: f"tcp://127.0.0.1:{p3}"},
+                   start=False)
+    keys = tmp_path / "keys"
+    drone2, drone3 = _pose_as(ctx, keys, 2, p2), _pose_as(ctx, keys, 3, p3)
+    sent = {"spoof": 0, "replay": 0}
+    try:
+        fleet.start()
+        sub = _listen_to(ctx, keys, 2, 1, fleet.ports[1])
+        t_end = time.time() + 25
+        while fleet.procs[1].poll() is None and time.time() < t_end:
+            drone2.send(_packet(2, 2, stamp=time.time()))  # HELLO: drone 2 is alive (drone 3 stays silent)
+            if sub.poll(20):
+                buf = sub.recv()
+                kind, drone, stage = buf[5], buf[6], buf[7]
+                if kind == 1 and drone == 1:
+                    slot, stamp = struct.unpack_from("<Id", buf, 16)
+                    spoof = _packet(1, 2, stage=stage, slot=slot, stamp=stamp,
+                                    payload=np.full(136, 0.5, "<f4").tobytes())
+                    drone3.send(spoof)  # "I am drone 2", over drone 3's link
+                    sent["spoof"] += 1
+                    time.sleep(0.002)
+                    answer = _packet(1, 2, stage=stage, slot=slot, stamp=stamp,
+                                     payload=np.full(136, 0.01 * stage, "<f4").tobytes())
+                    drone2.send(answer)
+                    drone2.send(answer)  # the same message again
+                    sent["replay"] += 1
+        summaries = fleet.wait(30)
+    finally:
+        fleet.stop()
+        ctx.destroy(linger=0)
+    assert fleet.returncodes() == {1: 0}
+    s = summaries[1]
+    assert s["authenticated"] is True
+    assert sent["spoof"] >= 10 and s["rejected"].get("spoofed", 0) >= 10
+    assert s["rejected"].get("replay", 0) >= 10
+    log = (tmp_path / "node_1.log").read_text()
+    assert "claims to be drone 2 but came over the link of drone 3 (authenticated)" in log
+    assert "replay of drone 2's data message of slot" in log
+    assert log.count("claims to be drone 2") <= 3 + s["rejected"]["spoofed"] // 100  # rate-limited
+    # Drone 1's outputs are those computed offline with drone 2's real answers (0.01, 0.02), never
+    # with the spoof's 0.5.
+    m = R.merge_views([R.load_node_results(tmp_path / "node_1.npz")])
+    used2, used3 = m["used_s2"][:, 0] == 2, m["used_s3"][:, 0] == 2  # drone 2's bit
+    assert used2.mean() >= 0.7, m["used_s2"][:, 0]  # drone 2's answers were used
+    crops, P, _ = offline_inputs(f"{SYN},views=1", m["frame_index"], 128)
+    for i in range(len(used2)):
+        ref = FakeStageModel()
+        ref.stage1(crops[i, 0], P[i, 0])
+        ref.stage(2, [np.full(136, 0.01, np.float32)] if used2[i] else [])
+        ref.stage(3, [np.full(136, 0.02, np.float32)] if used3[i] else [])
+        np.testing.assert_allclose(m["theta6d"][i, 0], ref.result()["theta6d"][0], atol=1e-6)

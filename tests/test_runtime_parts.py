@@ -113,7 +113,7 @@ def test_transport_pub_sub_on_loopback():
                     break
                 more, _ = b.poll(0.01)
                 got += more
-        assert got and decode_packet(got[0]).drone == 1
+        assert got and got[0][0] == 0 and decode_packet(got[0][1]).drone == 1  # 0: peer ids not given
         # the emulated 20 ms latency holds a packet back
         msg = encode_packet(DATA, 1, stage=1, payload=np.ones(136, np.float32))
         t = time.time()
@@ -121,7 +121,7 @@ def test_transport_pub_sub_on_loopback():
         received = []
         while msg not in received and time.time() - t < 2.0:
             pkts, _ = b.poll(0.05)
-            received += pkts
+            received += [buf for _, buf in pkts]
         assert msg in received and time.time() - t >= 0.019
         assert a.bytes_sent >= len(msg) and a.packets_sent >= 2
     finally:
@@ -297,3 +297,71 @@ def test_node_and_launch_command_lines():
 
     assert node_options({"backend": "fake", "window_ms": 60, "preload": True, "checkpoint": None, "x": False}) == [
         "--backend", "fake", "--window-ms", "60", "--preload"]
+
+
+# -- authentication (CurveZMQ) ----------------------------------------------------------------------
+def _first_packets(rx: Transport, send, seconds: float = 3.0) -> list:
+    got, t_end = [], time.time() + seconds
+    while not got and time.time() < t_end:  # PUB/SUB drops until the subscription is up
+        send()
+        got, _ = rx.poll(0.05)
+    return got
+
+
+def test_curve_links_tell_the_sender_and_refuse_outsiders(tmp_path):
+    """Drone 2 hears drone 1 over an authenticated link tagged with 1; a process without drone 1's
+    secret key listening at drone 1's address (a plain PUB, or one with a key of its own) is
+    never heard."""
+    import zmq
+
+    from airpose_lib.runtime.keys import create_swarm_keys, load_swarm_keys
+
+    keys = create_swarm_keys(tmp_path / "keys", [1, 2])
+    pa, pb, pc, pd, pe, pf = free_ports(6)
+    a = Transport(endpoint(pa), {2: endpoint(pb)}, keys=load_swarm_keys(keys, 1, [2]))
+    b = Transport(endpoint(pb), {1: endpoint(pa)}, keys=load_swarm_keys(keys, 2, [1]))
+    # b also believes drone 1 speaks at pc, where an impostor without drone 1's secret key listens
+    c = Transport(endpoint(pd), {1: endpoint(pc)}, keys=load_swarm_keys(keys, 2, [1]))
+    d = Transport(endpoint(pf), {1: endpoint(pe)}, keys=load_swarm_keys(keys, 2, [1]))
+    ctx = zmq.Context()
+    plain = ctx.socket(zmq.PUB)
+    plain.setsockopt(zmq.LINGER, 0)
+    plain.bind(endpoint(pc))
+    try:
+        got = _first_packets(b, lambda: a.send(encode_packet(HELLO, 1)))
+        assert got and got[0][0] == 1 and decode_packet(got[0][1]).drone == 1
+        assert b.authenticated
+        assert _first_packets(c, lambda: plain.send(encode_packet(HELLO, 1)), 1.5) == []
+        rogue = ctx.socket(zmq.PUB)  # CURVE server with a key pair that is not drone 1's
+        rogue.setsockopt(zmq.LINGER, 0)
+        public, secret = zmq.curve_keypair()
+        rogue.curve_secretkey, rogue.curve_publickey, rogue.curve_server = secret, public, True
+        rogue.bind(endpoint(pe))
+        assert _first_packets(d, lambda: rogue.send(encode_packet(HELLO, 1)), 1.5) == []
+    finally:
+        for t in (a, b, c, d):
+            t.close()
+        ctx.destroy(linger=0)
+
+
+def test_swarm_keys_errors_name_the_file(tmp_path):
+    from airpose_lib.runtime.keys import SwarmKeyError, create_swarm_keys, load_swarm_keys
+
+    keys = create_swarm_keys(tmp_path / "keys", [1])
+    assert (keys.stat().st_mode & 0o777) == 0o700
+    with pytest.raises(SwarmKeyError, match="drone_2.key is missing"):
+        load_swarm_keys(keys, 1, [2])
+    (keys / "drone_1.key_secret").write_text("garbage")
+    with pytest.raises(SwarmKeyError, match="drone_1.key_secret"):
+        load_swarm_keys(keys, 1, [])
+
+
+@pytest.mark.parametrize("box", [[600.0, 10.0, 700.0, 80.0], [-90.0, -50.0, -10.0, -5.0], [10.0, 300.0, 50.0, 400.0],
+                                 [50.0, 50.0, 50.0, 80.0]])
+def test_crop_input_refuses_a_box_outside_the_image(box):
+    image = np.full((270, 480, 3), 128, np.uint8)
+    K = np.array([[500.0, 0, 240], [0, 500.0, 135], [0, 0, 1]])
+    with pytest.raises(ValueError, match="does not overlap"):
+        crop_input(image, np.array(box), K, 64)
+    crop, _ = crop_input(image, np.array([470.0, 260.0, 600.0, 400.0]), K, 64)  # partly inside: fine
+    assert np.isfinite(crop).all() and (crop != crop.min()).any()

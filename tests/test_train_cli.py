@@ -41,8 +41,8 @@ def test_train_dispatch_merges_profile_and_options(monkeypatch, tmp_path):
     assert cfg.model == {"dropout": 0.0}
     assert cfg.loss == {"vertex_subsample": 2000, "w_tau": 3}  # merged into the profile's dict
     assert cfg.backbone == "resnet18"  # from the smoke profile
-    assert cli.main(["train", "--variant", "airpose", "--set", "stepz=3"]) == 1  # typo: a clean error
-    assert cli.main(["train", "--variant", "airpose", "--set", "nonsense"]) == 1
+    assert cli.main(["train", "--variant", "airpose", "--set", "stepz=3"]) == 2  # typo: a clean error
+    assert cli.main(["train", "--variant", "airpose", "--set", "nonsense"]) == 2
 
 
 def test_eval_dispatch_writes_tables(monkeypatch, tmp_path, capsys):
@@ -51,7 +51,7 @@ def test_eval_dispatch_writes_tables(monkeypatch, tmp_path, capsys):
     frame = pd.DataFrame({"method": ["m", "m"], "sample": [0, 0], "view": [0, 1], "mpe_m": [0.1, 0.3],
                           "mpjpe_m": [0.05, 0.07], "pa_mpjpe_m": [0.03, 0.04]})
     monkeypatch.setattr(T, "evaluate_checkpoint", lambda *a, **k: {"per_view": frame, "per_joint": frame})
-    assert cli.main(["eval", "--checkpoint", str(tmp_path / "x.pt")]) == 1  # no such file: clean error
+    assert cli.main(["eval", "--checkpoint", str(tmp_path / "x.pt")]) == 2  # no such file: clean error
     (tmp_path / "x.pt").write_bytes(b"")
     assert cli.main(["eval", "--checkpoint", str(tmp_path / "x.pt"), "--out", str(tmp_path / "ev")]) == 0
     assert (tmp_path / "ev" / "per_view.csv").exists() and (tmp_path / "ev" / "per_joint.csv").exists()

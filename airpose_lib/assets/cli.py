@@ -2,7 +2,7 @@
 
 :func:`add_asset_commands` adds them to the ``airpose data`` sub-parser group built in
 :mod:`airpose_lib.cli`. Errors are raised as that module's ``CLIError`` (printed without a
-traceback, exit status 1); ``verify`` also exits with 1 when the asset is not complete.
+traceback, exit status 2); ``verify`` exits with 1 when the asset is not complete.
 """
 from __future__ import annotations
 

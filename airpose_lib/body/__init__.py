@@ -20,6 +20,7 @@ from .joint_sets import (
 from .loader import (
     BodyModelError,
     body_model_info,
+    check_model_file,
     load_body_model,
     open_model_texture,
     resolve_model_file,

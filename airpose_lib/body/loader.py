@@ -105,6 +105,12 @@ def _check_file(path: Path) -> set[str]:
     return keys
 
 
+def check_model_file(path: str | Path) -> Path:
+    """``path`` if it is a readable SMPL-X-format npz; :class:`BodyModelError` naming it otherwise."""
+    _check_file(Path(path))
+    return Path(path)
+
+
 def load_body_model(
     source: str = "open",
     gender: str = "neutral",

@@ -32,6 +32,8 @@ import numpy as np
 import yaml
 
 from airpose_lib.body.cache import cache_dir
+from airpose_lib.folder_lock import locks_folder
+from airpose_lib.process_guard import die_with_parent
 
 from .appearance import AppearanceConfig, sample_appearance
 from .manifest import (
@@ -486,7 +488,8 @@ def _limit_threads() -> None:
     torch.set_num_threads(1)
 
 
-def _worker_init(config_dict: dict, progress_queue) -> None:
+def _worker_init(config_dict: dict, progress_queue, parent: int | None = None) -> None:
+    die_with_parent(parent)  # no orphaned renderers if the parent is killed (even before this runs)
     os.environ.setdefault("LP_NUM_THREADS", "1")  # Mesa llvmpipe: one raster thread per worker
     os.environ.setdefault("OMP_NUM_THREADS", "1")
     _limit_threads()
@@ -502,9 +505,10 @@ def _worker_shard(args: tuple[int, str]) -> dict:
 
 def _body_model_hashes(config: GenerationConfig) -> dict[str, str]:
     """SHA-256 of the body-model file of each ground-truth gender (the data depend on it)."""
-    from airpose_lib.body import resolve_model_file
+    from airpose_lib.body import check_model_file, resolve_model_file
 
-    return {g: sha256_file(resolve_model_file(config.body_source, g)) for g in config.scene.genders}
+    return {g: sha256_file(check_model_file(resolve_model_file(config.body_source, g)))  # a damaged file
+            for g in config.scene.genders}                                            # is named as such
 
 
 def _new_manifest(config: GenerationConfig, profile: str | None, body_models: dict) -> dict:
@@ -549,6 +553,7 @@ def _finish_manifest(manifest: dict, config: GenerationConfig) -> None:
     manifest["status"] = "complete" if done == set(range(config.num_shards)) else "incomplete"
 
 
+@locks_folder("root", "dataset folder")  # one writer; removes a dead writer's .shard_*.tmp
 def generate_still_dataset(
     config: GenerationConfig,
     root: Path | str,
@@ -583,8 +588,6 @@ def generate_still_dataset(
     """
     root = Path(root)
     root.mkdir(parents=True, exist_ok=True)
-    for stale in root.glob(".shard_*.tmp"):  # left by a killed worker; never a finished shard
-        stale.unlink()
     manifest = load_manifest(root)
     if manifest is not None and manifest.get("fingerprint") != config.fingerprint():
         raise DatasetError(
@@ -676,7 +679,7 @@ def _run_pool(config, root, todo, workers, bar, finished) -> None:
                 bar.update(n)
 
     ex = ProcessPoolExecutor(workers, mp_context=ctx, initializer=_worker_init,
-                             initargs=(config.to_dict(), q))
+                             initargs=(config.to_dict(), q, os.getpid()))
     try:
         pending = {ex.submit(_worker_shard, (k, str(root))) for k in todo}
         while pending:
@@ -697,7 +700,7 @@ def _run_pool(config, root, todo, workers, bar, finished) -> None:
 
 def ensure_still_dataset(profile: str | None = None, *, config: GenerationConfig | None = None,
                          root: Path | str | None = None, workers: int | None = None,
-                         progress: bool = True, record: bool = True) -> Path:
+                         progress: bool = True, record: bool | Path = False) -> Path:
     """Make sure a complete, verified dataset exists and return its folder.
 
     Either ``profile`` (settings from the profile file, default folder

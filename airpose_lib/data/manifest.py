@@ -2,9 +2,10 @@
 
 ``<root>/manifest.yaml`` is written by the generator after every finished shard (atomically), so
 it always lists exactly the shards that are complete; generation resumes from it and readers
-verify shards against it. When the last shard is done its ``status`` becomes ``complete`` and a
-copy goes to the checkout's ``data_manifests/generated_<profile>.yaml`` (the record that says
-which data a profile's figures were made from).
+verify shards against it. When the last shard is done its ``status`` becomes ``complete``; on
+request (``airpose data generate --record-manifest``, ``record=True``) a copy goes to the
+checkout's tracked ``data_manifests/generated_<profile>.yaml`` (the record that says which data a
+profile's figures were made from). No command writes that file unless asked to.
 """
 from __future__ import annotations
 
@@ -47,7 +48,12 @@ def load_manifest(root: Path) -> dict | None:
     path = Path(root) / MANIFEST_NAME
     if not path.is_file():
         return None
-    data = yaml.safe_load(path.read_text())
+    try:
+        data = yaml.safe_load(path.read_text())
+    except (yaml.YAMLError, UnicodeDecodeError) as e:  # cut short or overwritten
+        raise DatasetError(
+            f"{path} is damaged ({type(e).__name__}); delete it and run `{regenerate_command(None, Path(root))}` "
+            "again: every shard is then checked and rebuilt identically where needed") from e
     if not isinstance(data, dict) or data.get("kind") != DATASET_KIND:
         raise DatasetError(f"{path} is not a still-frame dataset manifest (kind != {DATASET_KIND!r})")
     return data

@@ -353,6 +353,12 @@ def _frame_key(key) -> int:
     return int(m.group(1))
 
 
+_DETECTIONS_FIX = ("copy the recording's file again, or regenerate a kit recording with "
+                   "`airpose data sequence --force`")
+_MISSING_FIX = ("to treat them as undetected pass --allow-missing-detections (`airpose predict`; "
+                "missing_detections='zero' in Python)")
+
+
 def _load_detector_file(path: Path):
     """The parsed content of a detector file (JSON for ``.json``, else a pickle), read once."""
     try:
@@ -361,11 +367,13 @@ def _load_detector_file(path: Path):
         with open(path, "rb") as fh:
             return pickle.load(fh, encoding="latin1")  # latin1: the release's Python-2 era pickles
     except FileNotFoundError:
-        raise SequenceFormatError(f"missing detector file {path}") from None
+        raise SequenceFormatError(f"missing detector file {path}; {_DETECTIONS_FIX}") from None
     except (json.JSONDecodeError, UnicodeDecodeError) as e:
-        raise SequenceFormatError(f"cannot parse {path}: {e}") from None
+        raise SequenceFormatError(f"cannot parse {path} (damaged or not a detector file: {e}); "
+                                  f"{_DETECTIONS_FIX}") from None
     except Exception as e:  # noqa: BLE001 - a broken pickle
-        raise SequenceFormatError(f"cannot read {path}: {e}") from None
+        raise SequenceFormatError(f"cannot read {path} (damaged or not a detector file: {type(e).__name__}: "
+                                  f"{e}); {_DETECTIONS_FIX}") from None
 
 
 def _read_openpose(path: Path, res, frames: np.ndarray, missing: str) -> tuple[np.ndarray, dict]:
@@ -382,8 +390,7 @@ def _read_openpose(path: Path, res, frames: np.ndarray, missing: str) -> tuple[n
         span = f"frames {have[0]}..{have[-1]}" if have else "no frames"
         raise SequenceFormatError(
             f"{path} lacks {len(absent)} of the {len(frames)} frames read (first missing: {absent[0]}; "
-            f"file has {span}); the detector file is shorter than the image sequence. Pass "
-            f"missing_detections='zero' to treat them as undetected.")
+            f"file has {span}); the detector file is shorter than the image sequence; {_MISSING_FIX}")
     out = np.zeros((len(frames), 25, 3))
     nan = 0
     for n, i in enumerate(frames):
@@ -429,8 +436,7 @@ def _read_alphapose(path: Path, entries, frames: np.ndarray, last_image: int, mi
     if last < last_image - tail_tolerance and missing != "zero":
         raise SequenceFormatError(
             f"{path} ends at frame {last} but the images go to {last_image}: the detector file is "
-            f"shorter than the image sequence. Pass missing_detections='zero' to treat the rest "
-            f"as undetected.")
+            f"shorter than the image sequence; {_MISSING_FIX}")
     out = np.zeros((len(frames), 18, 3))
     absent = 0
     for n, i in enumerate(frames):

@@ -35,6 +35,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from airpose_lib.folder_lock import folder_lock
+
 __all__ = ["METHODS", "RecordingExperiment", "default_experiment_dir", "run_recording_experiment",
            "body_vertices", "recording_prior", "ground_truth_diagnostic", "finetune_table", "selection_table",
            "claims_table", "official_recordings", "official_networks", "networks_for", "recordings_for",
@@ -437,6 +439,13 @@ def run_recording_experiment(profile: str = "smoke", out_dir: str | Path | None 
             ``AirPose (pre-trained)``, ``Baseline``, ``AirPose``), kit ``.pt`` or official
             ``.ckpt`` (:func:`official_networks`); then nothing is trained or fine-tuned.
     """
+    out = Path(out_dir) if out_dir is not None else default_experiment_dir(profile)
+    with folder_lock(out, stale=(".*.tmp", "estimates/*/.*.tmp")):  # one writer of the cached steps
+        return _run_recording_experiment(profile, out, sequences, seed, fine_tune_on, networks, progress)
+
+
+def _run_recording_experiment(profile: str, out: Path, sequences: dict | None, seed: int | None,
+                              fine_tune_on: str, networks: dict | None, progress: bool) -> RecordingExperiment:
     import torch
 
     from airpose_lib.body import load_body_model
@@ -444,7 +453,6 @@ def run_recording_experiment(profile: str = "smoke", out_dir: str | Path | None 
     from airpose_lib.eval.recordings import body_joints, recording_table
     from airpose_lib.train.config import load_train_config
 
-    out = Path(out_dir) if out_dir is not None else default_experiment_dir(profile)
     if sequences is None:
         from airpose_lib.data.sequences import ensure_sequences
 

@@ -26,7 +26,7 @@ def _frame_range(text: str | None) -> tuple[int | None, int | None] | None:
 
 # -- finetune -------------------------------------------------------------------------------------
 def _cmd_finetune(args: argparse.Namespace) -> int:
-    from airpose_lib.cli import CLIError, _parse_sets
+    from airpose_lib.cli import SEQUENCE_FOLDER, CLIError, _parse_sets, require_file, require_folder, require_path
     from airpose_lib.finetune.loss import FineTuneLossConfig
     from airpose_lib.finetune.train import FineTuneConfig, finetune, finetune_config
     from airpose_lib.prior import PriorError
@@ -50,11 +50,12 @@ def _cmd_finetune(args: argparse.Namespace) -> int:
                 cfg = cfg.replace(**{k: {**getattr(cfg, k), **v}})
     except (ValueError, TypeError) as e:
         raise CLIError(str(e)) from None
-    if not Path(args.checkpoint).is_file():
-        raise CLIError(f"no checkpoint at {args.checkpoint}")
+    require_file(args.checkpoint, "--checkpoint", "a checkpoints/*.pt of `airpose train`")
+    require_folder(args.sequence, "--sequence", SEQUENCE_FOLDER)
+    require_path(args.prior_path, "--prior-path", "a prior checkpoint file or folder")
     try:
         res = finetune(args.checkpoint, args.sequence, args.out, cfg, resume=args.resume, progress=not args.quiet)
-    except (ValueError, FileNotFoundError, PriorError) as e:
+    except ValueError as e:  # missing files, damaged ones and busy folders: airpose_lib.cli.main
         raise CLIError(str(e)) from None
     k = res.keypoints
     print(f"{res.num_frames} training frames; 2D targets kept {k['kept']}, dropped {k['disagree']} disagreeing, "
@@ -111,13 +112,13 @@ def _add_finetune(sub) -> None:
 
 # -- predict --------------------------------------------------------------------------------------
 def _cmd_predict(args: argparse.Namespace) -> int:
-    from airpose_lib.cli import CLIError
+    from airpose_lib.cli import SEQUENCE_FOLDER, CLIError, require_file, require_folder
     from airpose_lib.data.official_layout import load_sequence
     from airpose_lib.finetune.network import load_network
     from airpose_lib.finetune.predict import frames_in_range, predict_sequence, save_predictions
 
-    if not Path(args.checkpoint).is_file():
-        raise CLIError(f"no checkpoint at {args.checkpoint}")
+    require_file(args.checkpoint, "--checkpoint", "a checkpoint of `airpose train` or `airpose finetune`")
+    require_folder(args.sequence, "--sequence", SEQUENCE_FOLDER)
     try:
         model, cfg, size = load_network(args.checkpoint, args.device, args.input_size)
         if args.threads:
@@ -132,7 +133,7 @@ def _cmd_predict(args: argparse.Namespace) -> int:
                                 progress=not args.quiet,
                                 provenance={"checkpoint": str(args.checkpoint), "backbone": cfg.backbone})
         out = save_predictions(args.out, pred)
-    except (ValueError, FileNotFoundError) as e:
+    except ValueError as e:  # missing and damaged files: airpose_lib.cli.main
         raise CLIError(str(e)) from None
     F, V = pred["valid"].shape
     print(f"{F} frames x {V} views ({cfg.variant}, {size} px crops); {int((~pred['valid']).sum())} view-frames "

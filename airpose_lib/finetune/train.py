@@ -63,6 +63,7 @@ import torch
 from torch import nn
 
 from airpose_lib.body.cache import atomic_path
+from airpose_lib.folder_lock import folder_lock
 
 __all__ = ["FineTuneConfig", "FineTuneResult", "finetune_config", "finetune", "evaluate_finetune_loss",
            "heldout_split"]
@@ -446,8 +447,9 @@ def finetune(checkpoint: str | Path, sequence_root: str | Path, out_dir: str | P
     if cfg.num_threads:
         torch.set_num_threads(cfg.num_threads)
     try:
-        return _finetune(Path(checkpoint), Path(sequence_root), Path(out_dir), cfg, resume, progress, prior,
-                         body_model, stop_at, diagnostic)
+        with folder_lock(out_dir):  # one writer per run folder
+            return _finetune(Path(checkpoint), Path(sequence_root), Path(out_dir), cfg, resume, progress, prior,
+                             body_model, stop_at, diagnostic)
     finally:
         torch.set_num_threads(threads)
         restore_rng_state(caller_rng)

@@ -11,6 +11,8 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from airpose_lib.folder_lock import file_lock_for
+
 from .checkpoint import kit_prior_path, save_prior
 from .train import CorpusConfig, evaluate_prior, prior_profile, train_prior
 
@@ -47,6 +49,13 @@ def train_and_save_prior(profile: str, out: str | Path | None = None, *, steps: 
         ``steps, seconds, final_train_loss`` and the validation numbers of :func:`evaluate_prior`
         plus ``samples_within_joint_limits`` (share of N(0, I) samples within the joint limits +5 deg).
     """
+    path = Path(out) if out is not None else kit_prior_path(profile)
+    with file_lock_for(path, "prior checkpoint"):  # one writer per output file
+        return _train_and_save_prior(profile, path, steps, seed, progress)
+
+
+def _train_and_save_prior(profile: str, path: Path, steps: int | None, seed: int | None,
+                          progress: bool) -> tuple[Path, dict]:
     from airpose_lib.body import load_body_model
     from airpose_lib.body.fast import JointsOnly
     from airpose_lib.data.poses import within_limits
@@ -70,7 +79,6 @@ def train_and_save_prior(profile: str, out: str | Path | None = None, *, steps: 
     val = evaluate_prior(model, val_poses, joints_fn=joints_fn, n_samples=1000, seed=cfg.seed)
     samples = val.pop("samples")
     val["samples_within_joint_limits"] = float(within_limits(samples, tol=np.deg2rad(5.0)).mean())
-    path = Path(out) if out is not None else kit_prior_path(profile)
     report = {"steps": cfg.steps, "seconds": hist["seconds"], "final_train_loss": hist["loss"][-1],
               "train_poses": len(train_poses), "val_poses": len(val_poses), **val}
     save_prior(model, path, {"profile": profile, "train": cfg.to_dict(), "corpus": corpus.to_dict(),

@@ -28,6 +28,7 @@ from typing import Any
 import torch
 
 from airpose_lib.body.cache import atomic_path, cache_dir
+from airpose_lib.errors import reading
 
 from .vposer import LATENT_DIM, NUM_NEURONS, VPoser
 
@@ -91,7 +92,8 @@ def save_prior(model: VPoser, path: str | Path, provenance: Mapping[str, Any] | 
 
 
 def _load_kit(path: Path) -> tuple[VPoser, dict]:
-    blob = torch.load(path, map_location="cpu", weights_only=True)
+    with reading(path, "a prior checkpoint of `airpose prior train`", "train it again with `airpose prior train`"):
+        blob = torch.load(path, map_location="cpu", weights_only=True)
     if not isinstance(blob, dict) or blob.get("format") != KIT_FORMAT:
         raise PriorError(f"{path} is not a kit prior checkpoint (format {blob.get('format')!r}); "
                          "for the official VPoser use load_prior(source='vposer')")

@@ -1,7 +1,7 @@
 """Online, decentralised runtime: one OS process per drone, 136-number messages over ZeroMQ.
 
-Modules: ``wire`` (the versioned packet format), ``transport`` (ZeroMQ PUB/SUB, link emulation,
-free ports), ``sync`` (clocks, the frame schedule, camera replay, message matching, peer
+Modules: ``wire`` (the versioned packet format), ``keys`` (the swarm's CurveZMQ key pairs),
+``transport`` (ZeroMQ PUB/SUB, authenticated per-peer links, link emulation, free ports), ``sync`` (clocks, the frame schedule, camera replay, message matching, peer
 liveness), ``source`` (frame sources: the official-layout sequences of ``airpose_lib.data`` or a
 procedural stand-in; person box and crop), ``backends`` (the staged-model protocol: torch,
 ONNX Runtime or a fast fake), ``node`` (one drone: ``airpose node``), ``launcher`` (N drones on
@@ -16,6 +16,6 @@ from __future__ import annotations
 
 from airpose_lib._lazy import lazy_namespace
 
-_MODULES = ("wire", "transport", "sync", "source", "backends", "node", "launcher", "results", "offline",
+_MODULES = ("wire", "keys", "transport", "sync", "source", "backends", "node", "launcher", "results", "offline",
             "edge", "options")
 __getattr__, __dir__ = lazy_namespace(__name__, globals(), _MODULES)

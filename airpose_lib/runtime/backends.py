@@ -26,6 +26,8 @@ from typing import Protocol, runtime_checkable
 
 import numpy as np
 
+from airpose_lib.errors import reading
+
 from .wire import MESSAGE_VALUES
 
 __all__ = [
@@ -193,6 +195,9 @@ class BackendSpec:
         return asdict(self)
 
 
+_CKPT_FIX = "give another --checkpoint (e.g. the newest checkpoints/step_*.pt of the run)"
+
+
 def checkpoint_settings(path: str | Path) -> dict:
     """Network settings stored in a training checkpoint (``airpose_lib.train``'s ``config``):
     ``variant``, ``backbone``, ``model`` (extra ``build_model`` kwargs) and ``input_size`` (the
@@ -200,7 +205,8 @@ def checkpoint_settings(path: str | Path) -> dict:
     a bare ``state_dict``."""
     import torch
 
-    state = torch.load(path, map_location="cpu", weights_only=True)
+    with reading(path, "a model checkpoint (a state_dict or a checkpoint of `airpose train`)", _CKPT_FIX):
+        state = torch.load(path, map_location="cpu", weights_only=True)
     cfg = state.get("config") if isinstance(state, dict) else None
     if not isinstance(cfg, dict):
         return {}
@@ -227,7 +233,8 @@ def build_torch_model(spec: BackendSpec):
     settings = checkpoint_settings(spec.checkpoint)
     model = build_model(settings.get("variant", spec.variant), settings.get("backbone", spec.backbone),
                         **settings.get("model", {}))
-    state = torch.load(spec.checkpoint, map_location="cpu", weights_only=True)
+    with reading(spec.checkpoint, "a model checkpoint", _CKPT_FIX):
+        state = torch.load(spec.checkpoint, map_location="cpu", weights_only=True)
     for key in ("model", "state_dict"):
         if isinstance(state, dict) and key in state and isinstance(state[key], dict):
             state = state[key]

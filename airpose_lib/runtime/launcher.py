@@ -4,7 +4,9 @@ Each drone is ``python -m airpose_lib.runtime.node`` with its own id, a free por
 time, the others as peers and ``--t0 stdin``: the launcher waits until every drone printed
 ``READY`` (model loaded and warmed up, sockets bound), then sends them all the same start time
 ``START <t0>`` (now + ``lead_s``). Drone logs go to ``<out>/node_<id>.log``; each drone's
-``SUMMARY`` line is parsed. :meth:`Fleet.kill` and :meth:`Fleet.restart` are the fault
+``SUMMARY`` line is parsed. Unless the options say ``insecure``, the launcher makes a CURVE key
+pair per drone (and per ``extra_peers`` id) in ``<out>/keys/`` and passes ``--keys`` on
+(:mod:`.keys`). :meth:`Fleet.kill` and :meth:`Fleet.restart` are the fault
 injections of the tests (a restarted drone gets the original ``t0`` and rejoins the schedule).
 """
 from __future__ import annotations
@@ -19,6 +21,7 @@ import time
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 
+from .keys import create_swarm_keys
 from .transport import free_ports
 
 __all__ = ["Fleet", "launch", "node_options", "LaunchError"]
@@ -46,6 +49,14 @@ def node_options(options: Mapping | None) -> list[str]:
     return argv
 
 
+def _last_line(path: Path) -> str:
+    try:
+        lines = [line for line in path.read_text(errors="replace").splitlines() if line.strip()]
+    except OSError:
+        return "no log"
+    return lines[-1][:300] if lines else "empty log"
+
+
 def _reader(stream, q: queue.Queue, drone: int) -> None:
     for line in iter(stream.readline, ""):
         q.put((drone, line.rstrip("\n")))
@@ -56,7 +67,7 @@ class Fleet:
     """The running drones of one launch."""
 
     def __init__(self, out_dir: Path, ports: dict[int, int], common: list[str], offsets: dict[int, float],
-                 env: dict, host: str, extra_peers: Mapping[int, str] | None = None):
+                 env: dict, host: str, extra_peers: Mapping[int, str] | None = None, keys: Path | None = None):
         self.out_dir = out_dir
         self.ports = ports
         self.common = common
@@ -64,6 +75,7 @@ class Fleet:
         self.env = env
         self.host = host
         self.extra_peers = dict(extra_peers or {})
+        self.keys = keys  # swarm keys folder (None: insecure)
         self.procs: dict[int, subprocess.Popen] = {}
         self.summaries: dict[int, dict] = {}
         self.lines: queue.Queue = queue.Queue()
@@ -76,7 +88,7 @@ class Fleet:
         return [sys.executable, "-m", "airpose_lib.runtime.node", "--id", str(drone),
                 "--port", str(self.ports[drone]), "--host", self.host, "--peers", *peers, "--t0", t0,
                 "--clock-offset-ms", str(self.offsets.get(drone, 0.0)), "--out", str(self.out_dir),
-                *self.common]
+                *(["--keys", str(self.keys)] if self.keys is not None else []), *self.common]
 
     def _spawn(self, drone: int, t0: str) -> subprocess.Popen:
         log = open(self.out_dir / f"node_{drone}.log", "a")
@@ -108,7 +120,8 @@ class Fleet:
             dead = [d for d, p in self.procs.items() if p.poll() is not None and d not in self._ready]
             if dead:
                 self.stop()
-                raise LaunchError(f"drone(s) {dead} exited before READY; see {self.out_dir}/node_<id>.log")
+                why = "; ".join(f"drone {d}: {_last_line(self.out_dir / f'node_{d}.log')}" for d in dead)
+                raise LaunchError(f"drone(s) {dead} exited before READY ({why}); see {self.out_dir}/node_<id>.log")
             if time.time() > deadline:
                 self.stop()
                 raise LaunchError(f"drones {sorted(set(self.procs) - self._ready)} not ready after {ready_timeout_s} s")
@@ -188,7 +201,8 @@ def launch(num_drones: int, out_dir: str | Path, options: Mapping | Sequence[str
     common = list(options) if isinstance(options, (list, tuple)) else node_options(options)
     offsets = {d: float(clock_offsets_ms[d - 1]) if clock_offsets_ms else 0.0 for d in ports}
     env = dict(os.environ, OMP_NUM_THREADS=str(threads), MKL_NUM_THREADS=str(threads), PYTHONUNBUFFERED="1")
-    fleet = Fleet(out_dir, ports, common, offsets, env, host, extra_peers)
+    keys = None if "--insecure" in common else create_swarm_keys(out_dir / "keys", [*ports, *(extra_peers or {})])
+    fleet = Fleet(out_dir, ports, common, offsets, env, host, extra_peers, keys)
     for d in ports:
         fleet._spawn(d, "stdin")
     if start:

@@ -30,6 +30,12 @@ Modes:
     release the GIL); several frames in flight. A frame whose stage 1 could not finish by its
     deadline any more is skipped before it costs CPU.
 
+Authentication: the links are CurveZMQ (:mod:`.keys`), each peer on its own SUB socket; a
+packet whose drone id is not the drone at the other end of its link is rejected as ``spoofed``,
+a repeated stage message as ``replay`` (both logged, rate-limited, and counted in the summary's
+``rejected``); a message for a frame already finished is counted as late and logged.
+``--insecure`` (NodeConfig.insecure) runs without keys.
+
 Faults: malformed or wrong-version packets are rejected with a log line (rate-limited), and
 counted; a drone that dies stops being waited for after ``peer_timeout``; when it restarts (same
 address, same ``t0``) it joins the schedule at the next slot and the others use its messages
@@ -57,6 +63,7 @@ import zmq
 from . import results as R
 from .backends import (BackendSpec, StageModel, checkpoint_settings, fresh_copy, make_stage_model, to_numpy,
                        warm_up)
+from .keys import KEYS_ENV, SwarmKeyError, keys_folder, load_swarm_keys
 from .source import crop_input, open_source, person_box
 from .sync import CameraReplay, Clock, Mailbox, PeerTable, Schedule
 from .transport import LinkConfig, Transport, endpoint
@@ -103,6 +110,8 @@ class NodeConfig:
     min_confidence: float = 0.2
     box_margin_px: float = 20.0
     preload: bool = False  # decode the replayed frames into memory before the start
+    keys: str | None = None  # folder of the swarm's CURVE keys (runtime.keys); None: $AIRPOSE_SWARM_KEYS
+    insecure: bool = False  # no authentication (trusted networks only)
 
     @property
     def period_s(self) -> float:
@@ -147,6 +156,15 @@ class DroneProcess:
 
     def __init__(self, config: NodeConfig):
         self.cfg = c = config
+        self.keys = None
+        if not c.insecure:  # before anything slow: a drone without its keys fails at once
+            folder = keys_folder(c.keys)
+            if folder is None:
+                raise SwarmKeyError(
+                    f"drone {c.drone_id}: no swarm keys; give --keys DIR or set {KEYS_ENV} "
+                    "(make them with `airpose keys --drones N --out DIR`; `airpose launch` makes its own), "
+                    "or pass --insecure on a trusted network")
+            self.keys = load_swarm_keys(folder, c.drone_id, c.peers)
         self.clock = Clock(c.clock_offset_ms / 1000.0)
         self.view_index = c.drone_id - 1 if c.view is None else c.view
         self.src = open_source(c.source, c.detector)
@@ -169,6 +187,8 @@ class DroneProcess:
         self.mailbox = Mailbox()
         self.rejected: dict[str, int] = defaultdict(int)
         self.late_packets = 0
+        self._seen: deque = deque(maxlen=4096)  # recent (drone, kind, stage, slot, stamp): replays
+        self._seen_set: set = set()
         self.bytes_hello = 0
         self.bytes_data = 0
         self.data_packets = 0
@@ -246,13 +266,28 @@ class DroneProcess:
         if n <= 3 or n % 100 == 0:
             log.warning("rejected a %d-byte packet: %s (%d of this kind so far)", nbytes, reason, n)
 
-    def _receive(self, bufs: list[bytes]) -> None:
+    def _replayed(self, pkt: Packet) -> bool:
+        """True if this stage/skip message was received before (remembers the last 4096)."""
+        key = (pkt.drone, pkt.kind, pkt.stage, pkt.slot, pkt.stamp)
+        if key in self._seen_set:
+            return True
+        if len(self._seen) == self._seen.maxlen:
+            self._seen_set.discard(self._seen[0])
+        self._seen.append(key)
+        self._seen_set.add(key)
+        return False
+
+    def _receive(self, received: list[tuple[int, bytes]]) -> None:
         now = self.clock.now()
-        for buf in bufs:
+        for sender, buf in received:
             try:
                 pkt = decode_packet(buf)
             except WireError as e:
                 self._reject(e.code, str(e), len(buf))
+                continue
+            if sender and pkt.drone != sender:
+                self._reject("spoofed", f"claims to be drone {pkt.drone} but came over the link of drone "
+                             f"{sender}{' (authenticated)' if self.keys is not None else ''}", len(buf))
                 continue
             if pkt.drone == self.cfg.drone_id:
                 self._reject("own_id", f"own drone id {pkt.drone} (two drones with one id?)", len(buf))
@@ -266,6 +301,10 @@ class DroneProcess:
                 continue
             if self.peers.heard(pkt.drone, now):
                 log.info("drone %d is alive", pkt.drone)
+            if pkt.kind in (SKIP, DATA) and self._replayed(pkt):
+                self._reject("replay", f"replay of drone {pkt.drone}'s {pkt.kind_name} message of slot {pkt.slot} "
+                             f"(stage {pkt.stage}, stamp {pkt.stamp:.3f})", len(buf))
+                continue
             if pkt.kind == SKIP:
                 self._skips.append((pkt.drone, pkt.slot))
                 continue
@@ -275,6 +314,9 @@ class DroneProcess:
                     continue
                 if any(abs(pkt.stamp - s) <= self.tolerance_s for s in self._finished_stamps):
                     self.late_packets += 1
+                    if self.late_packets <= 3 or self.late_packets % 100 == 0:
+                        log.warning("drone %d's stage %d message of slot %d came after its frame was finished "
+                                    "(%d late so far)", pkt.drone, pkt.stage, pkt.slot, self.late_packets)
                 self.mailbox.put(pkt, now)
 
     # -- one frame -----------------------------------------------------------------------------
@@ -442,7 +484,8 @@ class DroneProcess:
         self._warm_up_acquisition()
         if c.preload:
             self._preload()
-        self.transport = Transport(endpoint(c.port, c.host), list(c.peers.values()), c.link, clock=self.clock.now)
+        self.transport = Transport(endpoint(c.port, c.host), dict(c.peers), c.link, clock=self.clock.now,
+                                   keys=self.keys)
         try:
             t0 = self._wait_start()
             restart = self.clock.now() > t0
@@ -681,6 +724,7 @@ class DroneProcess:
             "frames_started": self.frames_started,
             "bytes_per_frame": self.bytes_data / self.frames_started if self.frames_started else None,
             "rejected": dict(self.rejected), "late_packets": self.late_packets,
+            "authenticated": self.keys is not None,
             "link_lost": self.transport.emulator.lost if self.transport.emulator else 0,
             "send_dropped": self.transport.send_dropped,
             "timing_median": {k: statistics.median(v) for k, v in timings.items()},
@@ -691,9 +735,9 @@ class DroneProcess:
 # -- command line ---------------------------------------------------------------------------------
 def main(argv=None) -> int:
     """``python -m airpose_lib.runtime.node`` = ``airpose node``."""
-    from .options import build_node_parser, run_node
+    from airpose_lib.cli import main as cli_main  # one error policy: one line, exit status 2
 
-    return run_node(build_node_parser().parse_args(argv))
+    return cli_main(["node", *(sys.argv[1:] if argv is None else argv)])
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -6,10 +6,13 @@ import argparse
 import json
 import math
 import time
+from pathlib import Path
 
 from airpose_lib.paths import run_path  # a leaf module: `airpose --help` stays fast
 
 __all__ = [
+    "NodeOptionError",
+    "check_inputs",
     "parse_peers",
     "add_node_arguments",
     "build_node_parser",
@@ -20,6 +23,26 @@ __all__ = [
     "add_export_arguments",
     "run_export",
 ]
+
+
+class NodeOptionError(ValueError):
+    """A node or launch option names something that is not there; the message names the flag."""
+
+
+def check_inputs(args: argparse.Namespace) -> None:
+    """Fail before any process starts when ``--source``, ``--checkpoint`` or ``--onnx-dir`` is
+    missing (their contents are checked when they are loaded)."""
+    if not str(args.source).startswith("synthetic") and not Path(args.source).is_dir():
+        raise NodeOptionError(
+            f"--source {args.source}: no such folder; give a recording folder in the official layout "
+            "(machine_1/, machine_2/) or synthetic[:views=2,frames=300,...]")
+    if args.checkpoint is not None and not Path(args.checkpoint).is_file():
+        raise NodeOptionError(f"--checkpoint {args.checkpoint}: no such file; give a state_dict or a "
+                              "checkpoints/*.pt of `airpose train`")
+    if args.backend == "onnx" and (args.onnx_dir is None or not (Path(args.onnx_dir) / "meta.json").is_file()):
+        what = "no meta.json in it" if args.onnx_dir and Path(args.onnx_dir).is_dir() else "no such folder"
+        raise NodeOptionError(f"--onnx-dir {args.onnx_dir}: {what}; give a folder written by "
+                              "airpose_lib.model.onnx_export.export_onnx")
 
 
 def parse_peers(items: list[str], host: str = "127.0.0.1") -> dict[int, str]:
@@ -88,6 +111,10 @@ def add_node_arguments(p: argparse.ArgumentParser) -> None:
     m.add_argument("--threads", type=int, default=1, help="intra-op threads per drone (default: 1)")
     m.add_argument("--message-dtype", choices=("float32", "float16"), default="float32")
     m.add_argument("--fake-compute-ms", type=float, default=0.0, help=argparse.SUPPRESS)
+    a = p.add_argument_group("authentication (CurveZMQ; see airpose_lib/runtime/keys.py)")
+    a.add_argument("--insecure", action="store_true",
+                   help="exchange messages without authentication (any process that reaches the "
+                        "sockets can speak for any drone; trusted networks only)")
     n = p.add_argument_group("link emulation (applied to received packets)")
     n.add_argument("--link-latency-ms", type=float, default=0.0)
     n.add_argument("--link-jitter-ms", type=float, default=0.0)
@@ -110,6 +137,9 @@ def build_node_parser(p: argparse.ArgumentParser | None = None) -> argparse.Argu
                    help="start time (epoch s, this drone's clock); 'stdin' = wait for 'START <t0>' "
                         "(the launcher); default: the next multiple of 10 s at least 5 s away")
     p.add_argument("--clock-offset-ms", type=float, default=0.0, help="emulated clock error of this drone")
+    p.add_argument("--keys", default=None, metavar="DIR",
+                   help="folder with this drone's drone_<id>.key_secret and the peers' drone_<j>.key "
+                        "(default: $AIRPOSE_SWARM_KEYS; make them with `airpose keys`)")
     add_node_arguments(p)
     return p
 
@@ -136,14 +166,19 @@ def config_from_args(args: argparse.Namespace, drone_id: int, port: int, peers: 
                       heartbeat_ms=args.heartbeat_ms, frames=args.frames, start_s=args.start_s, t0=t0,
                       out_dir=args.out if args.out is not None else str(run_path("online")), link=link, host=host, max_runtime_s=args.max_runtime_s,
                       detector=args.detector, min_confidence=args.min_confidence,
-                      box_margin_px=args.box_margin_px, preload=args.preload)
+                      box_margin_px=args.box_margin_px, preload=args.preload,
+                      keys=getattr(args, "keys", None), insecure=args.insecure)
 
 
 def run_node(args: argparse.Namespace) -> int:
     """Handler of ``airpose node``."""
+    from airpose_lib.process_guard import die_with_parent
+
     from .node import DroneProcess
 
-    if args.t0 == "stdin":
+    check_inputs(args)
+    if args.t0 == "stdin":  # started by a launcher: never outlive it
+        die_with_parent()
         t0 = None
     elif args.t0 is None:
         t0 = math.ceil((time.time() + 5.0) / 10.0) * 10.0  # drones started by hand meet there
@@ -173,6 +208,7 @@ def run_launch(args: argparse.Namespace) -> int:
     """Handler of ``airpose launch``: start the drones on loopback, wait, print their summaries."""
     from .launcher import launch
 
+    check_inputs(args)
     # Every node option that differs from its default is passed on to the drones.
     node_defaults = vars(add_node_defaults())
     options = {k: v for k, v in vars(args).items()

@@ -288,12 +288,20 @@ def crop_input(image: np.ndarray, bbox: np.ndarray, K: np.ndarray, input_size: i
         formed in the virtual camera ``K_net`` (``geometry.virtual_crop``; convert a weak camera
         to a translation with ``K_net``). The box is resized keeping its aspect ratio into the
         centre of the S x S square and everything outside the box is black.
+
+    Raises:
+        ValueError: the box is empty or entirely outside the image (the crop would be black).
     """
     import cv2
     import torch
 
     from airpose_lib.geometry import virtual_crop
 
+    H, W = image.shape[:2]
+    x0, y0, x1, y1 = (float(v) for v in np.asarray(bbox, np.float64).reshape(4))
+    if not (x0 < W and y0 < H and x1 > 0 and y1 > 0 and x1 > x0 and y1 > y0):  # nothing of the image in it
+        raise ValueError(f"person box [{x0:.1f}, {y0:.1f}, {x1:.1f}, {y1:.1f}] does not overlap the "
+                         f"{W}x{H} image (or is empty); check the detections or the box margin")
     box_t = torch.as_tensor(np.asarray(bbox, np.float64))
     K_net = network_camera() if K_net is None else K_net
     A, P = virtual_crop(box_t, torch.as_tensor(np.asarray(K, np.float64)),

@@ -12,6 +12,12 @@ drone's PUB. Why PUB/SUB rather than DEALER/ROUTER or REQ/REP:
 The price is that PUB/SUB loses messages silently (slow-joiner, reconnect); the node handles a
 missing message anyway (fallback), and heartbeats (HELLO) tell it who is alive.
 
+Each peer has its own SUB socket, so every received packet comes with the id of the drone at the
+other end of its link. With :class:`~.keys.SwarmKeys` the links are CurveZMQ: the PUB socket is
+a CURVE server that admits only the swarm's public keys (a ZAP handler), and the SUB socket of
+peer ``j`` only completes its handshake with the holder of ``j``'s secret key; the node rejects a
+packet whose drone id is not that of its link (:mod:`.keys`, :mod:`.node`).
+
 :class:`LinkEmulator` delays, rate-limits and drops received packets per sending drone, to
 emulate the paper's 5 GHz Wi-Fi (50 Mbps) on loopback.
 """
@@ -20,12 +26,13 @@ from __future__ import annotations
 import heapq
 import itertools
 import socket
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
 import zmq
 
-from .wire import HEADER_BYTES
+from .keys import SwarmKeys
 
 __all__ = ["LinkConfig", "LinkEmulator", "Transport", "free_ports", "endpoint"]
 
@@ -83,7 +90,7 @@ class LinkEmulator:
         self.config = config
         self._rng = np.random.default_rng(config.seed)
         self._free: dict[int, float] = {}
-        self._queue: list = []  # heap of (deliver_at, seq, buf)
+        self._queue: list = []  # heap of (deliver_at, seq, sender, buf)
         self._seq = itertools.count()
         self.lost = 0
 
@@ -99,52 +106,92 @@ class LinkEmulator:
         t += c.latency_ms / 1000.0
         if c.jitter_ms:
             t += self._rng.uniform(0.0, c.jitter_ms / 1000.0)
-        heapq.heappush(self._queue, (t, next(self._seq), buf))
+        heapq.heappush(self._queue, (t, next(self._seq), sender, buf))
 
-    def release(self, now: float) -> list[bytes]:
+    def release(self, now: float) -> list[tuple[int, bytes]]:
+        """``(sender, packet)`` pairs due by ``now``."""
         out = []
         while self._queue and self._queue[0][0] <= now:
-            out.append(heapq.heappop(self._queue)[2])
+            _, _, sender, buf = heapq.heappop(self._queue)
+            out.append((sender, buf))
         return out
 
     def next_due(self) -> float | None:
         return self._queue[0][0] if self._queue else None
 
 
+class _SwarmMembers:
+    """ZAP credentials check of the PUB socket: only the swarm's public keys may subscribe."""
+
+    def __init__(self, keys: SwarmKeys):
+        self.allowed = {keys.public, *keys.peers.values()}
+
+    def callback(self, domain: str, key: bytes) -> bool:
+        return key in self.allowed
+
+
 class Transport:
-    """One drone's sockets: a bound PUB, a SUB connected to the peers, an optional link emulator.
+    """One drone's sockets: a bound PUB, one SUB per peer, an optional link emulator.
 
     Args:
         bind: this drone's endpoint (``tcp://127.0.0.1:PORT``).
-        peers: the other drones' endpoints.
+        peers: the other drones, id -> endpoint (a plain list of endpoints: ids unknown, 0).
         link: optional :class:`LinkConfig` applied to received packets.
         clock: callable giving the local time (for the emulator).
         hwm: high-water mark (packets queued per peer before PUB drops).
+        keys: this drone's CURVE keys and its peers' public keys (None: no authentication).
     """
 
-    def __init__(self, bind: str, peers: list[str], link: LinkConfig | None = None, clock=None, hwm: int = 256):
+    def __init__(self, bind: str, peers: Mapping[int, str] | Sequence[str], link: LinkConfig | None = None,
+                 clock=None, hwm: int = 256, keys: SwarmKeys | None = None):
         import time
 
         self._clock = clock or time.time
         self.ctx = zmq.Context()
+        self.keys = keys
+        self.auth = None
+        pairs = list(peers.items()) if isinstance(peers, Mapping) else [(0, ep) for ep in peers]
         self.pub = self.ctx.socket(zmq.PUB)
-        self.sub = self.ctx.socket(zmq.SUB)
-        for s in (self.pub, self.sub):
+        self.pub.setsockopt(zmq.SNDHWM, hwm)
+        if keys is not None:
+            from zmq.auth.thread import ThreadAuthenticator
+
+            self.auth = ThreadAuthenticator(self.ctx)
+            self.auth.start()
+            self.auth.configure_curve_callback(domain="*", credentials_provider=_SwarmMembers(keys))
+            self.pub.curve_secretkey = keys.secret
+            self.pub.curve_publickey = keys.public
+            self.pub.curve_server = True
+        self.subs: dict = {}  # SUB socket -> the peer id at its other end
+        for ident, ep in pairs:
+            sub = self.ctx.socket(zmq.SUB)
+            sub.setsockopt(zmq.RCVHWM, hwm)
+            if keys is not None:
+                if ident not in keys.peers:
+                    raise ValueError(f"no public key of drone {ident} in the swarm keys")
+                sub.curve_secretkey = keys.secret
+                sub.curve_publickey = keys.public
+                sub.curve_serverkey = keys.peers[ident]
+            sub.setsockopt(zmq.SUBSCRIBE, b"")  # everything: malformed packets must reach the parser
+            self.subs[sub] = ident
+        for s in (self.pub, *self.subs):
             s.setsockopt(zmq.LINGER, 0)
             s.setsockopt(zmq.RECONNECT_IVL, 50)  # ms; quick rejoin of a restarted drone
             s.setsockopt(zmq.RECONNECT_IVL_MAX, 500)
-        self.pub.setsockopt(zmq.SNDHWM, hwm)
-        self.sub.setsockopt(zmq.RCVHWM, hwm)
-        self.sub.setsockopt(zmq.SUBSCRIBE, b"")  # everything: malformed packets must reach the parser
         self.pub.bind(bind)
-        for p in peers:
-            self.sub.connect(p)
+        for sub, (_, ep) in zip(self.subs, pairs):
+            sub.connect(ep)
         self.emulator = LinkEmulator(link) if link is not None and link.active else None
         self.poller = zmq.Poller()
-        self.poller.register(self.sub, zmq.POLLIN)
+        for sub in self.subs:
+            self.poller.register(sub, zmq.POLLIN)
         self.bytes_sent = 0
         self.packets_sent = 0
         self.send_dropped = 0
+
+    @property
+    def authenticated(self) -> bool:
+        return self.keys is not None
 
     def register(self, sock) -> None:
         """Also wake :meth:`poll` for this (e.g. inproc) socket."""
@@ -161,29 +208,32 @@ class Transport:
         self.packets_sent += 1
         return True
 
-    def poll(self, timeout_s: float) -> tuple[list[bytes], set]:
-        """Wait up to ``timeout_s`` for packets; returns (packets now deliverable, ready extra
-        sockets)."""
+    def poll(self, timeout_s: float) -> tuple[list[tuple[int, bytes]], set]:
+        """Wait up to ``timeout_s`` for packets; returns (``(sender, packet)`` pairs now
+        deliverable, ready extra sockets). ``sender`` is the peer id of the link it came over."""
         if self.emulator is not None:
             due = self.emulator.next_due()
             if due is not None:
                 timeout_s = min(timeout_s, max(0.0, due - self._clock()))
         events = dict(self.poller.poll(max(0, int(np.ceil(timeout_s * 1000)))))
         out = []
-        if events.pop(self.sub, None):
+        for sub, sender in self.subs.items():
+            if not events.pop(sub, None):
+                continue
             while True:
                 try:
-                    buf = self.sub.recv(zmq.NOBLOCK)
+                    buf = sub.recv(zmq.NOBLOCK)
                 except zmq.Again:
                     break
                 if self.emulator is None:
-                    out.append(buf)
+                    out.append((sender, buf))
                 else:
-                    sender = buf[6] if len(buf) >= HEADER_BYTES else 0
                     self.emulator.admit(sender, buf, self._clock())
         if self.emulator is not None:
             out.extend(self.emulator.release(self._clock()))
         return out, set(events)
 
     def close(self) -> None:
+        if self.auth is not None:
+            self.auth.stop()
         self.ctx.destroy(linger=0)  # closes every socket of the context, inproc ones included

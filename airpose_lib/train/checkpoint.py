@@ -21,6 +21,7 @@ import numpy as np
 import torch
 
 from airpose_lib.body.cache import atomic_path
+from airpose_lib.errors import reading
 
 __all__ = [
     "kit_version",
@@ -103,7 +104,9 @@ def save_checkpoint(out_dir: str | Path, state: dict[str, Any], keep: int = 2) -
 
 def load_checkpoint(path: str | Path, map_location: str | torch.device = "cpu") -> dict[str, Any]:
     """Load a checkpoint written by :func:`save_checkpoint`."""
-    state = torch.load(Path(path), map_location=map_location, weights_only=True)
+    with reading(path, "a checkpoint of `airpose train` or `airpose finetune`",
+                 "use another checkpoint (e.g. the newest checkpoints/step_*.pt) or train again"):
+        state = torch.load(Path(path), map_location=map_location, weights_only=True)
     if state.get("format_version") != FORMAT_VERSION:
         raise ValueError(f"{path}: unsupported checkpoint format {state.get('format_version')!r}")
     return state

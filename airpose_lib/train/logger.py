@@ -6,9 +6,12 @@ and only the CSV is written (``RunLogger.tensorboard`` is then False).
 
 from __future__ import annotations
 
+import contextlib
 import csv
 from collections.abc import Mapping
 from pathlib import Path
+
+from airpose_lib.folder_lock import folder_lock
 
 __all__ = ["RunLogger", "read_log"]
 
@@ -28,6 +31,8 @@ class RunLogger:
     def __init__(self, out_dir: str | Path, resume_step: int | None = None, tensorboard: bool = True) -> None:
         self.path = Path(out_dir) / "log.csv"
         self.path.parent.mkdir(parents=True, exist_ok=True)
+        self._lock = contextlib.ExitStack()  # one writer per run folder (re-entrant in this process)
+        self._lock.enter_context(folder_lock(out_dir))
         self._columns: list[str] | None = None
         if resume_step is None or not self.path.exists():
             self.path.unlink(missing_ok=True)
@@ -75,6 +80,7 @@ class RunLogger:
     def close(self) -> None:
         if self._tb is not None:
             self._tb.close()
+        self._lock.close()
 
 
 def _columns_of(rows: list[dict]) -> list[str] | None:

@@ -30,6 +30,7 @@ import os
 import socket
 import time
 import warnings
+from contextlib import nullcontext
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -38,6 +39,8 @@ import torch
 import torch.distributed as dist
 from torch import nn
 from torch.utils.data import DataLoader
+
+from airpose_lib.folder_lock import folder_lock
 
 from .checkpoint import (
     capture_rng_state,
@@ -376,8 +379,9 @@ def run_training(cfg: TrainConfig, out_dir: Path, resume: bool, model_factory: C
     """
     saved = (torch.get_num_threads(), torch.are_deterministic_algorithms_enabled(),
              torch.is_deterministic_algorithms_warn_only_enabled())
-    try:
-        return _run_training(cfg, out_dir, resume, model_factory, dataset_factory, loss_factory, stop_at)
+    try:  # rank 0 is the run folder's one writer
+        with folder_lock(out_dir) if not dist.is_initialized() or dist.get_rank() == 0 else nullcontext():
+            return _run_training(cfg, out_dir, resume, model_factory, dataset_factory, loss_factory, stop_at)
     finally:
         torch.set_num_threads(saved[0])
         torch.use_deterministic_algorithms(saved[1], warn_only=saved[2])

@@ -1,0 +1,247 @@
+"""One error policy for the `airpose` command: every user mistake (a missing, truncated or foreign
+file, an output folder that cannot be created) ends in one line naming the file and the fix, exit
+status 2, no traceback; `--debug` adds the traceback."""
+from __future__ import annotations
+
+import pickle
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from airpose_lib import cli
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _truncate(path: Path) -> Path:
+    data = path.read_bytes()
+    path.write_bytes(data[: len(data) // 2])
+    return path
+
+
+@pytest.fixture(scope="module")
+def inputs(tmp_path_factory) -> dict[str, Path]:
+    """A tiny recording, a truncated copy of it, a truncated checkpoint and .npz, and paths that
+    do not exist or cannot be created."""
+    from airpose_lib.data.official_layout import OfficialLayoutWriter
+
+    tmp = tmp_path_factory.mktemp("inputs")
+    seq = tmp / "seq"
+    w = OfficialLayoutWriter(seq, num_views=2)
+    for i in range(3):
+        w.write_frame(i, [np.zeros((64, 96, 3), np.uint8)] * 2)
+    K = np.array([[[100.0, 0, 48], [0, 100.0, 32], [0, 0, 1]]] * 2)
+    kps = {"openpose": np.full((3, 2, 25, 3), 0.5), "alphapose": np.full((3, 2, 18, 3), 0.5)}
+    w.finish(K, kps)
+    bad_seq = tmp / "bad_seq"
+    shutil.copytree(seq, bad_seq)
+    _truncate(bad_seq / "machine_1" / "openpose_res.pkl")
+    short_seq = tmp / "short_seq"  # detections of frame 0 only
+    shutil.copytree(seq, short_seq)
+    pkl = short_seq / "machine_1" / "openpose_res.pkl"
+    with open(pkl, "rb") as fh:
+        res = pickle.load(fh)
+    with open(pkl, "wb") as fh:
+        pickle.dump({k: v for k, v in res.items() if int(k) == 0}, fh)
+    ckpt = tmp / "last.pt"
+    torch.save({"model": {"w": torch.zeros(1000)}, "step": 3}, ckpt)
+    _truncate(ckpt)
+    good_npz = tmp / "good_pred.npz"
+    np.savez(good_npz, phi=np.zeros((3, 2, 3, 3)), tau=np.zeros((3, 2, 3)), theta=np.zeros((3, 2, 21, 3, 3)),
+             beta=np.zeros((3, 2, 10)))
+    npz = tmp / "pred.npz"
+    np.savez(npz, phi=np.zeros((3, 2, 3, 3)), tau=np.zeros((3, 2, 3)))
+    _truncate(npz)
+    a_file = tmp / "a_file"
+    a_file.write_text("not a folder")
+    run = tmp / "run"  # a training run whose last checkpoint was cut short
+    (run / "checkpoints").mkdir(parents=True)
+    shutil.copy(ckpt, run / "checkpoints" / "last.pt")
+    data = tmp / "data"  # a dataset folder whose manifest was cut short
+    data.mkdir()
+    (data / "manifest.yaml").write_text("kind: airpose-still-frames\nshards: [{index: 0, file: ")
+    return {"seq": seq, "bad_seq": bad_seq, "short_seq": short_seq, "ckpt": ckpt, "npz": npz, "good_npz": good_npz, "missing": tmp / "does_not_exist",
+            "uncreatable": a_file / "sub", "run": run, "data": data, "tmp": tmp}
+
+
+def _node(*extra: str) -> list[str]:
+    return ["node", "--id", "1", "--port", "5999", "--backend", "torch", "--insecure", *extra]
+
+
+# (name, argv from the inputs, the path the message must name)
+MISSING = [
+    ("eval --checkpoint", lambda p: ["eval", "--checkpoint", p["missing"]], "missing"),
+    ("fit --sequence", lambda p: ["fit", "--sequence", p["missing"], "--init", p["npz"]], "missing"),
+    ("fit --init", lambda p: ["fit", "--sequence", p["seq"], "--init", p["missing"]], "missing"),
+    ("fit --prior-path", lambda p: ["fit", "--sequence", p["seq"], "--init", p["npz"], "--prior-path",
+                                    p["missing"]], "missing"),
+    ("finetune --checkpoint", lambda p: ["finetune", "--checkpoint", p["missing"], "--sequence", p["seq"],
+                                         "--out", p["tmp"] / "ft"], "missing"),
+    ("finetune --sequence", lambda p: ["finetune", "--checkpoint", p["ckpt"], "--sequence", p["missing"],
+                                       "--out", p["tmp"] / "ft"], "missing"),
+    ("predict --checkpoint", lambda p: ["predict", "--checkpoint", p["missing"], "--sequence", p["seq"],
+                                        "--out", p["tmp"] / "pred_out.npz"], "missing"),
+    ("predict --sequence", lambda p: ["predict", "--checkpoint", p["ckpt"], "--sequence", p["missing"],
+                                      "--out", p["tmp"] / "pred_out.npz"], "missing"),
+    ("prior info --path", lambda p: ["prior", "info", "--path", p["missing"]], "missing"),
+    ("node --source", lambda p: _node("--source", p["missing"]), "missing"),
+    ("node --checkpoint", lambda p: _node("--checkpoint", p["missing"]), "missing"),
+    ("node --onnx-dir", lambda p: _node("--backend", "onnx", "--onnx-dir", p["missing"]), "missing"),
+    ("launch --source", lambda p: ["launch", "--source", p["missing"], "--out", p["tmp"] / "online"], "missing"),
+    ("launch --checkpoint", lambda p: ["launch", "--checkpoint", p["missing"], "--out", p["tmp"] / "online"],
+     "missing"),
+    ("data verify --root", lambda p: ["data", "verify", "official_real", "--root", p["uncreatable"]],
+     "uncreatable"),
+    # outputs that cannot be created (a file where a folder should be)
+    ("train --out", lambda p: ["train", "--variant", "airpose", "--out", p["uncreatable"]], "uncreatable"),
+    ("data generate --out", lambda p: ["data", "generate", "--out", p["uncreatable"]], "uncreatable"),
+    ("data sequence --out", lambda p: ["data", "sequence", "--out", p["uncreatable"]], "uncreatable"),
+    ("prior train --out", lambda p: ["prior", "train", "--profile", "smoke", "--out",
+                                     p["uncreatable"] / "prior.pt"], "uncreatable"),
+    ("reproduce --out", lambda p: ["reproduce", "--only", "00", "--out", p["uncreatable"]], "uncreatable"),
+    ("finetune --out", lambda p: ["finetune", "--checkpoint", p["ckpt"], "--sequence", p["seq"],
+                                  "--out", p["uncreatable"]], "uncreatable"),
+]
+
+TRUNCATED = [
+    ("eval --checkpoint", lambda p: ["eval", "--checkpoint", p["ckpt"]], "ckpt"),
+    ("predict --checkpoint", lambda p: ["predict", "--checkpoint", p["ckpt"], "--sequence", p["seq"],
+                                        "--out", p["tmp"] / "pred_out.npz"], "ckpt"),
+    ("finetune --checkpoint", lambda p: ["finetune", "--checkpoint", p["ckpt"], "--sequence", p["seq"],
+                                         "--out", p["tmp"] / "ft2"], "ckpt"),
+    ("train resume", lambda p: ["train", "--variant", "airpose", "--out", p["run"]], "run"),
+    ("fit --init", lambda p: ["fit", "--sequence", p["seq"], "--init", p["npz"]], "npz"),
+    ("fit --sequence", lambda p: ["fit", "--sequence", p["bad_seq"], "--init", p["good_npz"]], "bad_seq"),
+    ("fit --prior-path", lambda p: ["fit", "--sequence", p["seq"], "--init", p["good_npz"], "--prior-path",
+                                    p["ckpt"]], "ckpt"),
+    ("prior info --path", lambda p: ["prior", "info", "--path", p["ckpt"]], "ckpt"),
+    ("node --checkpoint", lambda p: _node("--checkpoint", p["ckpt"]), "ckpt"),
+    ("node --source", lambda p: _node("--source", p["bad_seq"]), "bad_seq"),
+    ("data generate manifest", lambda p: ["data", "generate", "--out", p["data"]], "data"),
+]
+
+
+def _run(argv, capsys) -> tuple[int, str]:
+    """Exit status and stderr of ``airpose ARGV`` (stdout is kept in ``_run.out``)."""
+    capsys.readouterr()
+    code = cli.main([str(a) for a in argv])
+    out = capsys.readouterr()
+    _run.out = out.out
+    return code, out.err
+
+
+def _assert_one_line(code: int, err: str, path: Path) -> None:
+    lines = [line for line in err.splitlines() if line.strip()]
+    assert code == 2, err
+    assert len(lines) == 1 and lines[0].startswith("airpose: error: "), err
+    assert str(path) in lines[0], err
+    assert "Traceback" not in err
+
+
+@pytest.mark.parametrize("argv,named", [c[1:] for c in MISSING], ids=[c[0] for c in MISSING])
+def test_every_subcommand_reports_a_missing_path_in_one_line(argv, named, inputs, capsys):
+    code, err = _run(argv(inputs), capsys)
+    if named == "uncreatable" and argv(inputs)[:2] == ["data", "verify"]:  # a report, not an error
+        assert code == 1 and str(inputs["uncreatable"]) in _run.out + err
+        return
+    _assert_one_line(code, err, inputs[named])
+
+
+@pytest.mark.parametrize("argv,named", [c[1:] for c in TRUNCATED], ids=[c[0] for c in TRUNCATED])
+def test_every_subcommand_reports_a_truncated_input_in_one_line(argv, named, inputs, capsys):
+    code, err = _run(argv(inputs), capsys)
+    _assert_one_line(code, err, inputs[named])
+    assert "damaged" in err or "truncated" in err or "not" in err
+
+
+def test_node_without_keys_says_where_they_come_from(inputs, capsys, monkeypatch):
+    monkeypatch.delenv("AIRPOSE_SWARM_KEYS", raising=False)
+    code, err = _run(["node", "--id", "1", "--port", "5999", "--backend", "fake"], capsys)
+    assert code == 2 and "AIRPOSE_SWARM_KEYS" in err and "--keys" in err and len(err.strip().splitlines()) == 1
+    code, err = _run(["node", "--id", "1", "--port", "5999", "--peers", "2@6000", "--backend", "fake",
+                      "--keys", inputs["tmp"] / "no_keys"], capsys)
+    _assert_one_line(code, err, inputs["tmp"] / "no_keys")
+
+
+def test_short_detections_name_the_cli_flag(inputs, capsys):
+    code, err = _run(["fit", "--sequence", inputs["short_seq"], "--init", inputs["good_npz"]], capsys)
+    _assert_one_line(code, err, inputs["short_seq"] / "machine_1" / "openpose_res.pkl")
+    assert "--allow-missing-detections" in err
+
+
+def test_debug_shows_the_traceback(inputs, capsys):
+    code, err = _run(["eval", "--checkpoint", inputs["ckpt"], "--debug"], capsys)
+    assert code == 2 and "Traceback" in err and err.strip().splitlines()[-1].startswith("airpose: error: ")
+
+
+def test_a_bug_keeps_its_traceback(monkeypatch):
+    def broken(args):
+        raise ZeroDivisionError("a bug")
+
+    parser = cli.build_parser()
+    args = parser.parse_args(["data", "list"])
+    monkeypatch.setattr(cli, "build_parser", lambda: parser)
+    monkeypatch.setattr(args, "func", broken, raising=False)
+    monkeypatch.setattr(parser, "parse_args", lambda argv=None: args)
+    with pytest.raises(ZeroDivisionError):
+        cli.main(["data", "list"])
+
+
+def test_damaged_body_model_is_named_as_such(tmp_path, monkeypatch, capsys):
+    """`body info` and `data generate --out NEW` on a truncated cached model name the file and
+    the repair command, not "generated with other body-model files"."""
+    from airpose_lib.body import open_model_path
+
+    monkeypatch.setenv("AIRPOSE_CACHE", str(tmp_path / "cache"))
+    for g in ("neutral", "male", "female"):
+        path = open_model_path(g)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        np.savez(path, v_template=np.zeros((10, 3)))
+        _truncate(path)
+    bad = open_model_path("neutral")
+    code, err = _run(["body", "info"], capsys)
+    _assert_one_line(code, err, bad)
+    assert "damaged" in err and "airpose body build --force" in err
+    code, err = _run(["data", "generate", "--out", tmp_path / "new"], capsys)
+    _assert_one_line(code, err, tmp_path / "cache")
+    assert "damaged" in err and "airpose body build --force" in err and "other body-model" not in err
+
+
+def test_body_build_verifies_an_existing_file(tmp_path, monkeypatch, capsys):
+    """Without --force, `body build` rebuilds a damaged cached file instead of trusting it."""
+    import airpose_lib.body as body
+
+    monkeypatch.setenv("AIRPOSE_CACHE", str(tmp_path / "cache"))
+    path = body.open_model_path("neutral")
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_bytes(b"PK\x03\x04 cut short")
+    calls = []
+
+    def fake_build(genders=("neutral",), force=False, **kw):
+        calls.append((tuple(genders), force))
+        return {g: body.open_model_path(g) for g in genders}
+
+    monkeypatch.setattr(body, "build_open_model", fake_build)
+    code, err = _run(["body", "build"], capsys)
+    assert code == 0, err
+    assert (("neutral",), True) in calls  # the damaged file was rebuilt
+    assert "damaged" in _run.out
+
+
+def test_module_entry_prints_one_line_without_traceback(tmp_path):
+    res = subprocess.run([sys.executable, "-m", "airpose_lib", "eval", "--checkpoint", str(tmp_path / "x.pt")],
+                         capture_output=True, text=True, timeout=120, cwd=ROOT)
+    assert res.returncode == 2 and "Traceback" not in res.stderr
+    assert res.stderr.strip().count("\n") == 0 and str(tmp_path / "x.pt") in res.stderr
+
+
+def test_body_info_smplx_in_a_missing_folder(tmp_path, monkeypatch, capsys):
+    monkeypatch.setenv("AIRPOSE_SMPLX_DIR", str(tmp_path / "nope"))
+    code, err = _run(["body", "info", "--source", "smplx"], capsys)
+    _assert_one_line(code, err, tmp_path / "nope")
+    assert "AIRPOSE_SMPLX_DIR" in err

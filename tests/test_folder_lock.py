@@ -1,0 +1,200 @@
+"""One writer per run or data folder (an OS lock the kernel drops when its holder dies), temp files
+of dead writers removed and those of a live one kept, workers that die with their parent, and no
+command rewriting the tracked data_manifests/ unless asked."""
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from airpose_lib import cli
+from airpose_lib.folder_lock import FolderBusyError, folder_lock
+
+ROOT = Path(__file__).resolve().parents[1]
+HOLD = ("import sys, time\n"
+        "from airpose_lib.folder_lock import folder_lock\n"
+        "with folder_lock(sys.argv[1]):\n"
+        "    print('LOCKED', flush=True)\n"
+        "    time.sleep(120)\n")
+
+
+def _env() -> dict:
+    return dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+
+
+@pytest.fixture
+def holder(tmp_path):
+    """Another process holding the lock of ``tmp_path / "run"``; yields (folder, Popen)."""
+    folder = tmp_path / "run"
+    proc = subprocess.Popen([sys.executable, "-c", HOLD, str(folder)], stdout=subprocess.PIPE, text=True,
+                            env=_env())
+    try:
+        assert proc.stdout.readline().strip() == "LOCKED"
+        yield folder, proc
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+        proc.wait()
+
+
+def test_a_second_writer_is_refused_with_the_holders_pid(holder):
+    folder, proc = holder
+    with pytest.raises(FolderBusyError, match=f"PID {proc.pid}"):
+        with folder_lock(folder):
+            pass
+
+
+def test_temp_files_of_a_live_writer_are_kept_and_of_a_dead_one_removed(holder):
+    folder, proc = holder
+    shard = folder / ".shard_00003.npz.abc.tmp"
+    ckpt = folder / "checkpoints" / ".last.pt.xyz.tmp"
+    ckpt.parent.mkdir(parents=True)
+    keep = folder / "checkpoints" / "last.pt"
+    for f in (shard, ckpt, keep):
+        f.write_bytes(b"partial")
+    with pytest.raises(FolderBusyError):
+        with folder_lock(folder):
+            pass
+    assert shard.exists() and ckpt.exists()  # the holder is alive: its temp files stay
+    proc.send_signal(signal.SIGKILL)  # dies without cleaning up; the kernel releases the lock
+    proc.wait()
+    with folder_lock(folder):
+        assert not shard.exists() and not ckpt.exists() and keep.exists()
+
+
+def test_the_lock_is_reentrant_in_one_process(tmp_path):
+    probe = ("import sys\n"
+             "from airpose_lib.folder_lock import folder_lock\n"
+             "with folder_lock(sys.argv[1]):\n"
+             "    print('LOCKED')\n")
+    with folder_lock(tmp_path / "run"):
+        with folder_lock(tmp_path / "run"):
+            pass
+        # still held by us: another process is refused
+        res = subprocess.run([sys.executable, "-c", probe, str(tmp_path / "run")], capture_output=True, text=True,
+                             env=_env(), timeout=120)
+        assert res.returncode != 0 and f"PID {os.getpid()}" in res.stderr
+    res = subprocess.run([sys.executable, "-c", probe, str(tmp_path / "run")], capture_output=True, text=True,
+                         env=_env(), timeout=120)
+    assert res.stdout.strip() == "LOCKED", res.stderr  # released
+
+
+@pytest.mark.parametrize("argv", [
+    ["train", "--variant", "airpose", "--out", "{run}"],
+    ["data", "generate", "--out", "{run}"],
+    ["finetune", "--checkpoint", "{ckpt}", "--sequence", "{seq}", "--out", "{run}"],
+], ids=["train", "data generate", "finetune"])
+def test_commands_refuse_a_folder_in_use(argv, holder, tmp_path, capsys):
+    folder, proc = holder
+    ckpt = tmp_path / "x.pt"
+    ckpt.write_bytes(b"x")
+    (tmp_path / "seq").mkdir()
+    code = cli.main([a.format(run=folder, ckpt=ckpt, seq=tmp_path / "seq") for a in argv])
+    err = capsys.readouterr().err
+    assert code == 2 and f"PID {proc.pid}" in err and str(folder) in err and len(err.strip().splitlines()) == 1
+
+
+def test_run_logger_is_a_writer(holder):
+    from airpose_lib.train.logger import RunLogger
+
+    folder, proc = holder
+    with pytest.raises(FolderBusyError, match=f"PID {proc.pid}"):
+        RunLogger(folder, tensorboard=False)
+
+
+# -- no orphans ------------------------------------------------------------------------------------
+def _stat(pid: int) -> tuple[str, int] | None:
+    """(state, ppid) of a process from /proc, None if it is gone."""
+    try:
+        fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    except (OSError, IndexError):
+        return None
+    return fields[0], int(fields[1])
+
+
+def _children(pid: int) -> set[int]:
+    """All descendants of ``pid`` (Linux /proc)."""
+    parents = {}
+    for entry in Path("/proc").iterdir():
+        if entry.name.isdigit():
+            st = _stat(int(entry.name))
+            if st is not None:
+                parents[int(entry.name)] = st[1]
+    out, frontier = set(), {pid}
+    while frontier:
+        frontier = {c for c, pp in parents.items() if pp in frontier} - out
+        out |= frontier
+    return out
+
+
+def _alive(pid: int) -> bool:
+    st = _stat(pid)
+    return st is not None and st[0] != "Z"
+
+
+def test_pool_workers_die_with_a_killed_parent(tmp_path, open_model_files):
+    """SIGKILL `airpose data generate --workers 2` mid-run: its two render workers and the
+    multiprocessing resource tracker exit too (they used to run on, ~1.7 GB)."""
+    proc = subprocess.Popen([sys.executable, "-m", "airpose_lib", "data", "generate", "--profile", "smoke",
+                             "--workers", "2", "--out", str(tmp_path / "data")], env=_env(),
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    data = tmp_path / "data"
+    try:
+        t_end = time.time() + 300
+        while time.time() < t_end and proc.poll() is None and not list(data.glob("shard_*")):
+            time.sleep(0.5)  # until the workers render (a first shard is finished)
+        kids = _children(proc.pid)
+        assert len(kids) >= 3, kids  # 2 workers + the resource tracker
+    finally:
+        proc.send_signal(signal.SIGKILL)
+        proc.wait()
+    t_end = time.time() + 60
+    alive = kids
+    while alive and time.time() < t_end:
+        time.sleep(0.25)
+        alive = {k for k in kids if _alive(k)}
+    for k in alive:  # do not leak them into the machine if the test fails
+        os.kill(k, signal.SIGKILL)
+    assert not alive, f"orphans left: {alive}"
+
+
+def test_die_with_parent_sets_the_kernel_signal():
+    code = ("import ctypes, signal\n"
+            "from airpose_lib.process_guard import die_with_parent\n"
+            "assert die_with_parent()\n"
+            "sig = ctypes.c_int()\n"
+            "ctypes.CDLL(None).prctl(2, ctypes.byref(sig), 0, 0, 0)\n"  # PR_GET_PDEATHSIG
+            "print(sig.value == signal.SIGKILL)\n")
+    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=_env(), timeout=60)
+    assert res.stdout.strip() == "True", res.stderr
+
+
+# -- tracked files -----------------------------------------------------------------------------------
+def test_generation_elsewhere_leaves_the_tracked_manifest_alone(tmp_path, monkeypatch):
+    from airpose_lib.data.generate import GenerationConfig, generate_still_dataset
+    from airpose_lib.data.scene import SceneConfig
+
+    tracked = ROOT / "data_manifests" / "generated_smoke.yaml"
+    before = tracked.read_bytes()
+    cfg = GenerationConfig(num_samples=2, shard_size=2, crop_size=32, seed=3, scene=SceneConfig(num_distractors=(0, 0)))
+    m = generate_still_dataset(cfg, tmp_path / "d", workers=1, progress=False, profile="smoke")
+    assert m["status"] == "complete" and tracked.read_bytes() == before
+    generate_still_dataset(cfg, tmp_path / "d", workers=1, progress=False, profile="smoke", record=tmp_path / "rec")
+    assert (tmp_path / "rec" / "generated_smoke.yaml").is_file() and tracked.read_bytes() == before
+    # the CLI records only with --record-manifest
+    seen = {}
+    import airpose_lib.data.generate as gen
+
+    def fake(config, root, **kw):
+        seen.update(kw)
+        raise gen.DatasetError("stop here")
+
+    monkeypatch.setattr(gen, "generate_still_dataset", fake)
+    assert cli.main(["data", "generate", "--out", str(tmp_path / "x")]) == 2 and seen["record"] is False
+    assert cli.main(["data", "generate", "--out", str(tmp_path / "x"), "--record-manifest"]) == 2
+    assert seen["record"] is True

@@ -133,3 +133,29 @@ def test_training_wall_time_is_read_from_result_json_when_present(tmp_path):
     assert train_wall_s({("baseline", 1): Run(tmp_path / "a"), ("baseline", 2): Run(tmp_path / "b"),
                          ("airpose", 1): Run(tmp_path / "c")}) == {
         ("baseline", 1): 42.0, ("baseline", 2): None, ("airpose", 1): None}
+
+
+def test_airpose_reproduce_compares_after_notebook_02_and_writes_only_with_the_flag(tmp_path, monkeypatch, capsys):
+    import airpose_lib.eval.reference as reference
+    import airpose_lib.reproduce as rep
+    from airpose_lib import cli
+    from airpose_lib.reproduce.runner import NotebookResult, RunReport
+
+    out_dir = tmp_path / "runs" / "smoke" / "02_ablation_table"
+    _bundle(out_dir.parent, _runs(), name="02_ablation_table/results")
+
+    def fake_run(profile, **kw):
+        r = RunReport(profile="smoke", description="", kit_version="0", kernel_name="python3",
+                      started_at="now", run_dir=str(out_dir.parent), figures_dir=str(tmp_path / "figures"))
+        r.results = [NotebookResult("02_ablation_table", "02_ablation_table.ipynb", status="ok",
+                                    parameters={"output_dir": str(out_dir)})]
+        return r
+
+    monkeypatch.setattr(rep, "run_profile", fake_run)
+    monkeypatch.setattr(reference, "RESULTS_ROOT", tmp_path / "results")
+    assert cli.main(["reproduce", "--only", "02"]) == 0
+    assert "none for profile 'smoke'" in capsys.readouterr().out and not (tmp_path / "results").exists()
+    assert cli.main(["reproduce", "--only", "02", "--write-reference"]) == 0
+    assert "wrote" in capsys.readouterr().out and (tmp_path / "results" / "smoke" / "per_seed.csv").is_file()
+    assert cli.main(["reproduce", "--only", "02"]) == 0
+    assert "0 differ by more than the reference's seed spread" in capsys.readouterr().out

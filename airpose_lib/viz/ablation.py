@@ -1,13 +1,86 @@
-"""Qualitative figure of the ablation: each variant's estimate on a few test samples."""
+"""Figures of the ablation (notebook 02): Table I as bars next to the reference and the paper, and
+each variant's estimate on a few test samples (skeletons, positions, meshes)."""
 from __future__ import annotations
 
 from collections.abc import Mapping
 
 import numpy as np
+import pandas as pd
 
 from airpose_lib.body.joint_sets import SMPLX_PARENTS
 
-from .style import VIEW_COLORS, method_color
+from .style import METHOD_COLORS, VIEW_COLORS, method_color
+from .trajectories import plot_mesh_overlays
+
+__all__ = ["SOURCE_COLORS", "plot_table1", "plot_ablation_samples", "plot_ablation_meshes"]
+
+#: Bar colours of :func:`plot_table1`, one per source of numbers (the methods are on the x axis).
+SOURCE_COLORS = {"kit": "#0072B2", "reference": "#56B4E9", "paper": "#999999"}
+
+
+def plot_table1(table: pd.DataFrame, reference: pd.DataFrame | None = None, kit_label: str = "kit",
+                metrics: tuple[str, ...] = ("MPE", "MPJPE"), oracle_label: str | None = None):
+    """Table I as grouped bars: this run (seed std as error bars), the committed reference and
+    the paper, one panel per metric on a log axis (the kit's and the paper's MPE can differ by
+    more than 10x; a linear axis would flatten the paper's bars).
+
+    Args:
+        table: :func:`airpose_lib.eval.ablation.ablation_table` (``<metric> [m]``, ``<metric> std [m]``,
+            ``<metric> paper [m]``); a row named ``oracle_label`` is drawn as a dashed floor line
+            on the panels where it has a value, not as bars.
+        reference: Table I of the committed reference (``results/<profile>/table1.csv``) or None.
+        kit_label: legend entry of this run's bars (e.g. ``"kit (cpu, 3 seeds)"``).
+    Returns:
+        the figure; the legend sits above the panels, clear of the bars.
+    """
+    import matplotlib.pyplot as plt
+    from matplotlib.lines import Line2D
+    from matplotlib.patches import Patch
+
+    rows = [m for m in table.index if m != oracle_label]
+    sources = [("kit", kit_label, table)] + ([("reference", "committed reference", reference)]
+                                             if reference is not None else []) + [("paper", "paper", None)]
+    width = 0.8 / len(sources)
+    fig, axes = plt.subplots(1, len(metrics), figsize=(5.2 * len(metrics), 3.9), squeeze=False)
+    handles = [Patch(color=SOURCE_COLORS[key], label=label) for key, label, _ in sources]
+    x = np.arange(len(rows))
+    for ax, metric in zip(axes[0], metrics):
+        values = []
+        for k, (key, _, src) in enumerate(sources):
+            if key == "paper":
+                y, err = table.loc[rows, f"{metric} paper [m]"].to_numpy(float), None
+            else:
+                y = src[f"{metric} [m]"].reindex(rows).to_numpy(float)
+                std = src[f"{metric} std [m]"].reindex(rows).to_numpy(float) if f"{metric} std [m]" in src else None
+                err = None if std is None or np.isnan(std).all() else np.nan_to_num(std)
+            xs = x + (k - (len(sources) - 1) / 2) * width
+            ax.bar(xs, y, width=width * 0.95, color=SOURCE_COLORS[key], yerr=err, capsize=2,
+                   error_kw={"lw": 0.8})
+            tops = y + (err if err is not None else 0.0)  # labels above the error bars
+            for xi, yi, top in zip(xs, y, tops):
+                if np.isfinite(yi):
+                    ax.annotate(f"{yi:.2f}" if yi >= 0.995 else f"{yi:.3f}", (xi, top), xytext=(0, 2),
+                                textcoords="offset points", ha="center", va="bottom", fontsize=6, rotation=90)
+            values.append(y)
+        if oracle_label is not None and oracle_label in table.index and np.isfinite(table.loc[oracle_label, f"{metric} [m]"]):
+            floor = float(table.loc[oracle_label, f"{metric} [m]"])
+            ax.axhline(floor, color=METHOD_COLORS["Ground truth"], ls="--", lw=1.2)
+            values.append(np.array([floor]))
+            if not any(h.get_label().startswith("oracle") for h in handles):
+                handles.append(Line2D([], [], color=METHOD_COLORS["Ground truth"], ls="--",
+                                      label="oracle floor (GT pose, mean body)"))
+        finite = np.concatenate(values)
+        finite = finite[np.isfinite(finite) & (finite > 0)]
+        ax.set_yscale("log")
+        if finite.size:  # head room above the tallest bar for its value label
+            ax.set_ylim(finite.min() / 2.5, finite.max() * 4.0)
+        ax.set_xticks(x, [m.replace(" + ", "\n+ ") for m in rows], fontsize=8)
+        ax.set_ylabel(f"{metric} [m] (log scale)")
+        ax.set_title(metric)
+    fig.legend(handles=handles, loc="upper center", ncol=len(handles), frameon=False, fontsize=8,
+               bbox_to_anchor=(0.5, 1.0))
+    fig.tight_layout(rect=(0, 0, 1, 0.90))
+    return fig
 
 
 def plot_ablation_samples(crops: np.ndarray, joints_crop: Mapping[str, np.ndarray], gt_crop: np.ndarray,
@@ -55,3 +128,20 @@ def plot_ablation_samples(crops: np.ndarray, joints_crop: Mapping[str, np.ndarra
     fig.legend(loc="lower center", ncol=len(joints_crop) + 1, frameon=False, fontsize=8)
     fig.tight_layout(rect=(0, 0.04, 1, 1))
     return fig
+
+
+def plot_ablation_meshes(crops: np.ndarray, vertices: Mapping[str, np.ndarray], faces: np.ndarray,
+                         K_crop: np.ndarray):
+    """Each estimate's body mesh rendered into the crops with the crop's own intrinsics (mesh and
+    image align exactly when the estimate is right), ground truth first.
+
+    Args:
+        crops: ``(n, V, S, S, 3)`` uint8 crops.
+        vertices: method -> ``(n, V, Nv, 3)`` camera-frame vertices.
+        faces: ``(M, 3)`` triangles.
+        K_crop: ``(n, V, 3, 3)`` crop intrinsics.
+    """
+    n, V, S = crops.shape[:3]
+    whole_crop = np.broadcast_to(np.array([[0.0, 0.0], [S - 1.0, S - 1.0]]), (n, V, 2, 2))
+    return plot_mesh_overlays(crops, vertices, faces, K_crop, frame_labels=[f"sample {i + 1}" for i in range(n)],
+                              zoom_points=whole_crop)

@@ -104,3 +104,16 @@ def test_a_finished_run_is_reused_only_with_the_same_config(tmp_path):
     assert _finished_run(tmp_path, "smoke", "airpose", 8) is None  # another seed
     (tmp_path / "result.json").write_text(json.dumps({**result, "step": cfg["steps"] - 1}))
     assert _finished_run(tmp_path, "smoke", "airpose", 7) is None  # unfinished: resume instead
+
+
+def test_paper_gaps_are_ratios_to_the_paper_and_the_oracle():
+    from airpose_lib.eval.ablation import paper_gaps
+
+    t = ablation_table({("airpose", 1): _per_view(0.3, 0.144), ("baseline", 1): _per_view(1.0, 0.091)},
+                       oracle=pd.DataFrame({"mpe_m": [0.2]}))
+    g = paper_gaps(t)
+    assert list(g.index) == ["Baseline", "AirPose"]
+    assert g.loc["AirPose", "MPE kit / paper"] == pytest.approx(2.0)
+    assert g.loc["AirPose", "MPJPE kit / paper"] == pytest.approx(2.0)
+    assert g.loc["AirPose", "MPE kit / oracle"] == pytest.approx(1.5)
+    assert "MPE kit / oracle" not in paper_gaps(ablation_table({("airpose", 1): _per_view(0.3, 0.1)}))

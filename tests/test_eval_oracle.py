@@ -63,10 +63,11 @@ def _arrays(model, s: float, n=3, V=2):
 
     rng = np.random.default_rng(4)
     theta = rng.normal(0, 0.25, size=(n, 21, 3))
-    with torch.no_grad():
-        out = model(betas=torch.zeros(n, 10, dtype=torch.float64),
-                    body_pose=torch.as_tensor(theta).reshape(n, 63),
-                    global_orient=torch.zeros(n, 3, dtype=torch.float64))
+    z = lambda k: torch.zeros(n, k, dtype=torch.float64)  # noqa: E731
+    with torch.no_grad():  # as the data generator poses its subjects
+        out = model(betas=z(10), body_pose=torch.as_tensor(theta).reshape(n, 63), global_orient=z(3), transl=z(3),
+                    jaw_pose=z(3), leye_pose=z(3), reye_pose=z(3), left_hand_pose=z(45), right_hand_pose=z(45),
+                    expression=z(model.num_expression_coeffs))
     J0 = s * out.joints[:, :22].numpy()
     phi = np.stack([[_rotation(rng) for _ in range(V)] for _ in range(n)])
     tau = rng.uniform([-2, -1, 8], [2, 1, 14], size=(n, V, 3))

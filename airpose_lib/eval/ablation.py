@@ -16,7 +16,7 @@ import pandas as pd
 from .oracle import ORACLE_LABEL
 
 __all__ = ["VARIANT_LABELS", "PAPER_TABLE_I", "PER_SEED_METRICS", "TABLE_COLUMNS", "per_seed_table",
-           "ablation_table", "table_to_markdown", "table_to_latex"]
+           "ablation_table", "paper_gaps", "table_to_markdown", "table_to_latex"]
 
 #: Row names of Table I for the kit's variant names.
 VARIANT_LABELS = {
@@ -136,6 +136,21 @@ def ablation_table(per_view: Mapping[tuple[str, int], pd.DataFrame],
         out = pd.concat([out, row.reindex(columns=out.columns)])
         out["seeds"] = out["seeds"].astype("Int64")
     out.index.name = "method"
+    return out
+
+
+def paper_gaps(table: pd.DataFrame) -> pd.DataFrame:
+    """How far each variant is from the paper and from the oracle floor, as ratios.
+
+    Returns:
+        one row per variant of :func:`ablation_table`: ``MPE kit / paper``, ``MPJPE kit / paper``
+        and, with an oracle row, ``MPE kit / oracle`` (how many times the stature floor).
+    """
+    rows = [m for m in table.index if m != ORACLE_LABEL]
+    out = pd.DataFrame({"MPE kit / paper": table.loc[rows, "MPE [m]"] / table.loc[rows, "MPE paper [m]"],
+                        "MPJPE kit / paper": table.loc[rows, "MPJPE [m]"] / table.loc[rows, "MPJPE paper [m]"]})
+    if ORACLE_LABEL in table.index:
+        out["MPE kit / oracle"] = table.loc[rows, "MPE [m]"] / table.loc[ORACLE_LABEL, "MPE [m]"]
     return out
 
 

@@ -96,7 +96,7 @@ def mean_body_joints(theta: np.ndarray, body_model=None, body_source: str = "ope
 
 
 def oracle_per_view(arrays: Mapping[str, np.ndarray], body_model=None, body_source: str = "open",
-                    gauss_newton_steps: int = 5) -> pd.DataFrame:
+                    gauss_newton_steps: int = 5, max_samples: int | None = None) -> pd.DataFrame:
     """Per-view MPE of the mean-body oracle on a still-frame split.
 
     Args:
@@ -104,10 +104,12 @@ def oracle_per_view(arrays: Mapping[str, np.ndarray], body_model=None, body_sour
             ``tau (N, V, 3)``, ``j2d (N, V, 22, 2)`` (full-frame pixels), ``K (N, V, 3, 3)``;
             ``index (N,)`` sample ids if present.
         body_model, body_source: the body posed with beta = 0 (:func:`mean_body_joints`).
+        max_samples: only the first this many samples (the networks' ``eval_max_samples``).
     Returns:
         columns ``method, sample, view, mpe_m, err_x_m, err_y_m, err_z_m, reproj_px`` (the RMS pixel
         residual of the fit), one row per (sample, view), like :func:`airpose_lib.eval.per_view_table`.
     """
+    arrays = {k: np.asarray(v)[:max_samples] for k, v in arrays.items()}
     phi = np.asarray(arrays["phi"], dtype=np.float64)
     N, V = phi.shape[:2]
     X0 = mean_body_joints(arrays["theta"], body_model, body_source)  # (N, 22, 3)

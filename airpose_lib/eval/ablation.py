@@ -8,7 +8,7 @@ MPE is read against. Whether the orderings are significant is :mod:`airpose_lib.
 """
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Mapping
 
 import numpy as np
 import pandas as pd

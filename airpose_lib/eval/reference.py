@@ -225,9 +225,12 @@ def compare_to_reference(new_per_seed: pd.DataFrame, reference: str | Path | pd.
             new_mean, ref_mean = float(n[m].mean()), float(r[m].mean())
             if not (np.isfinite(new_mean) and np.isfinite(ref_mean)):
                 continue
-            std = float(r[m].std(ddof=1)) if len(r) > 1 else np.nan
-            allowed, basis = ((std, f"reference std over {len(r)} seeds") if len(r) > 1
-                              else (single_seed_rtol * abs(ref_mean), f"{single_seed_rtol:.0%} of the reference (one seed)"))
+            if len(r) > 1:
+                std = float(r[m].std(ddof=1))
+                allowed, basis = std, f"reference std over {len(r)} seeds"
+            else:
+                std = np.nan
+                allowed, basis = single_seed_rtol * abs(ref_mean), f"{single_seed_rtol:.0%} of the reference (one seed)"
             diff = new_mean - ref_mean
             rows.append({"variant": variant, "metric": m, "new": new_mean, "reference": ref_mean,
                          "reference_std": std, "allowed": allowed, "basis": basis, "difference": diff,

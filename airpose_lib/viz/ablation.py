@@ -62,8 +62,8 @@ def plot_table1(table: pd.DataFrame, reference: pd.DataFrame | None = None, kit_
                     ax.annotate(f"{yi:.2f}" if yi >= 0.995 else f"{yi:.3f}", (xi, top), xytext=(0, 2),
                                 textcoords="offset points", ha="center", va="bottom", fontsize=6, rotation=90)
             values.append(y)
-        if oracle_label is not None and oracle_label in table.index and np.isfinite(table.loc[oracle_label, f"{metric} [m]"]):
-            floor = float(table.loc[oracle_label, f"{metric} [m]"])
+        floor = table[f"{metric} [m]"].get(oracle_label, np.nan) if oracle_label is not None else np.nan
+        if np.isfinite(floor):
             ax.axhline(floor, color=METHOD_COLORS["Ground truth"], ls="--", lw=1.2)
             values.append(np.array([floor]))
             if not any(h.get_label().startswith("oracle") for h in handles):

@@ -119,6 +119,8 @@ def test_reproduce_report_compares_and_writes_only_when_asked(tmp_path):
     assert "12 differ" in msg and "airpose" in msg and "mpe_m" in msg
     assert (root / "smoke" / "per_seed.csv").read_bytes() == before
     assert reference_report(tmp_path / "no-bundle", "smoke", root=root) == ""
+    other = _bundle(tmp_path, _runs(seeds=(1, 2)), name="two-seeds")
+    assert "differ in seeds / test images" in reference_report(other, "smoke", root=root)
 
 
 def test_training_wall_time_is_read_from_result_json_when_present(tmp_path):

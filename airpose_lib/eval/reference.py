@@ -263,6 +263,11 @@ def install_reference(bundle: str | Path, profile: str, command: str | None = No
     return dst
 
 
+def _setup(per_seed: pd.DataFrame) -> tuple[list, list]:
+    """The seeds and the test-image counts of a per-seed table (what makes two runs comparable)."""
+    return sorted(per_seed["seed"].unique().tolist()), sorted(per_seed["images"].unique().tolist())
+
+
 def reference_report(bundle: str | Path, profile: str, write: bool = False, command: str | None = None,
                      root: str | Path | None = None) -> str:
     """What ``airpose reproduce`` prints after notebook 02: the new run against ``results/<profile>/``.
@@ -280,10 +285,14 @@ def reference_report(bundle: str | Path, profile: str, write: bool = False, comm
         return f"reference: wrote {install_reference(bundle, profile, command, root)}"
     if not (ref / "per_seed.csv").is_file():
         return f"reference: none for profile {profile!r} ({ref}); `--write-reference` records this run as one"
-    cmp = compare_to_reference(pd.read_csv(bundle / "per_seed.csv"), ref)
+    new, old = pd.read_csv(bundle / "per_seed.csv"), pd.read_csv(ref / "per_seed.csv")
+    cmp = compare_to_reference(new, old)
     moved = cmp[cmp["differs"]]
     head = (f"reference: {len(cmp)} variant means compared with {ref}; "
             f"{len(moved)} differ by more than the reference's seed spread")
+    if _setup(new) != _setup(old):
+        head += (f"\nreference: note the runs differ in seeds / test images per run: reference {_setup(old)}, "
+                 f"this run {_setup(new)}")
     if moved.empty:
         return head
     return head + "\n" + moved.drop(columns=["reference_std"]).to_string(index=False, float_format="%.4f")

@@ -775,7 +775,24 @@ def _cmd_reproduce(args: argparse.Namespace) -> int:
         print(report.figures_dir)
     else:
         print(f"figures collected in {report.figures_dir}")
+    _check_reference(report, args.write_reference)
     return 0
+
+
+def _check_reference(report, write: bool) -> None:
+    """After notebook 02: its Table I bundle against ``results/<profile>/``, or installed there
+    with ``--write-reference``. Here, not in the runner: the runner imports nothing of the kit."""
+    from airpose_lib.eval.reference import reference_report
+
+    nb = next((r for r in report.results if r.name == "02_ablation_table" and r.status == "ok"), None)
+    if nb is None:
+        if write:
+            raise CLIError("--write-reference: notebook 02_ablation_table did not run; add --only 02_ablation_table")
+        return
+    msg = reference_report(Path(nb.parameters["output_dir"]) / "results", report.profile, write=write,
+                           command=" ".join(["airpose", *sys.argv[1:]]))
+    if msg:
+        print(msg)
 
 
 def _add_reproduce(sub) -> None:
@@ -807,6 +824,9 @@ def _add_reproduce(sub) -> None:
                      help="list the notebooks and the profile's parameters, run nothing")
     rep.add_argument("--quiet", action="store_true",
                      help="print only failures and where the figures are (no per-notebook lines or table)")
+    rep.add_argument("--write-reference", action="store_true",
+                     help="store notebook 02's Table I files as the reference in results/<profile>/ "
+                          "(default: only compare with it)")
     rep.set_defaults(func=_cmd_reproduce)
 
 

@@ -6,10 +6,11 @@ import pytest
 from airpose_lib.eval.ablation import (
     PAPER_TABLE_I,
     ablation_table,
-    ordering_checks,
+    per_seed_table,
     table_to_latex,
     table_to_markdown,
 )
+from airpose_lib.eval.oracle import ORACLE_LABEL
 
 
 def _per_view(mpe, mpjpe, n=4):
@@ -34,15 +35,47 @@ def test_unknown_variant_is_an_error():
         ablation_table({("hmr", 1): _per_view(1, 1)})
 
 
-def test_ordering_checks_follow_the_numbers():
-    paper_like = ablation_table({(v, 0): _per_view(m, j) for v, m, j in (
-        ("baseline", 0.50, 0.091), ("multiview", 0.46, 0.084), ("fullcam", 0.22, 0.077), ("airpose", 0.15, 0.072))})
-    assert ordering_checks(paper_like)["holds"].all()
-    reversed_ = ablation_table({(v, 0): _per_view(m, j) for v, m, j in (
-        ("baseline", 0.15, 0.07), ("multiview", 0.16, 0.08), ("fullcam", 0.30, 0.09), ("airpose", 0.50, 0.10))})
-    checks = ordering_checks(reversed_)
-    assert not checks.loc["MPE: Baseline > Fullcam > AirPose", "holds"]
-    assert not checks.loc["MPJPE: AirPose < Baseline", "holds"]
+def _full(mpe, mpjpe, rot, n=4):
+    t = _per_view(mpe, mpjpe, n)
+    t["sample"], t["view"] = np.arange(n) // 2, np.arange(n) % 2
+    t["mpjpe_shape_m"] = mpjpe + 0.01
+    t["root_rot_deg"] = [rot, rot, rot, 90.0][:n]  # the median ignores the one outlier
+    return t
+
+
+def test_extra_columns_oracle_row_and_tight_boxes():
+    runs = {("baseline", 1): _full(0.6, 0.10, 10.0), ("baseline", 2): _full(0.4, 0.08, 20.0),
+            ("airpose", 1): _full(0.2, 0.07, 5.0)}
+    tight = {k: _per_view(2 * t["mpe_m"].iloc[0], 3 * t["mpjpe_m"].iloc[0]) for k, t in runs.items()}
+    oracle = pd.DataFrame({"mpe_m": [0.1, 0.3]})
+    t = ablation_table(runs, oracle=oracle, per_view_tight=tight)
+    assert list(t.index) == ["Baseline", "AirPose", ORACLE_LABEL]
+    assert list(t.columns[:6]) == ["MPE [m]", "MPE std [m]", "MPE paper [m]", "MPJPE [m]", "MPJPE std [m]",
+                                   "MPJPE paper [m]"]
+    assert t.loc["Baseline", "MPJPE shape-aware [m]"] == pytest.approx(0.10)
+    assert t.loc["Baseline", "root orient. median [deg]"] == pytest.approx(15.0)
+    assert t.loc["Baseline", "MPE tight box [m]"] == pytest.approx(1.0)
+    assert t.loc["AirPose", "MPJPE tight box [m]"] == pytest.approx(0.21)
+    assert t.loc[ORACLE_LABEL, "MPE [m]"] == pytest.approx(0.2)
+    assert t.loc[ORACLE_LABEL].drop("MPE [m]").isna().all()  # MPE only
+    md = table_to_markdown(t)
+    assert f"| {ORACLE_LABEL} | 0.200 | - | - | - |" in md and "| 2 |" in md
+
+
+def test_optional_columns_are_left_out_when_a_run_lacks_them():
+    runs = {("baseline", 1): _full(0.6, 0.10, 10.0), ("fullcam", 1): _per_view(0.3, 0.09)}
+    t = ablation_table(runs, per_view_tight={("baseline", 1): _per_view(1.0, 0.2)})
+    assert "MPJPE shape-aware [m]" not in t and "MPE tight box [m]" not in t and "PA-MPJPE [m]" in t
+
+
+def test_per_seed_rows_in_table_order_with_wall_times():
+    runs = {("airpose", 2): _full(0.2, 0.07, 5.0), ("baseline", 2): _full(0.4, 0.08, 20.0),
+            ("baseline", 1): _full(0.6, 0.10, 10.0)}
+    p = per_seed_table(runs, wall_s={("baseline", 1): 12.5, ("airpose", 2): None})
+    assert list(zip(p["variant"], p["seed"])) == [("baseline", 1), ("baseline", 2), ("airpose", 2)]
+    assert p.loc[0, "mpe_m"] == pytest.approx(0.6) and p.loc[0, "root_rot_median_deg"] == pytest.approx(10.0)
+    assert p.loc[0, "wall_s"] == 12.5 and np.isnan(p.loc[1, "wall_s"]) and np.isnan(p.loc[2, "wall_s"])
+    assert (p["images"] == 4).all() and list(p["method"]) == ["Baseline", "Baseline", "AirPose"]
 
 
 def test_markdown_and_latex_render_every_row():
@@ -71,3 +104,16 @@ def test_a_finished_run_is_reused_only_with_the_same_config(tmp_path):
     assert _finished_run(tmp_path, "smoke", "airpose", 8) is None  # another seed
     (tmp_path / "result.json").write_text(json.dumps({**result, "step": cfg["steps"] - 1}))
     assert _finished_run(tmp_path, "smoke", "airpose", 7) is None  # unfinished: resume instead
+
+
+def test_paper_gaps_are_ratios_to_the_paper_and_the_oracle():
+    from airpose_lib.eval.ablation import paper_gaps
+
+    t = ablation_table({("airpose", 1): _per_view(0.3, 0.144), ("baseline", 1): _per_view(1.0, 0.091)},
+                       oracle=pd.DataFrame({"mpe_m": [0.2]}))
+    g = paper_gaps(t)
+    assert list(g.index) == ["Baseline", "AirPose"]
+    assert g.loc["AirPose", "MPE kit / paper"] == pytest.approx(2.0)
+    assert g.loc["AirPose", "MPJPE kit / paper"] == pytest.approx(2.0)
+    assert g.loc["AirPose", "MPE kit / oracle"] == pytest.approx(1.5)
+    assert "MPE kit / oracle" not in paper_gaps(ablation_table({("airpose", 1): _per_view(0.3, 0.1)}))

@@ -1,18 +1,22 @@
 """Table I of the paper (the ablation on synthetic data) and the kit's own version of it.
 
-``PAPER_TABLE_I`` holds the paper's numbers; :func:`ablation_table` aggregates the kit's per-view
-tables over seeds (mean and standard deviation) and puts the paper's numbers in adjacent columns,
-so every reproduction shows both side by side.
+``PAPER_TABLE_I`` holds the paper's numbers; :func:`per_seed_table` reduces each run's per-view
+table to its metric means, and :func:`ablation_table` aggregates those over seeds (mean and
+standard deviation), puts the paper's numbers in adjacent columns, so every reproduction shows
+both side by side, and adds the mean-body oracle row (:mod:`airpose_lib.eval.oracle`), the floor
+MPE is read against. Whether the orderings are significant is :mod:`airpose_lib.eval.significance`.
 """
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Mapping
 
 import numpy as np
 import pandas as pd
 
-__all__ = ["VARIANT_LABELS", "PAPER_TABLE_I", "ablation_table", "ordering_checks", "table_to_markdown",
-           "table_to_latex"]
+from .oracle import ORACLE_LABEL
+
+__all__ = ["VARIANT_LABELS", "PAPER_TABLE_I", "PER_SEED_METRICS", "TABLE_COLUMNS", "per_seed_table",
+           "ablation_table", "paper_gaps", "table_to_markdown", "table_to_latex"]
 
 #: Row names of Table I for the kit's variant names.
 VARIANT_LABELS = {
@@ -29,72 +33,130 @@ PAPER_TABLE_I = pd.DataFrame(
 )
 
 
-def ablation_table(per_view: Mapping[tuple[str, int], pd.DataFrame]) -> pd.DataFrame:
-    """Kit numbers (mean and std over seeds) next to the paper's.
+#: Per-seed metric -> (per-view column, how the images of one run are reduced).
+PER_SEED_METRICS = {
+    "mpe_m": ("mpe_m", "mean"),
+    "mpjpe_m": ("mpjpe_m", "mean"),
+    "mpjpe_shape_m": ("mpjpe_shape_m", "mean"),
+    "pa_mpjpe_m": ("pa_mpjpe_m", "mean"),
+    "root_rot_median_deg": ("root_rot_deg", "median"),
+}
+#: Per-seed metric -> Table I column (``ablation_table``).
+TABLE_COLUMNS = {
+    "mpe_m": "MPE [m]",
+    "mpjpe_m": "MPJPE [m]",
+    "mpjpe_shape_m": "MPJPE shape-aware [m]",
+    "pa_mpjpe_m": "PA-MPJPE [m]",
+    "root_rot_median_deg": "root orient. median [deg]",
+    "mpe_tight_m": "MPE tight box [m]",
+    "mpjpe_tight_m": "MPJPE tight box [m]",
+}
+
+
+def per_seed_table(per_view: Mapping[tuple[str, int], pd.DataFrame],
+                   per_view_tight: Mapping[tuple[str, int], pd.DataFrame] | None = None,
+                   wall_s: Mapping[tuple[str, int], float | None] | None = None) -> pd.DataFrame:
+    """One row per (variant, seed): the run's metric means over its test images.
+
+    Args:
+        per_view: (variant, seed) -> per-view table (:func:`airpose_lib.eval.tables.per_view_table`
+            columns; ``mpjpe_shape_m`` and ``root_rot_deg`` are optional).
+        per_view_tight: the same on tight-box test crops (optional, per run).
+        wall_s: (variant, seed) -> training wall time in seconds (optional, None when unknown).
+    Returns:
+        columns ``variant, method, seed`` and those of :data:`PER_SEED_METRICS` present in every
+        table (root orientation: the median over images), ``mpe_tight_m``, ``mpjpe_tight_m`` when
+        every run has a tight-box table, ``images``, and ``wall_s`` when given; Table I order.
+    """
+    unknown = {v for v, _ in per_view} - set(VARIANT_LABELS)
+    if unknown:
+        raise ValueError(f"unknown variants {sorted(unknown)}; expected {list(VARIANT_LABELS)}")
+    if not per_view:
+        raise ValueError("no runs to tabulate")
+    present = [m for m, (col, _) in PER_SEED_METRICS.items() if all(col in t for t in per_view.values())]
+    tight = per_view_tight is not None and all(per_view_tight.get(k) is not None for k in per_view)
+    rows = []
+    for (variant, seed), t in per_view.items():
+        row = {"variant": variant, "method": VARIANT_LABELS[variant], "seed": seed}
+        for m in present:
+            col, how = PER_SEED_METRICS[m]
+            row[m] = float(getattr(t[col], how)())
+        if tight:
+            tt = per_view_tight[variant, seed]
+            row["mpe_tight_m"], row["mpjpe_tight_m"] = float(tt["mpe_m"].mean()), float(tt["mpjpe_m"].mean())
+        row["images"] = len(t)
+        if wall_s is not None:
+            w = wall_s.get((variant, seed))
+            row["wall_s"] = float(w) if w is not None else float("nan")
+        rows.append(row)
+    out = pd.DataFrame(rows)
+    order = {v: i for i, v in enumerate(VARIANT_LABELS)}
+    return out.sort_values(["variant", "seed"], key=lambda c: c.map(order) if c.name == "variant" else c,
+                           ignore_index=True)
+
+
+def ablation_table(per_view: Mapping[tuple[str, int], pd.DataFrame],
+                   oracle: pd.DataFrame | None = None,
+                   per_view_tight: Mapping[tuple[str, int], pd.DataFrame] | None = None) -> pd.DataFrame:
+    """Kit numbers (mean and std over seeds) next to the paper's, and the oracle floor.
 
     Args:
         per_view: (variant, seed) -> the per-view table of that run
             (:func:`airpose_lib.eval.tables.per_view_table`: columns ``mpe_m``, ``mpjpe_m``,
-            ``pa_mpjpe_m``, one row per test image and view).
+            ``pa_mpjpe_m``, optionally ``mpjpe_shape_m`` and ``root_rot_deg``; one row per test
+            image and view).
+        oracle: per-view table of :func:`airpose_lib.eval.oracle.oracle_per_view` (``mpe_m``):
+            adds the oracle row, MPE only (its other columns are NaN, shown as ``-``).
+        per_view_tight: the same runs evaluated on tight-box test crops: adds the tight-box
+            MPE / MPJPE columns (only when every run has one).
     Returns:
         one row per variant (Table I order, paper labels) with columns ``MPE [m]``,
         ``MPE std [m]``, ``MPE paper [m]``, ``MPJPE [m]``, ``MPJPE std [m]``, ``MPJPE paper [m]``,
-        ``PA-MPJPE [m]``, ``seeds``. The std is over the seeds' means (NaN for one seed).
+        then the extra columns present (``MPJPE shape-aware [m]``, ``PA-MPJPE [m]``,
+        ``root orient. median [deg]``, ``MPE tight box [m]``, ``MPJPE tight box [m]``; means over
+        seeds) and ``seeds``. The std is over the seeds' means (NaN for one seed).
     """
-    rows = []
-    for (variant, seed), table in per_view.items():
-        rows.append({"variant": variant, "seed": seed, "mpe": table["mpe_m"].mean(),
-                     "mpjpe": table["mpjpe_m"].mean(), "pa_mpjpe": table["pa_mpjpe_m"].mean()})
-    runs = pd.DataFrame(rows)
-    unknown = set(runs["variant"]) - set(VARIANT_LABELS)
-    if unknown:
-        raise ValueError(f"unknown variants {sorted(unknown)}; expected {list(VARIANT_LABELS)}")
-    g = runs.groupby("variant")
+    runs = per_seed_table(per_view, per_view_tight)
+    g = runs.groupby("method", sort=False)
     out = pd.DataFrame({
-        "MPE [m]": g["mpe"].mean(),
-        "MPE std [m]": g["mpe"].std(ddof=1),
-        "MPJPE [m]": g["mpjpe"].mean(),
-        "MPJPE std [m]": g["mpjpe"].std(ddof=1),
-        "PA-MPJPE [m]": g["pa_mpjpe"].mean(),
-        "seeds": g["seed"].count(),
+        "MPE [m]": g["mpe_m"].mean(),
+        "MPE std [m]": g["mpe_m"].std(ddof=1),
+        "MPE paper [m]": PAPER_TABLE_I["MPE [m]"],
+        "MPJPE [m]": g["mpjpe_m"].mean(),
+        "MPJPE std [m]": g["mpjpe_m"].std(ddof=1),
+        "MPJPE paper [m]": PAPER_TABLE_I["MPJPE [m]"],
     })
-    out.index = [VARIANT_LABELS[v] for v in out.index]
-    order = [label for label in VARIANT_LABELS.values() if label in out.index]
-    out = out.loc[order]
-    out.insert(2, "MPE paper [m]", PAPER_TABLE_I.loc[order, "MPE [m]"].to_numpy())
-    out.insert(5, "MPJPE paper [m]", PAPER_TABLE_I.loc[order, "MPJPE [m]"].to_numpy())
+    for m, column in TABLE_COLUMNS.items():
+        if m not in ("mpe_m", "mpjpe_m") and m in runs:
+            out[column] = g[m].mean()
+    out["seeds"] = g["seed"].count().astype("Int64")
+    out = out.loc[[m for m in VARIANT_LABELS.values() if m in g.groups]]  # Table I order
+    if oracle is not None:
+        row = pd.DataFrame({"MPE [m]": [float(oracle["mpe_m"].mean())]}, index=[ORACLE_LABEL])
+        out = pd.concat([out, row.reindex(columns=out.columns)])
+        out["seeds"] = out["seeds"].astype("Int64")
     out.index.name = "method"
     return out
 
 
-def ordering_checks(table: pd.DataFrame) -> pd.DataFrame:
-    """The paper's qualitative claims about Table I, checked on an :func:`ablation_table`.
+def paper_gaps(table: pd.DataFrame) -> pd.DataFrame:
+    """How far each variant is from the paper and from the oracle floor, as ratios.
 
     Returns:
-        one row per claim: ``claim``, ``holds`` (bool, or None when a variant is missing) and the
-        kit's numbers it rests on.
+        one row per variant of :func:`ablation_table`: ``MPE kit / paper``, ``MPJPE kit / paper``
+        and, with an oracle row, ``MPE kit / oracle`` (how many times the stature floor).
     """
-    B, M, F, A = (VARIANT_LABELS[v] for v in ("baseline", "multiview", "fullcam", "airpose"))
-    mpe, mpjpe = table["MPE [m]"], table["MPJPE [m]"]
-
-    def check(claim: str, names: Sequence[str], test) -> dict:
-        if not all(n in table.index for n in names):
-            return {"claim": claim, "holds": None, "kit values": "variant missing"}
-        return {"claim": claim, "holds": bool(test()),
-                "kit values": ", ".join(f"{n}: {mpe[n]:.3f} / {mpjpe[n]:.3f}" for n in names)}
-
-    rows = [
-        check("MPE: Baseline > Fullcam > AirPose", (B, F, A), lambda: mpe[B] > mpe[F] > mpe[A]),
-        check("MPE: Multi-view within 25 % of Baseline (no P, no full camera)", (B, M),
-              lambda: abs(mpe[M] - mpe[B]) <= 0.25 * mpe[B]),
-        check("MPJPE decreases Baseline > Multi-view > Fullcam > AirPose", (B, M, F, A),
-              lambda: mpjpe[B] > mpjpe[M] > mpjpe[F] > mpjpe[A]),
-        check("MPJPE: AirPose < Baseline", (B, A), lambda: mpjpe[A] < mpjpe[B]),
-    ]
-    return pd.DataFrame(rows).set_index("claim")
+    rows = [m for m in table.index if m != ORACLE_LABEL]
+    out = pd.DataFrame({"MPE kit / paper": table.loc[rows, "MPE [m]"] / table.loc[rows, "MPE paper [m]"],
+                        "MPJPE kit / paper": table.loc[rows, "MPJPE [m]"] / table.loc[rows, "MPJPE paper [m]"]})
+    if ORACLE_LABEL in table.index:
+        out["MPE kit / oracle"] = table.loc[rows, "MPE [m]"] / table.loc[ORACLE_LABEL, "MPE [m]"]
+    return out
 
 
 def _fmt(x, digits: int) -> str:
+    if x is None or x is pd.NA:
+        return "-"
     if isinstance(x, (float, np.floating)):
         return "-" if np.isnan(x) else f"{x:.{digits}f}"
     return str(x)

@@ -1,68 +1,88 @@
-"""Figures of the ablation (Table I): the table as bars next to the paper, and each variant's
-estimate on a few test samples."""
+"""Figures of the ablation (notebook 02): Table I as bars next to the reference and the paper, and
+each variant's estimate on a few test samples (skeletons, positions, meshes)."""
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 
 import numpy as np
+import pandas as pd
 
 from airpose_lib.body.joint_sets import SMPLX_PARENTS
 
-from .style import PAPER_COLOR, VIEW_COLORS, method_color
+from .style import METHOD_COLORS, VIEW_COLORS, method_color
+from .trajectories import plot_mesh_overlays
 
-__all__ = ["plot_table1", "plot_ablation_samples"]
+__all__ = ["SOURCE_COLORS", "plot_table1", "plot_ablation_samples", "plot_ablation_meshes"]
+
+#: Bar colours of :func:`plot_table1`, one per source of numbers (the methods are on the x axis).
+SOURCE_COLORS = {"kit": "#0072B2", "reference": "#56B4E9", "paper": "#999999"}
+
 
 #: Markers of the per-view position estimates (UAV1, UAV2, ...) in the top views.
 VIEW_MARKERS = "o^sD"
 
-
-def plot_table1(table, metrics: Sequence[str] = ("MPE", "MPJPE"), profile: str | None = None,
-                title: str | None = None):
-    """Table I as bars: the kit's value per variant (its colour, +- std over seeds) beside the
-    paper's (grey, hatched), one panel per metric, the value written over every bar.
+def plot_table1(table: pd.DataFrame, reference: pd.DataFrame | None = None, kit_label: str = "kit",
+                metrics: tuple[str, ...] = ("MPE", "MPJPE"), oracle_label: str | None = None):
+    """Table I as grouped bars: this run (seed std as error bars), the committed reference and
+    the paper, one panel per metric on a log axis (the kit's and the paper's MPE can differ by
+    more than 10x; a linear axis would flatten the paper's bars).
 
     Args:
-        table: one row per variant (index: method names) with columns ``"<metric> [m]"``,
-            optionally ``"<metric> std [m]"`` and ``"<metric> paper [m]"``.
-        metrics: the panels.
-        profile: named in the legend ("kit (smoke)").
-        title: figure title (default: "Table I: kit next to the paper").
-
-    A panel whose values span more than a factor 20 (a short training's errors next to the
-    paper's) uses a log axis, so the paper's bars stay visible.
+        table: :func:`airpose_lib.eval.ablation.ablation_table` (``<metric> [m]``, ``<metric> std [m]``,
+            ``<metric> paper [m]``); a row named ``oracle_label`` is drawn as a dashed floor line
+            on the panels where it has a value, not as bars.
+        reference: Table I of the committed reference (``results/<profile>/table1.csv``) or None.
+        kit_label: legend entry of this run's bars (e.g. ``"kit (cpu, 3 seeds)"``).
+    Returns:
+        the figure; the legend sits above the panels, clear of the bars.
     """
     import matplotlib.pyplot as plt
+    from matplotlib.lines import Line2D
     from matplotlib.patches import Patch
 
-    fig, axes = plt.subplots(1, len(metrics), figsize=(4.6 * len(metrics), 3.6), squeeze=False,
-                             layout="constrained")
-    x = np.arange(len(table))
+    rows = [m for m in table.index if m != oracle_label]
+    sources = [("kit", kit_label, table)] + ([("reference", "committed reference", reference)]
+                                             if reference is not None else []) + [("paper", "paper", None)]
+    width = 0.8 / len(sources)
+    fig, axes = plt.subplots(1, len(metrics), figsize=(5.2 * len(metrics), 3.9), squeeze=False)
+    handles = [Patch(color=SOURCE_COLORS[key], label=label) for key, label, _ in sources]
+    x = np.arange(len(rows))
     for ax, metric in zip(axes[0], metrics):
-        kit = table[f"{metric} [m]"].to_numpy(float)
-        std = table[f"{metric} std [m]"].fillna(0).to_numpy(float) if f"{metric} std [m]" in table else None
-        paper_col = f"{metric} paper [m]"
-        paper = table[paper_col].to_numpy(float) if paper_col in table else np.full(len(table), np.nan)
-        ax.bar(x - 0.2, kit, width=0.4, yerr=std, color=[method_color(m) for m in table.index],
-               edgecolor="black", linewidth=0.5, capsize=2)
-        ax.bar(x + 0.2, paper, width=0.4, color=PAPER_COLOR, hatch="///", edgecolor="0.35", linewidth=0.5)
-        values = np.concatenate([kit, paper])
-        values = values[np.isfinite(values) & (values > 0)]
-        if len(values) and values.max() / values.min() > 20:
-            ax.set_yscale("log")
-        for xi, v in zip(np.concatenate([x - 0.2, x + 0.2]), np.concatenate([kit, paper])):
-            if np.isfinite(v):
-                ax.annotate(f"{v:.3g}", (xi, v), xytext=(0, 2), textcoords="offset points", ha="center",
-                            va="bottom", fontsize=6.5)
-        ax.set_xticks(x, [m.replace("+", "\n+") for m in table.index], fontsize=7.5)
-        ax.set_ylabel(f"{metric} [m]")
+        values = []
+        for k, (key, _, src) in enumerate(sources):
+            if key == "paper":
+                y, err = table.loc[rows, f"{metric} paper [m]"].to_numpy(float), None
+            else:
+                y = src[f"{metric} [m]"].reindex(rows).to_numpy(float)
+                std = src[f"{metric} std [m]"].reindex(rows).to_numpy(float) if f"{metric} std [m]" in src else None
+                err = None if std is None or np.isnan(std).all() else np.nan_to_num(std)
+            xs = x + (k - (len(sources) - 1) / 2) * width
+            ax.bar(xs, y, width=width * 0.95, color=SOURCE_COLORS[key], yerr=err, capsize=2,
+                   error_kw={"lw": 0.8})
+            tops = y + (err if err is not None else 0.0)  # labels above the error bars
+            for xi, yi, top in zip(xs, y, tops):
+                if np.isfinite(yi):
+                    ax.annotate(f"{yi:.2f}" if yi >= 0.995 else f"{yi:.3f}", (xi, top), xytext=(0, 2),
+                                textcoords="offset points", ha="center", va="bottom", fontsize=6, rotation=90)
+            values.append(y)
+        floor = table[f"{metric} [m]"].get(oracle_label, np.nan) if oracle_label is not None else np.nan
+        if np.isfinite(floor):
+            ax.axhline(floor, color=METHOD_COLORS["Ground truth"], ls="--", lw=1.2)
+            values.append(np.array([floor]))
+            if not any(h.get_label().startswith("oracle") for h in handles):
+                handles.append(Line2D([], [], color=METHOD_COLORS["Ground truth"], ls="--",
+                                      label="oracle floor (GT pose, mean body)"))
+        finite = np.concatenate(values)
+        finite = finite[np.isfinite(finite) & (finite > 0)]
+        ax.set_yscale("log")
+        if finite.size:  # head room above the tallest bar for its value label
+            ax.set_ylim(finite.min() / 2.5, finite.max() * 4.0)
+        ax.set_xticks(x, [m.replace(" + ", "\n+ ") for m in rows], fontsize=8)
+        ax.set_ylabel(f"{metric} [m] (log scale)")
         ax.set_title(metric)
-        ax.margins(y=0.15)
-        ax.grid(axis="x", visible=False)
-    kit_label = f"kit, {profile} profile (colour = variant)" if profile else "kit (colour = variant)"
-    handles = [Patch(facecolor="white", edgecolor="black", label=kit_label),
-               Patch(facecolor=PAPER_COLOR, hatch="///", edgecolor="0.35", label="paper (RA-L 2022)")]
-    fig.suptitle(title or "Table I: kit next to the paper")
-    fig.legend(handles=handles, loc="outside lower center", ncol=2, frameon=False)
+    fig.legend(handles=handles, loc="upper center", ncol=len(handles), frameon=False, fontsize=8,
+               bbox_to_anchor=(0.5, 1.0))
+    fig.tight_layout(rect=(0, 0, 1, 0.90))
     return fig
 
 
@@ -124,3 +144,20 @@ def plot_ablation_samples(crops: np.ndarray, joints_crop: Mapping[str, np.ndarra
         fig.suptitle(title)
     fig.legend(handles=handles, loc="outside lower center", ncol=min(len(handles), 4), frameon=False)
     return fig
+
+
+def plot_ablation_meshes(crops: np.ndarray, vertices: Mapping[str, np.ndarray], faces: np.ndarray,
+                         K_crop: np.ndarray):
+    """Each estimate's body mesh rendered into the crops with the crop's own intrinsics (mesh and
+    image align exactly when the estimate is right), ground truth first.
+
+    Args:
+        crops: ``(n, V, S, S, 3)`` uint8 crops.
+        vertices: method -> ``(n, V, Nv, 3)`` camera-frame vertices.
+        faces: ``(M, 3)`` triangles.
+        K_crop: ``(n, V, 3, 3)`` crop intrinsics.
+    """
+    n, V, S = crops.shape[:3]
+    whole_crop = np.broadcast_to(np.array([[0.0, 0.0], [S - 1.0, S - 1.0]]), (n, V, 2, 2))
+    return plot_mesh_overlays(crops, vertices, faces, K_crop, frame_labels=[f"sample {i + 1}" for i in range(n)],
+                              zoom_points=whole_crop)

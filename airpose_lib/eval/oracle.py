@@ -1,0 +1,128 @@
+"""The physical floor of MPE on the kit's data: a perfect monocular estimate that cannot read stature.
+
+A single image fixes a person's position only up to the person's size: a body k times taller
+at k times the distance projects to the same pixels. The "oracle" of Table I knows everything a
+network could read from one view exactly -- the ground-truth root orientation phi and body pose
+theta, and the ground-truth 2D joints -- but not the shape, so it poses the *mean* body
+(neutral model, beta = 0) and solves the translation tau that reprojects its 22 body joints onto
+the ground-truth 2D joints. Its MPE against the ground-truth tau is what remains of the stature
+(and gender) spread of the test subjects: no monocular network can beat it on average without
+reading body size from the pixels (issue 11, point 8).
+
+tau is solved in two steps per view: the algebraic (DLT-style) least-squares solution, linear in
+tau, then a few Gauss-Newton steps on the pixel reprojection error.
+"""
+from __future__ import annotations
+
+from collections.abc import Mapping
+
+import numpy as np
+import pandas as pd
+import torch
+
+from airpose_lib.body import load_body_model
+from airpose_lib.body.fast import JointsOnly
+
+__all__ = ["ORACLE_LABEL", "solve_translation", "mean_body_joints", "oracle_per_view"]
+
+#: Row name of the oracle in Table I.
+ORACLE_LABEL = "Oracle (GT pose, mean body)"
+
+
+def _project(P: np.ndarray, K: np.ndarray) -> np.ndarray:
+    """Pinhole projection of camera-frame points ``P (..., J, 3)`` with ``K (..., 3, 3)`` -> pixels."""
+    q = np.einsum("...ij,...nj->...ni", K, P)
+    return q[..., :2] / q[..., 2:3]
+
+
+def _solve(A: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Batched ``A (..., 3, 3) x = b (..., 3)`` (numpy >= 2 needs b as a column)."""
+    return np.linalg.solve(A, b[..., None])[..., 0]
+
+
+def solve_translation(X: np.ndarray, uv: np.ndarray, K: np.ndarray, gauss_newton_steps: int = 5) -> np.ndarray:
+    """The translation tau that puts rotated model-frame points ``X`` onto the pixels ``uv``.
+
+    Args:
+        X: ``(..., J, 3)`` points in camera axes about the model origin (``phi X0``).
+        uv: ``(..., J, 2)`` observed pixels of ``X + tau``.
+        K: ``(..., 3, 3)`` intrinsics (third row ``[0, 0, 1]``).
+        gauss_newton_steps: refinement steps on the pixel error after the linear solution.
+    Returns:
+        ``(..., 3)`` tau, float64.
+    """
+    X, uv, K = (np.asarray(a, dtype=np.float64) for a in (X, uv, K))
+    # Algebraic error: with normalised coordinates (x, y, 1) = K^-1 (u, v, 1), a point on the ray
+    # satisfies (X + tx) - x (Z + tz) = 0 and (Y + ty) - y (Z + tz) = 0: two linear equations in tau.
+    ones = np.ones(uv.shape[:-1] + (1,))
+    xy = np.einsum("...ij,...nj->...ni", np.linalg.inv(K), np.concatenate([uv, ones], axis=-1))
+    x, y = xy[..., 0] / xy[..., 2], xy[..., 1] / xy[..., 2]  # (..., J)
+    zeros, one = np.zeros_like(x), np.ones_like(x)
+    A = np.concatenate([np.stack([one, zeros, -x], axis=-1), np.stack([zeros, one, -y], axis=-1)], axis=-2)
+    b = np.concatenate([x * X[..., 2] - X[..., 0], y * X[..., 2] - X[..., 1]], axis=-1)
+    tau = _solve(np.einsum("...ji,...jk->...ik", A, A), np.einsum("...ji,...j->...i", A, b))
+    for _ in range(gauss_newton_steps):
+        P = X + tau[..., None, :]
+        q = np.einsum("...ij,...nj->...ni", K, P)
+        z = q[..., 2]
+        r = (q[..., :2] / z[..., None] - uv).reshape(*uv.shape[:-2], -1)  # (..., 2J)
+        # d(q_a / z)/dP = (K_a - (q_a / z) e_z) / z for a = u, v (rows of K; K's third row is e_z)
+        proj = q[..., :2] / z[..., None]
+        J_u = (K[..., None, 0, :] - proj[..., 0:1] * K[..., None, 2, :]) / z[..., None]
+        J_v = (K[..., None, 1, :] - proj[..., 1:2] * K[..., None, 2, :]) / z[..., None]
+        Jac = np.stack([J_u, J_v], axis=-2).reshape(*uv.shape[:-2], -1, 3)  # (..., 2J, 3), d/dtau = d/dP
+        JtJ = np.einsum("...ji,...jk->...ik", Jac, Jac)
+        tau = tau - _solve(JtJ, np.einsum("...ji,...j->...i", Jac, r))
+    return tau
+
+
+def mean_body_joints(theta: np.ndarray, body_model=None, body_source: str = "open") -> np.ndarray:
+    """The 22 body joints of the mean body (neutral model, beta = 0) in its model frame.
+
+    Args:
+        theta: ``(N, 21, 3)`` axis-angle body pose.
+        body_model: an ``smplx.SMPLX`` (default: ``load_body_model(body_source, "neutral")``).
+    Returns:
+        ``(N, 22, 3)`` joints with identity root orientation, zero translation (the paper's
+        ``X0``: ``X = phi X0 + tau``), float64.
+    """
+    if body_model is None:
+        body_model = load_body_model(body_source, "neutral", dtype=torch.float64)
+    joints_fn = JointsOnly(body_model).double()
+    theta = torch.as_tensor(np.asarray(theta), dtype=torch.float64)
+    with torch.no_grad():
+        joints = joints_fn(body_pose=theta.reshape(len(theta), 63))  # betas, root, translation: zero
+    return joints[:, :22].numpy()
+
+
+def oracle_per_view(arrays: Mapping[str, np.ndarray], body_model=None, body_source: str = "open",
+                    gauss_newton_steps: int = 5, max_samples: int | None = None) -> pd.DataFrame:
+    """Per-view MPE of the mean-body oracle on a still-frame split.
+
+    Args:
+        arrays: ``StillFrameDataset.arrays``: ``theta (N, 21, 3)``, ``phi (N, V, 3, 3)``,
+            ``tau (N, V, 3)``, ``j2d (N, V, 22, 2)`` (full-frame pixels), ``K (N, V, 3, 3)``;
+            ``index (N,)`` sample ids if present.
+        body_model, body_source: the body posed with beta = 0 (:func:`mean_body_joints`).
+        max_samples: only the first this many samples (the networks' ``eval_max_samples``).
+    Returns:
+        columns ``method, sample, view, mpe_m, err_x_m, err_y_m, err_z_m, reproj_px`` (the RMS pixel
+        residual of the fit), one row per (sample, view), like :func:`airpose_lib.eval.per_view_table`.
+    """
+    arrays = {k: np.asarray(v)[:max_samples] for k, v in arrays.items()}
+    phi = np.asarray(arrays["phi"], dtype=np.float64)
+    N, V = phi.shape[:2]
+    X0 = mean_body_joints(arrays["theta"], body_model, body_source)  # (N, 22, 3)
+    X = np.einsum("nvij,nkj->nvki", phi, X0)  # phi X0, (N, V, 22, 3)
+    uv = np.asarray(arrays["j2d"], dtype=np.float64)
+    K = np.asarray(arrays["K"], dtype=np.float64)
+    tau = solve_translation(X, uv, K, gauss_newton_steps)
+    err = tau - np.asarray(arrays["tau"], dtype=np.float64)
+    reproj = np.sqrt(((_project(X + tau[..., None, :], K) - uv) ** 2).sum(-1).mean(-1))
+    ids = np.asarray(arrays["index"]) if "index" in arrays else np.arange(N)
+    return pd.DataFrame({
+        "method": ORACLE_LABEL, "sample": np.repeat(ids, V), "view": np.tile(np.arange(V), N),
+        "mpe_m": np.linalg.norm(err, axis=-1).reshape(-1),
+        "err_x_m": err[..., 0].reshape(-1), "err_y_m": err[..., 1].reshape(-1), "err_z_m": err[..., 2].reshape(-1),
+        "reproj_px": reproj.reshape(-1),
+    })

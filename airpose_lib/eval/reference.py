@@ -1,0 +1,298 @@
+"""Reference results of Table I kept in the repository (``results/<profile>/``), and the check of a
+new run against them.
+
+Notebook 02 writes a results bundle into its output folder with :func:`write_reference`:
+
+* ``table1.csv`` / ``table1.md``: Table I (kit mean and seed std, paper, extra columns, oracle row);
+* ``per_seed.csv``: one row per variant x seed with the metric means (what the check compares);
+* ``claims.csv`` / ``claims.md``: the six ordering claims with difference, interval and verdict;
+* ``oracle.csv``: the mean-body oracle's MPE summary (the floor of the data);
+* ``provenance.json``: kit version, git commit, machine, command and the wall time of each step.
+
+``airpose reproduce --write-reference`` copies that bundle to ``results/<profile>/`` (nothing else
+writes there); without the flag, a run whose profile has a committed bundle prints
+:func:`compare_to_reference`: every variant mean that moved by more than the reference's own
+seed spread.
+"""
+from __future__ import annotations
+
+import datetime as _dt
+import json
+import os
+import platform
+import shutil
+import subprocess
+from collections.abc import Mapping
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from airpose_lib import __version__
+from airpose_lib.body.cache import atomic_path
+
+from .ablation import PER_SEED_METRICS, table_to_markdown
+
+__all__ = ["REFERENCE_FILES", "RESULTS_ROOT", "reference_dir", "machine_description", "git_commit",
+           "train_wall_s", "oracle_summary", "write_reference", "read_reference_table", "side_by_side",
+           "compare_to_reference", "install_reference", "reference_report"]
+
+#: The files of a results bundle.
+REFERENCE_FILES = ("table1.csv", "table1.md", "per_seed.csv", "claims.csv", "claims.md", "oracle.csv",
+                   "provenance.json")
+#: ``results/`` at the root of the checkout this package lives in.
+RESULTS_ROOT = Path(__file__).resolve().parents[2] / "results"
+#: Metrics :func:`compare_to_reference` checks by default (those both runs have).
+COMPARED_METRICS = (*PER_SEED_METRICS, "mpe_tight_m", "mpjpe_tight_m")
+
+
+def reference_dir(profile: str, root: str | Path | None = None) -> Path:
+    """``results/<profile>`` of the checkout (or of ``root``)."""
+    return Path(root if root is not None else RESULTS_ROOT) / profile
+
+
+# -- provenance -----------------------------------------------------------------------------------
+def machine_description() -> dict:
+    """Platform, CPU model (``/proc/cpuinfo``), core count, RAM (``/proc/meminfo``) and load average."""
+    cpu, ram_gib = platform.processor() or None, None
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    try:
+        for line in Path("/proc/meminfo").read_text().splitlines():
+            if line.startswith("MemTotal"):
+                ram_gib = round(int(line.split()[1]) / 2**20, 1)  # kB -> GiB
+                break
+    except (OSError, ValueError):
+        pass
+    load = os.getloadavg() if hasattr(os, "getloadavg") else None
+    return {"platform": platform.platform(), "python": platform.python_version(), "cpu": cpu,
+            "cores": os.cpu_count(), "ram_gib": ram_gib,
+            "load_average": [round(x, 2) for x in load] if load else None}
+
+
+def git_commit(root: str | Path | None = None) -> dict:
+    """``{"commit": sha or None, "dirty": bool or None}`` of the checkout at ``root``."""
+    root = Path(root) if root is not None else RESULTS_ROOT.parent
+    try:
+        sha = subprocess.run(["git", "rev-parse", "HEAD"], cwd=root, capture_output=True, text=True,
+                             timeout=10, check=True).stdout.strip()
+        status = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], cwd=root,
+                                capture_output=True, text=True, timeout=10, check=True).stdout
+    except (OSError, subprocess.SubprocessError):
+        return {"commit": None, "dirty": None}
+    return {"commit": sha, "dirty": bool(status.strip())}
+
+
+def train_wall_s(runs: Mapping) -> dict:
+    """(variant, seed) -> training wall time from each run folder's ``result.json`` (None if absent).
+
+    Args:
+        runs: (variant, seed) -> ``AblationRun`` (its ``out_dir`` if it has one, else the folder
+            above ``checkpoints/``).
+    """
+    out = {}
+    for key, run in runs.items():
+        folder = getattr(run, "out_dir", None) or Path(run.checkpoint).parent.parent
+        try:
+            w = json.loads((Path(folder) / "result.json").read_text()).get("wall_s")
+            out[key] = float(w) if w is not None else None
+        except (OSError, ValueError, TypeError):
+            out[key] = None
+    return out
+
+
+# -- the bundle -----------------------------------------------------------------------------------
+def oracle_summary(oracle: pd.DataFrame) -> pd.DataFrame:
+    """One row: the oracle's MPE mean, median, 90th percentile, signed / absolute depth error and
+    reprojection residual over the test images (``oracle_per_view`` columns)."""
+    return pd.DataFrame([{
+        "method": oracle["method"].iloc[0] if "method" in oracle else "oracle",
+        "mpe_m": oracle["mpe_m"].mean(), "mpe_median_m": oracle["mpe_m"].median(),
+        "mpe_p90_m": oracle["mpe_m"].quantile(0.9),
+        "err_z_m": oracle["err_z_m"].mean(), "abs_err_z_m": oracle["err_z_m"].abs().mean(),
+        "reproj_px": oracle["reproj_px"].mean() if "reproj_px" in oracle else np.nan,
+        "images": len(oracle),
+    }])
+
+
+def _write_text(path: Path, text: str) -> None:
+    with atomic_path(path) as tmp:
+        tmp.write_text(text)
+
+
+def _write_csv(path: Path, frame: pd.DataFrame, index: bool) -> None:
+    with atomic_path(path) as tmp:
+        frame.to_csv(tmp, index=index)
+
+
+def write_reference(out_dir: str | Path, *, table: pd.DataFrame, per_seed: pd.DataFrame, claims: pd.DataFrame,
+                    oracle: pd.DataFrame | None, profile: str, command: str,
+                    step_wall_s: Mapping[str, float | None], extra: Mapping | None = None) -> Path:
+    """Write a results bundle (:data:`REFERENCE_FILES`), each file atomically.
+
+    Args:
+        out_dir: the bundle folder (the notebook's output folder, or ``results/<profile>``).
+        table: :func:`airpose_lib.eval.ablation.ablation_table`.
+        per_seed: :func:`airpose_lib.eval.ablation.per_seed_table`.
+        claims: :func:`airpose_lib.eval.significance.claims_table`.
+        oracle: :func:`airpose_lib.eval.oracle.oracle_per_view` (None: no ``oracle.csv``).
+        profile: the reproduction profile.
+        command: the command that regenerates the bundle.
+        step_wall_s: step name -> wall time in seconds (None when unknown).
+        extra: more provenance entries (seeds, data source ...).
+    Returns:
+        ``out_dir``.
+    """
+    out = Path(out_dir)
+    _write_csv(out / "table1.csv", table, index=True)
+    _write_text(out / "table1.md", table_to_markdown(table))
+    _write_csv(out / "per_seed.csv", per_seed, index=False)
+    _write_csv(out / "claims.csv", claims, index=True)
+    _write_text(out / "claims.md", table_to_markdown(claims, digits=4))
+    if oracle is not None:
+        _write_csv(out / "oracle.csv", oracle_summary(oracle), index=False)
+    provenance = {
+        "profile": profile, "kit_version": __version__, "git": git_commit(),
+        "created_at": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
+        "machine": machine_description(), "command": command,
+        "wall_s": {k: (round(float(v), 1) if v is not None else None) for k, v in step_wall_s.items()},
+        **dict(extra or {}),
+    }
+    _write_text(out / "provenance.json", json.dumps(provenance, indent=2, default=str) + "\n")
+    return out
+
+
+def read_reference_table(ref_dir: str | Path) -> pd.DataFrame | None:
+    """The committed ``table1.csv`` of a bundle, or None when there is none."""
+    path = Path(ref_dir) / "table1.csv"
+    return pd.read_csv(path, index_col=0) if path.is_file() else None
+
+
+def side_by_side(table: pd.DataFrame, reference: pd.DataFrame | None,
+                 metrics: tuple[str, ...] = ("MPE", "MPJPE")) -> pd.DataFrame:
+    """This run, the committed reference and the paper, per metric, in adjacent columns.
+
+    Args:
+        table, reference: Table I of this run and of the reference (:func:`read_reference_table`;
+            None: the reference columns are NaN).
+    Returns:
+        one row per method of ``table``, columns ``<metric> kit [m]``, ``<metric> kit std [m]``,
+        ``<metric> reference [m]``, ``<metric> reference std [m]``, ``<metric> paper [m]``.
+    """
+    out = pd.DataFrame(index=table.index)
+    for m in metrics:
+        out[f"{m} kit [m]"] = table[f"{m} [m]"]
+        out[f"{m} kit std [m]"] = table[f"{m} std [m]"]
+        for col, src in ((f"{m} reference [m]", f"{m} [m]"), (f"{m} reference std [m]", f"{m} std [m]")):
+            out[col] = (reference[src].reindex(table.index) if reference is not None and src in reference
+                        else np.nan)
+        out[f"{m} paper [m]"] = table[f"{m} paper [m]"]
+    return out
+
+
+# -- the check ------------------------------------------------------------------------------------
+def compare_to_reference(new_per_seed: pd.DataFrame, reference: str | Path | pd.DataFrame,
+                         single_seed_rtol: float = 0.10) -> pd.DataFrame:
+    """Where a new run's variant means moved by more than the reference's seed spread.
+
+    For each variant and metric both per-seed tables have, the allowed deviation of the new
+    mean over seeds from the reference mean is the reference's standard deviation over seeds
+    (ddof 1); with a single reference seed there is no spread, so it is ``single_seed_rtol``
+    times the reference mean (10 % by default).
+
+    Args:
+        new_per_seed: :func:`airpose_lib.eval.ablation.per_seed_table` of the new run.
+        reference: a bundle folder (its ``per_seed.csv``) or that table.
+        single_seed_rtol: relative tolerance when the reference has one seed.
+    Returns:
+        one row per (variant, metric): ``variant, metric, new, reference, reference_std,
+        allowed, basis, difference, differs`` (bool); variants of only one side are left out.
+    """
+    ref = reference if isinstance(reference, pd.DataFrame) else pd.read_csv(Path(reference) / "per_seed.csv")
+    metrics = [m for m in COMPARED_METRICS if m in new_per_seed and m in ref]
+    rows = []
+    new_g, ref_g = new_per_seed.groupby("variant", sort=False), ref.groupby("variant", sort=False)
+    for variant, r in ref_g:
+        if variant not in new_g.groups:
+            continue
+        n = new_g.get_group(variant)
+        for m in metrics:
+            new_mean, ref_mean = float(n[m].mean()), float(r[m].mean())
+            if not (np.isfinite(new_mean) and np.isfinite(ref_mean)):
+                continue
+            if len(r) > 1:
+                std = float(r[m].std(ddof=1))
+                allowed, basis = std, f"reference std over {len(r)} seeds"
+            else:
+                std = np.nan
+                allowed, basis = single_seed_rtol * abs(ref_mean), f"{single_seed_rtol:.0%} of the reference (one seed)"
+            diff = new_mean - ref_mean
+            rows.append({"variant": variant, "metric": m, "new": new_mean, "reference": ref_mean,
+                         "reference_std": std, "allowed": allowed, "basis": basis, "difference": diff,
+                         "differs": bool(abs(diff) > allowed)})
+    cols = ["variant", "metric", "new", "reference", "reference_std", "allowed", "basis", "difference", "differs"]
+    return pd.DataFrame(rows, columns=cols)
+
+
+def install_reference(bundle: str | Path, profile: str, command: str | None = None,
+                      root: str | Path | None = None) -> Path:
+    """Copy a run's results bundle into ``results/<profile>/`` (what ``--write-reference`` does).
+
+    ``command`` replaces the bundle's recorded command (the one that really ran). Files are
+    copied atomically one by one; a file of the bundle that is absent is removed from the target.
+    """
+    src, dst = Path(bundle), reference_dir(profile, root)
+    if not (src / "per_seed.csv").is_file():
+        raise FileNotFoundError(f"{src}: no results bundle (per_seed.csv); run notebook 02 first")
+    for name in REFERENCE_FILES:
+        if not (src / name).is_file():
+            (dst / name).unlink(missing_ok=True)
+            continue
+        if name == "provenance.json" and command is not None:
+            prov = json.loads((src / name).read_text())
+            prov["command"] = command
+            _write_text(dst / name, json.dumps(prov, indent=2, default=str) + "\n")
+            continue
+        with atomic_path(dst / name) as tmp:
+            shutil.copyfile(src / name, tmp)
+    return dst
+
+
+def _setup(per_seed: pd.DataFrame) -> tuple[list, list]:
+    """The seeds and the test-image counts of a per-seed table (what makes two runs comparable)."""
+    return sorted(per_seed["seed"].unique().tolist()), sorted(per_seed["images"].unique().tolist())
+
+
+def reference_report(bundle: str | Path, profile: str, write: bool = False, command: str | None = None,
+                     root: str | Path | None = None) -> str:
+    """What ``airpose reproduce`` prints after notebook 02: the new run against ``results/<profile>/``.
+
+    Args:
+        bundle: the notebook's results bundle (``<run>/02_ablation_table/results``).
+        write: install the bundle as the new reference (``--write-reference``) instead of comparing.
+    Returns:
+        a few lines of text ("" when there is nothing to say: no bundle, or no reference).
+    """
+    bundle, ref = Path(bundle), reference_dir(profile, root)
+    if not (bundle / "per_seed.csv").is_file():
+        return f"reference: notebook 02 wrote no {bundle / 'per_seed.csv'}; nothing compared" if write else ""
+    if write:
+        return f"reference: wrote {install_reference(bundle, profile, command, root)}"
+    if not (ref / "per_seed.csv").is_file():
+        return f"reference: none for profile {profile!r} ({ref}); `--write-reference` records this run as one"
+    new, old = pd.read_csv(bundle / "per_seed.csv"), pd.read_csv(ref / "per_seed.csv")
+    cmp = compare_to_reference(new, old)
+    moved = cmp[cmp["differs"]]
+    head = (f"reference: {len(cmp)} variant means compared with {ref}; "
+            f"{len(moved)} differ by more than the reference's seed spread")
+    if _setup(new) != _setup(old):
+        head += (f"\nreference: note the runs differ in seeds / test images per run: reference {_setup(old)}, "
+                 f"this run {_setup(new)}")
+    if moved.empty:
+        return head
+    return head + "\n" + moved.drop(columns=["reference_std"]).to_string(index=False, float_format="%.4f")

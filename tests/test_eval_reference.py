@@ -1,0 +1,163 @@
+"""Results bundles (results/<profile>/) and the check of a new run against them."""
+import json
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from airpose_lib.eval.ablation import ablation_table, per_seed_table
+from airpose_lib.eval.reference import (
+    REFERENCE_FILES,
+    compare_to_reference,
+    machine_description,
+    read_reference_table,
+    reference_report,
+    side_by_side,
+    train_wall_s,
+    write_reference,
+)
+from airpose_lib.eval.significance import claims_table
+
+VARIANTS = ("baseline", "multiview", "fullcam", "airpose")
+
+
+def _runs(seeds=(1, 2, 3), shift=0.0, n=40):
+    rng = np.random.default_rng(0)
+    runs = {}
+    for s in seeds:
+        for k, v in enumerate(VARIANTS):
+            e = 2.0 - 0.4 * k + shift + rng.normal(0, 0.05, size=n)
+            runs[v, s] = pd.DataFrame({"method": v, "sample": np.arange(n) // 2, "view": np.arange(n) % 2,
+                                       "mpe_m": e, "mpjpe_m": e / 10, "pa_mpjpe_m": e / 20})
+    return runs
+
+
+def _oracle(n=40):
+    z = np.linspace(-0.5, 0.5, n)
+    return pd.DataFrame({"method": "Oracle", "mpe_m": np.abs(z) + 0.1, "err_z_m": z, "reproj_px": 0.0})
+
+
+def _bundle(tmp_path, runs, name="bundle"):
+    per_seed = per_seed_table(runs, wall_s={k: 1.5 for k in runs})
+    return write_reference(tmp_path / name, table=ablation_table(runs, oracle=_oracle()), per_seed=per_seed,
+                           claims=claims_table(runs, n_resamples=200), oracle=_oracle(), profile="smoke",
+                           command="airpose reproduce --profile smoke --only 02_ablation_table",
+                           step_wall_s={"train and evaluate": 12.34, "oracle": None}, extra={"seeds": [1, 2, 3]})
+
+
+def test_bundle_has_every_file_and_its_provenance(tmp_path):
+    out = _bundle(tmp_path, _runs())
+    assert sorted(p.name for p in out.iterdir()) == sorted(REFERENCE_FILES)  # no temporary files left
+    prov = json.loads((out / "provenance.json").read_text())
+    assert prov["kit_version"] and prov["profile"] == "smoke" and prov["seeds"] == [1, 2, 3]
+    assert prov["wall_s"] == {"train and evaluate": 12.3, "oracle": None}
+    assert set(prov["machine"]) >= {"platform", "cpu", "cores", "ram_gib"} and prov["machine"]["cores"] >= 1
+    assert "commit" in prov["git"]
+    table = read_reference_table(out)
+    assert list(table.index)[:4] == ["Baseline", "Baseline + Multi-view", "Baseline + Fullcam", "AirPose"]
+    assert table.loc["Baseline", "MPE paper [m]"] == 0.5
+    claims = pd.read_csv(out / "claims.csv", index_col=0)
+    assert len(claims) == 6 and (claims["verdict"] == "holds").all()
+    assert pd.read_csv(out / "oracle.csv").loc[0, "abs_err_z_m"] == pytest.approx(_oracle()["err_z_m"].abs().mean())
+    assert len(pd.read_csv(out / "per_seed.csv")) == 12
+
+
+def test_machine_description_reads_the_cpu_and_memory():
+    m = machine_description()
+    assert m["cpu"] and m["ram_gib"] > 0
+
+
+def test_side_by_side_puts_reference_and_paper_next_to_the_run(tmp_path):
+    ref = read_reference_table(_bundle(tmp_path, _runs()))
+    new = ablation_table(_runs(shift=0.1))
+    t = side_by_side(new, ref)
+    assert t.loc["AirPose", "MPE kit [m]"] == pytest.approx(ref.loc["AirPose", "MPE [m]"] + 0.1, abs=0.02)
+    assert t.loc["AirPose", "MPE paper [m]"] == 0.15 and "MPJPE reference std [m]" in t
+    assert side_by_side(new, None)["MPE reference [m]"].isna().all()
+    assert read_reference_table(tmp_path / "nowhere") is None
+
+
+def test_compare_flags_only_means_that_moved_beyond_the_seed_spread(tmp_path):
+    ref = per_seed_table(_runs())
+    same = compare_to_reference(per_seed_table(_runs()), ref)
+    assert len(same) == 4 * 3 and not same["differs"].any() and (same["difference"] == 0).all()
+    # move only AirPose's MPE by 10x the reference spread
+    moved = per_seed_table(_runs())
+    spread = ref.loc[ref["variant"] == "airpose", "mpe_m"].std(ddof=1)
+    moved.loc[moved["variant"] == "airpose", "mpe_m"] += 10 * spread
+    cmp = compare_to_reference(moved, ref).set_index(["variant", "metric"])
+    assert cmp["differs"].sum() == 1 and cmp.loc[("airpose", "mpe_m"), "differs"]
+    assert cmp.loc[("airpose", "mpe_m"), "allowed"] == pytest.approx(spread)
+    assert cmp.loc[("airpose", "mpe_m"), "basis"] == "reference std over 3 seeds"
+
+
+def test_one_reference_seed_uses_the_stated_tolerance():
+    ref = per_seed_table(_runs(seeds=(1,)))
+    new = ref.copy()
+    new["mpe_m"] *= 1.05
+    assert not compare_to_reference(new, ref)["differs"].any()
+    new["mpe_m"] *= 1.10  # 15.5 % above: beyond the 10 %
+    cmp = compare_to_reference(new, ref)
+    assert cmp.loc[cmp["metric"] == "mpe_m", "differs"].all()
+    assert cmp.loc[cmp["metric"] == "mpjpe_m", "differs"].sum() == 0
+    assert (cmp["basis"] == "10% of the reference (one seed)").all()
+
+
+def test_reproduce_report_compares_and_writes_only_when_asked(tmp_path):
+    root = tmp_path / "results"
+    bundle = _bundle(tmp_path, _runs())
+    msg = reference_report(bundle, "smoke", root=root)
+    assert "none for profile 'smoke'" in msg and not root.exists()  # nothing written without the flag
+    msg = reference_report(bundle, "smoke", write=True, command="airpose reproduce --write-reference", root=root)
+    assert "wrote" in msg and sorted(p.name for p in (root / "smoke").iterdir()) == sorted(REFERENCE_FILES)
+    assert json.loads((root / "smoke" / "provenance.json").read_text())["command"] == \
+        "airpose reproduce --write-reference"
+    assert "0 differ" in reference_report(bundle, "smoke", root=root)
+    before = (root / "smoke" / "per_seed.csv").read_bytes()
+    worse = _bundle(tmp_path, _runs(shift=1.0), name="worse")
+    msg = reference_report(worse, "smoke", root=root)
+    assert "12 differ" in msg and "airpose" in msg and "mpe_m" in msg
+    assert (root / "smoke" / "per_seed.csv").read_bytes() == before
+    assert reference_report(tmp_path / "no-bundle", "smoke", root=root) == ""
+    other = _bundle(tmp_path, _runs(seeds=(1, 2)), name="two-seeds")
+    assert "differ in seeds / test images" in reference_report(other, "smoke", root=root)
+
+
+def test_training_wall_time_is_read_from_result_json_when_present(tmp_path):
+    class Run:
+        def __init__(self, folder):
+            self.checkpoint = folder / "checkpoints" / "last.pt"
+
+    (tmp_path / "a" / "checkpoints").mkdir(parents=True)
+    (tmp_path / "a" / "result.json").write_text(json.dumps({"wall_s": 42.0}))
+    (tmp_path / "b" / "checkpoints").mkdir(parents=True)
+    (tmp_path / "b" / "result.json").write_text(json.dumps({"step": 3}))
+    assert train_wall_s({("baseline", 1): Run(tmp_path / "a"), ("baseline", 2): Run(tmp_path / "b"),
+                         ("airpose", 1): Run(tmp_path / "c")}) == {
+        ("baseline", 1): 42.0, ("baseline", 2): None, ("airpose", 1): None}
+
+
+def test_airpose_reproduce_compares_after_notebook_02_and_writes_only_with_the_flag(tmp_path, monkeypatch, capsys):
+    import airpose_lib.eval.reference as reference
+    import airpose_lib.reproduce as rep
+    from airpose_lib import cli
+    from airpose_lib.reproduce.runner import NotebookResult, RunReport
+
+    out_dir = tmp_path / "runs" / "smoke" / "02_ablation_table"
+    _bundle(out_dir.parent, _runs(), name="02_ablation_table/results")
+
+    def fake_run(profile, **kw):
+        r = RunReport(profile="smoke", description="", kit_version="0", kernel_name="python3",
+                      started_at="now", run_dir=str(out_dir.parent), figures_dir=str(tmp_path / "figures"))
+        r.results = [NotebookResult("02_ablation_table", "02_ablation_table.ipynb", status="ok",
+                                    parameters={"output_dir": str(out_dir)})]
+        return r
+
+    monkeypatch.setattr(rep, "run_profile", fake_run)
+    monkeypatch.setattr(reference, "RESULTS_ROOT", tmp_path / "results")
+    assert cli.main(["reproduce", "--only", "02"]) == 0
+    assert "none for profile 'smoke'" in capsys.readouterr().out and not (tmp_path / "results").exists()
+    assert cli.main(["reproduce", "--only", "02", "--write-reference"]) == 0
+    assert "wrote" in capsys.readouterr().out and (tmp_path / "results" / "smoke" / "per_seed.csv").is_file()
+    assert cli.main(["reproduce", "--only", "02"]) == 0
+    assert "0 differ by more than the reference's seed spread" in capsys.readouterr().out

@@ -1,0 +1,124 @@
+"""Paired bootstrap and Table I's claim table against cases with a known answer."""
+import numpy as np
+import pandas as pd
+import pytest
+
+from airpose_lib.eval.significance import claims_table, paired_bootstrap, paired_differences
+
+
+def test_interval_matches_the_normal_theory_interval():
+    rng = np.random.default_rng(1)
+    d = rng.normal(0.3, 0.5, size=(3, 800))  # three seeds, the same 800 images
+    r = paired_bootstrap(d, n_resamples=4000, seed=2)
+    # statistic = mean over images of the seed means; its standard error from the per-image means
+    d_image = d.mean(axis=0)
+    se = d_image.std(ddof=1) / np.sqrt(d.shape[1])
+    assert r.mean == pytest.approx(d.mean(), abs=1e-12)
+    half = 1.959964 * se
+    assert r.low == pytest.approx(r.mean - half, abs=0.08 * half)
+    assert r.high == pytest.approx(r.mean + half, abs=0.08 * half)
+    np.testing.assert_allclose(r.per_seed, d.mean(axis=1))
+    assert r.n_images == 800
+
+
+def test_interval_covers_the_true_mean_about_95_percent_of_the_time():
+    rng = np.random.default_rng(3)
+    hits = [_covers(rng.normal(1.0, 2.0, size=(1, 200)), 1.0, seed) for seed in range(200)]
+    assert 0.90 <= np.mean(hits) <= 0.99
+
+
+def _covers(d, truth, seed):
+    r = paired_bootstrap(d, n_resamples=1000, seed=seed)
+    return r.low <= truth <= r.high
+
+
+def test_zero_mean_differences_do_not_exclude_zero():
+    rng = np.random.default_rng(4)
+    d = rng.normal(0.0, 1.0, size=(2, 500))
+    d -= d.mean()  # exactly zero mean
+    r = paired_bootstrap(d, seed=0)
+    assert r.low < 0 < r.high
+
+
+def test_a_constant_shift_gives_a_degenerate_interval():
+    r = paired_bootstrap(np.full((3, 50), 0.25), seed=0)
+    assert r.low == pytest.approx(0.25) and r.high == pytest.approx(0.25) and r.mean == pytest.approx(0.25)
+
+
+def test_fixed_seed_is_reproducible_and_the_seed_matters():
+    d = np.random.default_rng(5).normal(size=(2, 100))
+    a, b, c = paired_bootstrap(d, seed=7), paired_bootstrap(d, seed=7), paired_bootstrap(d, seed=8)
+    assert (a.low, a.high) == (b.low, b.high) and (a.low, a.high) != (c.low, c.high)
+
+
+def test_non_finite_differences_are_an_error():
+    with pytest.raises(ValueError, match="finite"):
+        paired_bootstrap(np.array([[0.1, np.nan]]))
+
+
+def _table(values, samples=None):
+    n = len(values) // 2
+    samples = np.repeat(np.arange(n), 2) if samples is None else samples
+    v = np.asarray(values, dtype=float)
+    return pd.DataFrame({"method": "x", "sample": samples, "view": np.tile([0, 1], n),
+                         "mpe_m": v, "mpjpe_m": v / 10})
+
+
+def test_differences_are_paired_by_sample_and_view():
+    a = _table([1.0, 2.0, 3.0, 4.0])
+    b = _table([0.5, 0.5, 0.5, 0.5]).iloc[::-1]  # another row order: pairing is by (sample, view)
+    seeds, d = paired_differences({("baseline", 1): a, ("multiview", 1): b}, "baseline", "multiview", "mpe_m")
+    assert seeds == [1]
+    np.testing.assert_allclose(d, [[0.5, 1.5, 2.5, 3.5]])
+    # an image missing in one seed is dropped from every seed (the same images in each)
+    runs = {("baseline", 1): a, ("multiview", 1): b, ("baseline", 2): a.iloc[1:], ("multiview", 2): b}
+    seeds, d = paired_differences(runs, "baseline", "multiview", "mpe_m")
+    assert seeds == [1, 2] and d.shape == (2, 3)
+    np.testing.assert_allclose(d[0], [1.5, 2.5, 3.5])
+
+
+def _runs(effects, seeds=(1, 2, 3), n=200, noise=0.05, seed_effects=None):
+    """Per-view tables whose errors fall by ``effects[k]`` from variant k to k+1 (same for MPE, MPJPE x10)."""
+    rng = np.random.default_rng(0)
+    base = rng.uniform(0.5, 1.5, size=2 * n)  # per-image difficulty, shared by every variant
+    runs = {}
+    for s in seeds:
+        level = 2.0
+        for k, v in enumerate(("baseline", "multiview", "fullcam", "airpose")):
+            if k:
+                level -= (seed_effects or {}).get((k, s), effects[k - 1])
+            runs[v, s] = _table(base + level + rng.normal(0, noise, size=2 * n))
+    return runs
+
+
+def test_claims_hold_when_every_seed_shows_a_clear_ordering():
+    t = claims_table(_runs([0.05, 0.3, 0.1]))
+    assert len(t) == 6 and (t["verdict"] == "holds").all() and t["sign in every seed"].all()
+    assert t.loc["MPE: Baseline + Fullcam > AirPose", "difference [m]"] == pytest.approx(0.1, abs=0.01)
+    assert t.loc["MPJPE: Baseline + Fullcam > AirPose", "difference [m]"] == pytest.approx(0.01, abs=0.001)
+    assert (t["CI low [m]"] > 0).all() and (t["seeds"] == 3).all() and (t["images"] == 400).all()
+
+
+def test_no_effect_is_not_significant_and_a_reversal_is_reversed():
+    t = claims_table(_runs([0.0, -0.2, 0.1]))
+    assert t.loc["MPE: Baseline > Baseline + Multi-view", "verdict"] == "not significant"
+    assert t.loc["MPE: Baseline + Multi-view > Baseline + Fullcam", "verdict"] == "reversed"
+    assert t.loc["MPE: Baseline + Multi-view > Baseline + Fullcam", "CI high [m]"] < 0
+    assert t.loc["MPJPE: Baseline + Fullcam > AirPose", "verdict"] == "holds"
+
+
+def test_one_seed_against_the_claim_fails_it_even_with_a_significant_pooled_mean():
+    # seeds 1 and 2: a large effect; seed 3: a small one the other way. Pooled mean > 0 and clear.
+    t = claims_table(_runs([0.3, 0.3, 0.3], seed_effects={(1, 3): -0.05}))
+    row = t.loc["MPE: Baseline > Baseline + Multi-view"]
+    assert row["CI low [m]"] > 0 and not row["sign in every seed"]
+    assert row["verdict"] == "not significant"
+    assert "3: -0.0" in row["per-seed difference [m]"]
+
+
+def test_a_missing_variant_is_reported_not_run():
+    runs = {k: v for k, v in _runs([0.1, 0.1, 0.1]).items() if k[0] != "multiview"}
+    t = claims_table(runs)
+    assert (t.loc[["MPE: Baseline > Baseline + Multi-view", "MPE: Baseline + Multi-view > Baseline + Fullcam"],
+                  "verdict"] == "not run").all()
+    assert t.loc["MPE: Baseline + Fullcam > AirPose", "verdict"] == "holds"

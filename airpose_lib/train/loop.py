@@ -174,10 +174,13 @@ def default_loss_factory(cfg: TrainConfig) -> nn.Module:
     return SupervisedLoss(loss_config(cfg.variant, cfg.official_loss, **cfg.loss), source=cfg.body_source)
 
 
-#: Floor of the weak camera's scale where the losses turn it into a depth. Just past zero the depth
-#: ``2 f s / (S s_w)`` flips from +inf to -inf and one step can throw the 2D term to 1e12; the scale
-#: guard ``exp(-10 s_w)^2`` (which sees the raw value) pushes s_w back above the floor.
+#: Range of the weak camera's scale where the losses turn it into a depth ``2 f s / (S s_w)`` (with
+#: the cpu crops, a person between about 1.4 m and 140 m away). Just past zero the depth flips from
+#: +inf to -inf, and a scale thrown up by one large step puts the body at the camera; either sends
+#: the 2D term to 1e11 and wrecks the run (measured: a multi-view run at step 340). The scale guard
+#: ``exp(-10 s_w)^2``, which sees the raw value, pushes s_w back above the floor.
 MIN_WEAK_SCALE = 0.05
+MAX_WEAK_SCALE = 5.0
 
 
 def _supervised_terms(out: Mapping, loss_fn: nn.Module, batch: Mapping[str, torch.Tensor], input_size: int) -> dict:
@@ -185,7 +188,7 @@ def _supervised_terms(out: Mapping, loss_fn: nn.Module, batch: Mapping[str, torc
 
     if "cam" in out:
         cam = out["cam"]
-        out = dict(out, cam=torch.cat((cam[..., :1].clamp(min=MIN_WEAK_SCALE), cam[..., 1:]), dim=-1))
+        out = dict(out, cam=torch.cat((cam[..., :1].clamp(MIN_WEAK_SCALE, MAX_WEAK_SCALE), cam[..., 1:]), dim=-1))
     pred = dict(to_smplx_params(out, batch["P"], batch["K"], input_size=input_size))
     pred["phi6d"], pred["theta6d"] = out["phi6d"], out["theta6d"]
     if "cam" in out:

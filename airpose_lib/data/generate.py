@@ -715,6 +715,12 @@ def ensure_still_dataset(profile: str | None = None, *, config: GenerationConfig
         if profile is None:
             raise ValueError("give a root folder for an explicit config")
         root = default_root(profile)
+    done = load_manifest(Path(root))
+    if done is not None and done.get("status") == "complete" and done.get("fingerprint") == config.fingerprint() \
+            and not record:
+        # Finished: readers take no writer's lock (parallel trainings open it at once); the
+        # datasets verify every shard's checksum when they open it.
+        return Path(root)
     workers = workers if workers is not None else max(1, min(os.cpu_count() or 1, 4))
     manifest = generate_still_dataset(config, root, workers=workers, profile=profile,
                                       progress=progress, record=record)

@@ -12,6 +12,7 @@ from airpose_lib.eval.ablation import VARIANT_LABELS
 from .config import load_train_config
 from .evaluate import evaluate_checkpoint
 from .loop import TrainResult, default_out_dir, train
+from .pretrain import profile_backbone_key
 
 __all__ = ["AblationRun", "run_ablation", "trained_checkpoint"]
 
@@ -122,8 +123,16 @@ def _finished_run(out: Path, profile: str, variant: str, seed: int) -> TrainResu
     except (OSError, ValueError, KeyError):
         return None
     wanted = load_train_config(profile, variant, seed).to_dict()
-    # training fills in the resolved dataset folder when the profile names none
+    # training fills in the resolved dataset folder when the profile names none, and the
+    # profile's backbone file for `pretrained: profile` (named by its key: it must be the key the
+    # profile's `pretrain:` settings give now)
     ignore = {"progress"} | ({"data"} if not wanted["data"] else set())
+    if wanted.get("pretrained") == "profile":
+        ignore.add("pretrained")
+        used = Path(str(done.config.get("pretrained")))
+        root = (done.config.get("data") or {}).get("root")
+        if root is None or not used.is_file() or used.stem != profile_backbone_key(profile, root):
+            return None
     same = all(done.config.get(k) == wanted[k] for k in wanted.keys() - ignore)
     if same and done.step >= wanted["steps"] and done.checkpoint is not None and Path(done.checkpoint).is_file():
         return done

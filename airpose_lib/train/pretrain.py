@@ -36,7 +36,7 @@ from airpose_lib.paths import run_path
 from .checkpoint import kit_version, load_checkpoint
 from .config import TrainConfig, load_train_config
 
-__all__ = ["PRETRAIN_VERSION", "pretrain_config", "backbone_key", "ensure_backbone", "profile_backbone",
+__all__ = ["PRETRAIN_VERSION", "pretrain_config", "backbone_key", "ensure_backbone", "profile_backbone", "profile_backbone_key",
            "export_backbone", "gate_metrics", "reference_backbone_path", "write_reference_backbone"]
 
 #: Bumped when the same settings would train another backbone.
@@ -163,6 +163,14 @@ def _load_pretrain_model(checkpoint: str | Path, cfg: TrainConfig) -> torch.nn.M
     model = default_model_factory(cfg)
     model.load_state_dict(load_checkpoint(checkpoint)["model"])
     return model.eval()
+
+
+def profile_backbone_key(profile: str, data_root: str | Path) -> str:
+    """The key of the backbone a profile asks for on the dataset in ``data_root``."""
+    from airpose_lib.data.manifest import load_manifest
+
+    cfg = pretrain_config(profile).replace(data={"root": str(data_root)})
+    return backbone_key(cfg, load_manifest(Path(data_root))["fingerprint"])
 
 
 def profile_backbone(profile: str, progress: bool = False) -> Path:

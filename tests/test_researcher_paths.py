@@ -72,7 +72,7 @@ def test_progress_can_be_switched_off(monkeypatch):
     ("lr.x=1", "'lr' is not a dict option"),
 ])
 def test_train_set_errors_are_one_line(item, message, capsys):
-    assert cli.main(["train", "--variant", "airpose", "--set", item]) == 1
+    assert cli.main(["train", "--variant", "airpose", "--set", item]) == 2
     err = capsys.readouterr().err.strip()
     assert message in err and len(err.splitlines()) == 1 and "Traceback" not in err
 

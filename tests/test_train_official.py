@@ -55,7 +55,7 @@ def test_training_config_switches_to_the_official_dataset(official_assets):
     from airpose_lib.train.loop import default_dataset_factory, prepare_data
 
     data, _, _ = official_assets
-    cfg = load_train_config("smoke", "airpose")
+    cfg = load_train_config("smoke", "airpose", task="supervised", pretrained=None)  # end to end on the images
     official = cfg.replace(data={"source": "official_synthetic", "root": str(data), "input_size": 64,
                                  "body_source": "open"})
     with pytest.raises(ValueError, match="body_source='smplx'"):

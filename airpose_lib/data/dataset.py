@@ -63,14 +63,14 @@ _LOADED = _FLOAT_KEYS + ("kp_visible", "gender", "index", "image_offsets") + EXT
 _TIGHT = ("P_tight", "bbox_tight_crop", "image_offsets_tight")  # test shards only
 
 
-def swap_views(item: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
+def swap_views(item: dict[str, torch.Tensor], keys: tuple[str, ...] = PER_VIEW_KEYS) -> dict[str, torch.Tensor]:
     """The view-swap augmentation, in place: one random permutation of the views applied to every
-    per-view entry (:data:`PER_VIEW_KEYS`, each ``(V, ...)``), so that a network cannot learn which
-    view comes first (torch's RNG, seeded per sample by the training loop)."""
-    V = item["images"].shape[0]
+    per-view entry (``keys``, default :data:`PER_VIEW_KEYS`, each ``(V, ...)``), so that a network
+    cannot learn which view comes first (torch's RNG, seeded per sample by the training loop)."""
+    V = item[keys[0]].shape[0]
     if V > 1:
         perm = torch.randperm(V)
-        for k in PER_VIEW_KEYS:
+        for k in keys:
             item[k] = item[k][perm]
     return item
 
@@ -185,15 +185,19 @@ class StillFrameDataset(Dataset):
         if not -len(self) <= i < len(self):
             raise IndexError(f"index {i} out of range for {len(self)} samples")
         i = i % len(self)
-        a = self._arrays
-        item = {"images": normalize_images(self.rgb(i))}
-        for k in ("P", "K", "bbox", "R_cw", "t_cw", "phi", "tau", "j2d", "kp2d", "j3d_cam", "theta", "beta"):
-            item[k] = torch.from_numpy(a[k][i].copy())
-        item["kp_visible"] = torch.from_numpy(a["kp_visible"][i].copy())
-        item["gender"] = torch.tensor(int(a["gender"][i]), dtype=torch.int64)
-        item["index"] = torch.tensor(int(a["index"][i]), dtype=torch.int64)
+        item = {"images": normalize_images(self.rgb(i)), **self.ground_truth(i)}
         if self.augment:
             swap_views(item)
+        return item
+
+    def ground_truth(self, i: int) -> dict[str, torch.Tensor]:
+        """Every key of the item of sample ``i`` but ``images`` (no augmentation)."""
+        a = self._arrays
+        item = {k: torch.from_numpy(a[k][i].copy()) for k in
+                ("P", "K", "bbox", "R_cw", "t_cw", "phi", "tau", "j2d", "kp2d", "j3d_cam", "theta", "beta",
+                 "kp_visible")}
+        item["gender"] = torch.tensor(int(a["gender"][i]), dtype=torch.int64)
+        item["index"] = torch.tensor(int(a["index"][i]), dtype=torch.int64)
         return item
 
     def __repr__(self) -> str:

@@ -20,7 +20,7 @@ import torch
 from torch.utils.data import DataLoader, Dataset
 
 from airpose_lib.body.cache import atomic_path, cache_dir, file_lock
-from airpose_lib.data.dataset import PER_VIEW_KEYS, StillFrameDataset
+from airpose_lib.data.dataset import PER_VIEW_KEYS, StillFrameDataset, swap_views
 from airpose_lib.data.manifest import load_manifest
 from airpose_lib.data.shards import sha256_file
 from airpose_lib.model.backbone import build_backbone
@@ -119,18 +119,9 @@ class FeatureDataset(Dataset):
         return len(self.still)
 
     def __getitem__(self, i: int) -> dict[str, torch.Tensor]:
-        a = self.still.arrays
-        item = {"features": torch.from_numpy(np.array(self.features[i], dtype=np.float32))}
-        for k in ("P", "K", "bbox", "R_cw", "t_cw", "phi", "tau", "j2d", "kp2d", "j3d_cam", "theta", "beta"):
-            item[k] = torch.from_numpy(a[k][i].copy())
-        item["kp_visible"] = torch.from_numpy(a["kp_visible"][i].copy())
-        item["gender"] = torch.tensor(int(a["gender"][i]), dtype=torch.int64)
-        item["index"] = torch.tensor(int(a["index"][i]), dtype=torch.int64)
+        item = {"features": torch.from_numpy(np.array(self.features[i], dtype=np.float32)),
+                **self.still.ground_truth(i)}
         item["crop_size"] = torch.tensor(self.crop_size, dtype=torch.int64)  # S of the crops behind P
         if self.augment:
-            V = item["features"].shape[0]
-            if V > 1:
-                perm = torch.randperm(V)
-                for k in ("features",) + tuple(k for k in PER_VIEW_KEYS if k != "images"):
-                    item[k] = item[k][perm]
+            swap_views(item, ("features",) + tuple(k for k in PER_VIEW_KEYS if k != "images"))
         return item

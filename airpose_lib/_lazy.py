@@ -24,6 +24,10 @@ def lazy_namespace(package: str, namespace: dict, modules: Sequence[str],
     exports = dict(exports or {})
 
     def __getattr__(name: str):
+        if name in modules:  # `from pkg import submodule` asks here first: import just that one
+            value = importlib.import_module(f"{package}.{name}")
+            namespace[name] = value
+            return value
         module = exports.get(name)
         if module is None and not name.startswith("_"):
             for candidate in modules:

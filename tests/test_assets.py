@@ -35,7 +35,7 @@ from airpose_lib.assets import (
     resolve_data_source,
     verify,
 )
-from airpose_lib.assets.cli import add_asset_commands
+from airpose_lib.cli.assets import add_asset_commands
 from airpose_lib.assets.manifest import manifest_dir
 
 REPO_MANIFESTS = Path(__file__).resolve().parents[1] / "data_manifests"

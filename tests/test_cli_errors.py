@@ -245,3 +245,16 @@ def test_body_info_smplx_in_a_missing_folder(tmp_path, monkeypatch, capsys):
     code, err = _run(["body", "info", "--source", "smplx"], capsys)
     _assert_one_line(code, err, tmp_path / "nope")
     assert "AIRPOSE_SMPLX_DIR" in err
+
+
+def test_user_error_classes_are_where_the_cli_looks():
+    """The CLI finds the kit's user-facing exceptions by ``module:name`` (so that an error path
+    imports nothing); each entry must still name an exception class when its module moves."""
+    import importlib
+
+    from airpose_lib.cli import common
+
+    for spec in common._USER_ERRORS:
+        module, _, name = spec.partition(":")
+        cls = getattr(importlib.import_module(module), name, None)
+        assert isinstance(cls, type) and issubclass(cls, Exception), f"{spec}: no such exception class"

@@ -440,13 +440,13 @@ def test_cli_predict_and_finetune(tiny_ckpt, smoke_root, tmp_path, body32, capsy
     import argparse
 
     from airpose_lib.cli import CLIError
-    from airpose_lib.finetune.cli import _add_finetune, _add_predict
+    from airpose_lib.cli.finetune import add_finetune, add_predict
     from airpose_lib.prior import VPoser, save_prior
 
     parser = argparse.ArgumentParser(prog="airpose")
     sub = parser.add_subparsers(dest="command", required=True)
-    _add_finetune(sub)
-    _add_predict(sub)
+    add_finetune(sub)
+    add_predict(sub)
     run = lambda argv: (a := parser.parse_args(argv)).func(a)  # noqa: E731
 
     out = tmp_path / "pred.npz"

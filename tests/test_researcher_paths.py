@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from airpose_lib import cli, paths
+from airpose_lib.cli.common import parse_sets
 from airpose_lib.progress import LOG_INTERVAL_S, progress_bar
 from airpose_lib.reproduce import notebook_defaults
 
@@ -81,7 +82,7 @@ def test_set_values_are_typed():
     from airpose_lib.losses import LossConfig
     from airpose_lib.train import TrainConfig
 
-    got = cli._parse_sets(["lr=1e-4", "steps=3", "grad_clip=null", "loss.w_V=10", "model.dropout=0"],
+    got = parse_sets(["lr=1e-4", "steps=3", "grad_clip=null", "loss.w_V=10", "model.dropout=0"],
                           TrainConfig, {"loss": LossConfig})
     assert got == {"lr": 1e-4, "steps": 3, "grad_clip": None, "loss": {"w_V": 10.0}, "model": {"dropout": 0}}
     assert isinstance(got["loss"]["w_V"], float)

@@ -277,7 +277,8 @@ def test_merge_views_joins_on_slots(tmp_path):
 # -- command line -----------------------------------------------------------------------------------
 def test_node_and_launch_command_lines():
     from airpose_lib import cli
-    from airpose_lib.runtime.options import config_from_args, parse_peers
+    from airpose_lib.cli.node import config_from_args
+    from airpose_lib.runtime.transport import parse_peers
 
     assert parse_peers(["2@5002,3@10.0.0.3:5003", "4@tcp://h:1"]) == {
         2: "tcp://127.0.0.1:5002", 3: "tcp://10.0.0.3:5003", 4: "tcp://h:1"}

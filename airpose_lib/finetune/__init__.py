@@ -4,11 +4,11 @@ network over a recording.
 Modules: ``keypoints`` (the OpenPose/AlphaPose agreement filter -> 2D targets), ``predict``
 (detections -> crops -> per-view SMPL-X parameters; the predictions ``.npz``), ``loss`` (the
 fine-tuning loss), ``network`` (a checkpoint's network and crop size), ``train`` (frozen
-backbone, cached features, regressor training; resumable), ``cli`` (``airpose finetune`` /
-``airpose predict``).
+backbone, cached features, regressor training; resumable). The commands (``airpose finetune``,
+``airpose predict``) are in :mod:`airpose_lib.cli.finetune`.
 
-Names are imported lazily (``from airpose_lib.finetune import finetune`` works), so the CLI can
-build its parser from ``finetune.cli`` without importing torch.
+Names are imported lazily (``from airpose_lib.finetune import finetune`` works), so importing the
+package does not import torch.
 """
 from __future__ import annotations
 

@@ -7,15 +7,16 @@ procedural stand-in; person box and crop), ``backends`` (the staged-model protoc
 ONNX Runtime or a fast fake), ``node`` (one drone: ``airpose node``), ``launcher`` (N drones on
 loopback: ``airpose launch``), ``results`` (the per-drone record stream and its readers),
 ``offline`` (the same frames computed in one process, the reference), ``edge`` (the cached,
-optionally int8-quantised ONNX export of a drone's network), ``options`` (CLI).
+optionally int8-quantised ONNX export of a drone's network). The commands (``airpose node``,
+``launch``, ``export``, ``keys``) are in :mod:`airpose_lib.cli.node`.
 
-Names are imported lazily, so ``import airpose_lib.runtime`` is cheap (the CLI builds its parser
-from ``options`` without importing ZeroMQ or torch).
+Names are imported lazily, so ``import airpose_lib.runtime`` is cheap (no ZeroMQ or torch until
+a name is used).
 """
 from __future__ import annotations
 
 from airpose_lib._lazy import lazy_namespace
 
 _MODULES = ("wire", "keys", "transport", "sync", "source", "backends", "node", "launcher", "results", "offline",
-            "edge", "options")
+            "edge")
 __getattr__, __dir__ = lazy_namespace(__name__, globals(), _MODULES)

@@ -1,6 +1,6 @@
 """Start N drone processes on loopback and collect what they report.
 
-Each drone is ``python -m airpose_lib.runtime.node`` with its own id, a free port chosen at run
+Each drone is ``python -m airpose_lib.cli.drone`` (= ``airpose node``) with its own id, a free port chosen at run
 time, the others as peers and ``--t0 stdin``: the launcher waits until every drone printed
 ``READY`` (model loaded and warmed up, sockets bound), then sends them all the same start time
 ``START <t0>`` (now + ``lead_s``). Drone logs go to ``<out>/node_<id>.log``; each drone's
@@ -24,7 +24,7 @@ from pathlib import Path
 from .keys import create_swarm_keys
 from .transport import free_ports
 
-__all__ = ["Fleet", "launch", "node_options", "LaunchError"]
+__all__ = ["Fleet", "launch", "node_options", "format_summaries", "LaunchError"]
 
 
 class LaunchError(RuntimeError):
@@ -85,7 +85,7 @@ class Fleet:
     def argv(self, drone: int, t0: str) -> list[str]:
         peers = [f"{j}@{self.host}:{p}" for j, p in sorted(self.ports.items()) if j != drone]
         peers += [f"{j}@{ep}" for j, ep in sorted(self.extra_peers.items())]
-        return [sys.executable, "-m", "airpose_lib.runtime.node", "--id", str(drone),
+        return [sys.executable, "-m", "airpose_lib.cli.drone", "--id", str(drone),
                 "--port", str(self.ports[drone]), "--host", self.host, "--peers", *peers, "--t0", t0,
                 "--clock-offset-ms", str(self.offsets.get(drone, 0.0)), "--out", str(self.out_dir),
                 *(["--keys", str(self.keys)] if self.keys is not None else []), *self.common]
@@ -208,3 +208,15 @@ def launch(num_drones: int, out_dir: str | Path, options: Mapping | Sequence[str
     if start:
         fleet.start(lead_s, ready_timeout_s)
     return fleet
+
+
+def format_summaries(summaries: dict[int, dict]) -> str:
+    """One line per drone: fps, latency, drops, bytes."""
+    rows = ["drone  slots  valid  fps    drop%  p50 ms  p95 ms  fallback  bytes/frame  rejected"]
+    for d in sorted(summaries):
+        s = summaries[d]
+        ms = (lambda x: f"{1000 * x:6.1f}" if x is not None else "     -")  # noqa: E731
+        rows.append(f"{d:<6} {s['slots']:<6} {s['valid']:<6} {s['fps']:<6.2f} {100 * (s['drop_rate'] or 0):5.1f}  "
+                    f"{ms(s['latency_p50'])}  {ms(s['latency_p95'])}  {s['fallback_frames']:<8}  "
+                    f"{s['bytes_per_frame'] or 0:<11.0f}  {json.dumps(s['rejected'])}")
+    return "\n".join(rows)

@@ -1,7 +1,7 @@
 r"""One drone: camera replay, person box, staged network, message exchange, result stream.
 
 Run as its own process (``airpose node --id 1 --port 5001 --peers 2@5002 ...`` or
-``python -m airpose_lib.runtime.node ...``; :mod:`.launcher` starts N of them on loopback).
+``python -m airpose_lib.cli.drone ...``; :mod:`.launcher` starts N of them on loopback).
 
 Per schedule slot (see :mod:`.sync`) a drone
 
@@ -46,7 +46,6 @@ from __future__ import annotations
 import json
 import logging
 import math
-import os
 import queue
 import select
 import statistics
@@ -730,21 +729,3 @@ class DroneProcess:
             "timing_median": {k: statistics.median(v) for k, v in timings.items()},
             "wall_s": self.clock.now() - t_begin,
         }
-
-
-# -- command line ---------------------------------------------------------------------------------
-def main(argv=None) -> int:
-    """``python -m airpose_lib.runtime.node`` = ``airpose node``."""
-    from airpose_lib.cli import main as cli_main  # one error policy: one line, exit status 2
-
-    return cli_main(["node", *(sys.argv[1:] if argv is None else argv)])
-
-
-if __name__ == "__main__":  # pragma: no cover
-    status = main()
-    # Everything is written and closed by now; skip the interpreter's teardown (torch's takes
-    # seconds on a loaded machine, which would hold up the launcher and a restart).
-    sys.stdout.flush()
-    sys.stderr.flush()
-    logging.shutdown()
-    os._exit(status)

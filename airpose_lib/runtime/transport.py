@@ -34,11 +34,30 @@ import zmq
 
 from .keys import SwarmKeys
 
-__all__ = ["LinkConfig", "LinkEmulator", "Transport", "free_ports", "endpoint"]
+__all__ = ["LinkConfig", "LinkEmulator", "Transport", "free_ports", "endpoint", "parse_peers"]
 
 
 def endpoint(port: int, host: str = "127.0.0.1") -> str:
     return f"tcp://{host}:{port}"
+
+
+def parse_peers(items: list[str], host: str = "127.0.0.1") -> dict[int, str]:
+    """``["2@5002", "3@127.0.0.1:5003", "4@tcp://10.0.0.4:5004"]`` -> ``{2: "tcp://127.0.0.1:5002", ...}``
+    (commas also separate)."""
+    out = {}
+    for item in items:
+        for part in filter(None, item.split(",")):
+            ident, sep, addr = part.partition("@")
+            if not sep:
+                raise ValueError(f"peer {part!r}: expected ID@PORT, ID@HOST:PORT or ID@tcp://HOST:PORT")
+            if addr.startswith("tcp://"):
+                ep = addr
+            elif ":" in addr:
+                ep = "tcp://" + addr
+            else:
+                ep = f"tcp://{host}:{int(addr)}"
+            out[int(ident)] = ep
+    return out
 
 
 def free_ports(n: int, host: str = "127.0.0.1") -> list[int]:

@@ -1,67 +1,49 @@
-"""Command-line options of ``airpose node``, ``airpose launch`` and ``airpose export`` (argparse only at import time,
-so that ``airpose --help`` stays fast; the runtime is imported by the handlers)."""
+"""``airpose node``, ``launch``, ``export`` and ``keys``: the online runtime's commands
+(:mod:`airpose_lib.runtime` does the work).
+
+A drone is started again and again (by :mod:`airpose_lib.runtime.launcher`, and a restarted drone
+must rejoin within a few frames), so this module imports only the standard library; the handlers
+import the runtime (ZeroMQ, torch or ONNX Runtime) when they run.
+"""
 from __future__ import annotations
 
 import argparse
-import json
 import math
+import sys
 import time
 from pathlib import Path
 
-from airpose_lib.paths import run_path  # a leaf module: `airpose --help` stays fast
+from airpose_lib.paths import run_path  # these two: standard library only
+from airpose_lib.process_guard import die_with_parent
+
+from .common import CLIError
 
 __all__ = [
-    "NodeOptionError",
-    "check_inputs",
-    "parse_peers",
+    "add_node",
+    "add_launch",
+    "add_export",
+    "add_keys",
     "add_node_arguments",
     "build_node_parser",
-    "add_launch_arguments",
+    "check_inputs",
     "config_from_args",
-    "run_node",
-    "run_launch",
-    "add_export_arguments",
-    "run_export",
 ]
-
-
-class NodeOptionError(ValueError):
-    """A node or launch option names something that is not there; the message names the flag."""
 
 
 def check_inputs(args: argparse.Namespace) -> None:
     """Fail before any process starts when ``--source``, ``--checkpoint`` or ``--onnx-dir`` is
     missing (their contents are checked when they are loaded)."""
     if not str(args.source).startswith("synthetic") and not Path(args.source).is_dir():
-        raise NodeOptionError(
+        raise CLIError(
             f"--source {args.source}: no such folder; give a recording folder in the official layout "
             "(machine_1/, machine_2/) or synthetic[:views=2,frames=300,...]")
     if args.checkpoint is not None and not Path(args.checkpoint).is_file():
-        raise NodeOptionError(f"--checkpoint {args.checkpoint}: no such file; give a state_dict or a "
+        raise CLIError(f"--checkpoint {args.checkpoint}: no such file; give a state_dict or a "
                               "checkpoints/*.pt of `airpose train`")
     if args.backend == "onnx" and (args.onnx_dir is None or not (Path(args.onnx_dir) / "meta.json").is_file()):
         what = "no meta.json in it" if args.onnx_dir and Path(args.onnx_dir).is_dir() else "no such folder"
-        raise NodeOptionError(f"--onnx-dir {args.onnx_dir}: {what}; give a folder written by "
+        raise CLIError(f"--onnx-dir {args.onnx_dir}: {what}; give a folder written by "
                               "airpose_lib.model.onnx_export.export_onnx")
-
-
-def parse_peers(items: list[str], host: str = "127.0.0.1") -> dict[int, str]:
-    """``["2@5002", "3@127.0.0.1:5003", "4@tcp://10.0.0.4:5004"]`` -> ``{2: "tcp://127.0.0.1:5002", ...}``
-    (commas also separate)."""
-    out = {}
-    for item in items:
-        for part in filter(None, item.split(",")):
-            ident, sep, addr = part.partition("@")
-            if not sep:
-                raise ValueError(f"peer {part!r}: expected ID@PORT, ID@HOST:PORT or ID@tcp://HOST:PORT")
-            if addr.startswith("tcp://"):
-                ep = addr
-            elif ":" in addr:
-                ep = "tcp://" + addr
-            else:
-                ep = f"tcp://{host}:{int(addr)}"
-            out[int(ident)] = ep
-    return out
 
 
 def add_node_arguments(p: argparse.ArgumentParser) -> None:
@@ -148,9 +130,9 @@ def config_from_args(args: argparse.Namespace, drone_id: int, port: int, peers: 
                      t0: float | None, clock_offset_ms: float = 0.0, host: str = "127.0.0.1",
                      view: int | None = None):
     """A :class:`~.node.NodeConfig` from parsed options."""
-    from .backends import BackendSpec
-    from .node import NodeConfig
-    from .transport import LinkConfig
+    from airpose_lib.runtime.backends import BackendSpec
+    from airpose_lib.runtime.node import NodeConfig
+    from airpose_lib.runtime.transport import LinkConfig
 
     backend = BackendSpec(kind=args.backend, variant=args.variant, backbone=args.backbone,
                           input_size=args.input_size, seed=args.seed, checkpoint=args.checkpoint,
@@ -172,9 +154,8 @@ def config_from_args(args: argparse.Namespace, drone_id: int, port: int, peers: 
 
 def run_node(args: argparse.Namespace) -> int:
     """Handler of ``airpose node``."""
-    from airpose_lib.process_guard import die_with_parent
-
-    from .node import DroneProcess
+    from airpose_lib.runtime.node import DroneProcess
+    from airpose_lib.runtime.transport import parse_peers
 
     check_inputs(args)
     if args.t0 == "stdin":  # started by a launcher: never outlive it
@@ -206,7 +187,7 @@ def add_launch_arguments(p: argparse.ArgumentParser) -> None:
 
 def run_launch(args: argparse.Namespace) -> int:
     """Handler of ``airpose launch``: start the drones on loopback, wait, print their summaries."""
-    from .launcher import launch
+    from airpose_lib.runtime.launcher import format_summaries, launch
 
     check_inputs(args)
     # Every node option that differs from its default is passed on to the drones.
@@ -228,18 +209,6 @@ def add_node_defaults() -> argparse.Namespace:
     p = argparse.ArgumentParser(add_help=False)
     add_node_arguments(p)
     return p.parse_args([])
-
-
-def format_summaries(summaries: dict[int, dict]) -> str:
-    """One line per drone: fps, latency, drops, bytes."""
-    rows = ["drone  slots  valid  fps    drop%  p50 ms  p95 ms  fallback  bytes/frame  rejected"]
-    for d in sorted(summaries):
-        s = summaries[d]
-        ms = (lambda x: f"{1000 * x:6.1f}" if x is not None else "     -")  # noqa: E731
-        rows.append(f"{d:<6} {s['slots']:<6} {s['valid']:<6} {s['fps']:<6.2f} {100 * (s['drop_rate'] or 0):5.1f}  "
-                    f"{ms(s['latency_p50'])}  {ms(s['latency_p95'])}  {s['fallback_frames']:<8}  "
-                    f"{s['bytes_per_frame'] or 0:<11.0f}  {json.dumps(s['rejected'])}")
-    return "\n".join(rows)
 
 
 # -- export ------------------------------------------------------------------------------------
@@ -269,10 +238,7 @@ def add_export_arguments(p: argparse.ArgumentParser) -> None:
 
 def run_export(args: argparse.Namespace) -> int:
     """Handler of ``airpose export``: prints the export folder (use it as --onnx-dir)."""
-    import sys
-    from pathlib import Path
-
-    from .backends import BackendSpec
+    from airpose_lib.runtime.backends import BackendSpec
 
     if args.checkpoint and not Path(args.checkpoint).is_file():
         print(f"airpose export: error: no checkpoint at {args.checkpoint} (pass a checkpoints/*.pt of "
@@ -284,8 +250,7 @@ def run_export(args: argparse.Namespace) -> int:
         return 2
     from airpose_lib.data.manifest import DatasetError
     from airpose_lib.model.quantize import QuantSettings
-
-    from .edge import ensure_export
+    from airpose_lib.runtime.edge import ensure_export
 
     precision = "int8" if args.quantize == "int8" else "fp32"
     spec = BackendSpec(kind="onnx-int8" if precision == "int8" else "onnx", variant=args.variant,
@@ -301,3 +266,57 @@ def run_export(args: argparse.Namespace) -> int:
         return 2
     print(folder)
     return 0
+
+
+# -- the subcommands -----------------------------------------------------------------------------
+def add_node(sub) -> None:
+    node = sub.add_parser(
+        "node", help="run one drone of the online runtime (one process per drone)",
+        description="One drone: replays its camera of a sequence in real time, runs the staged "
+                    "network and exchanges the 136-number messages with the other drones over "
+                    "ZeroMQ (fixed 240 ms windows as the paper, or pipelined). Writes "
+                    "<out>/node_<id>.{jsonl,npz,summary.json}.")
+    build_node_parser(node)
+    node.set_defaults(func=run_node)
+
+
+def add_launch(sub) -> None:
+    launch = sub.add_parser(
+        "launch", help="start N drone processes on loopback and print what they achieved",
+        description="Start --drones drone processes (airpose node) on 127.0.0.1 with free ports and a "
+                    "common start time, wait for them and print fps, latency, drops and bytes per drone.")
+    add_launch_arguments(launch)
+    launch.set_defaults(func=run_launch)
+
+
+def add_export(sub) -> None:
+    export = sub.add_parser(
+        "export", help="export a network's drone stages to ONNX (optionally int8), cached",
+        description="Export stage 1 and stages 2+ of a network to ONNX, and with --quantize int8 a "
+                    "statically quantised stage 1 calibrated on the kit's still-frame crops, into "
+                    "<cache>/onnx/<name>-<key>/ keyed by the checkpoint's bytes, the calibration crops "
+                    "and the settings (reused when they match). Prints the folder, for "
+                    "`airpose node --backend onnx|onnx-int8 --onnx-dir DIR`.")
+    add_export_arguments(export)
+    export.set_defaults(func=run_export)
+
+
+def _cmd_keys(args: argparse.Namespace) -> int:
+    from airpose_lib.runtime.keys import create_swarm_keys
+
+    folder = create_swarm_keys(args.out, range(1, args.drones + 1), force=args.force)
+    print(f"CURVE keys of drones 1..{args.drones} in {folder}: give drone d its drone_<d>.key_secret and "
+          f"every drone_<j>.key, then `airpose node --keys DIR` (or AIRPOSE_SWARM_KEYS=DIR)")
+    return 0
+
+
+def add_keys(sub) -> None:
+    keys = sub.add_parser(
+        "keys", help="make the CurveZMQ keys of a drone swarm (for `airpose node --keys`)",
+        description="Make one CURVE key pair per drone (drone_<d>.key public, drone_<d>.key_secret "
+                    "secret) in a folder of mode 0700. `airpose launch` makes its own for a loopback "
+                    "swarm; this is for drones started by hand or on several machines.")
+    keys.add_argument("--drones", type=int, required=True, help="drones 1..N")
+    keys.add_argument("--out", type=Path, required=True, help="keys folder")
+    keys.add_argument("--force", action="store_true", help="replace existing key pairs")
+    keys.set_defaults(func=_cmd_keys)

@@ -1,44 +1,32 @@
-"""``airpose finetune`` and ``airpose predict``: builders registered by :mod:`airpose_lib.cli`.
-
-Only argparse and pathlib are imported at module level (``airpose --help`` stays fast, and this
-module may be imported while ``airpose_lib.cli`` is still initialising); the handlers import the
-kit, ``CLIError`` included, when they run.
-"""
+"""``airpose finetune`` and ``airpose predict``: fine-tuning on a recording's 2D detections and
+running a network over a recording (:mod:`airpose_lib.finetune` does the work)."""
 from __future__ import annotations
 
 import argparse
 from pathlib import Path
 
-__all__ = ["_add_finetune", "_add_predict"]
+from .common import (PROFILES, SEQUENCE_FOLDER, CLIError, parse_range, parse_sets, require_file, require_folder,
+                     require_path)
 
+__all__ = ["add_finetune", "add_predict"]
 
-def _profiles() -> tuple[str, ...]:
-    folder = Path(__file__).resolve().parents[1] / "reproduce" / "profiles"
-    return tuple(sorted(p.stem for p in folder.glob("*.yaml"))) or ("smoke", "cpu", "paper")
-
-
-def _frame_range(text: str | None) -> tuple[int | None, int | None] | None:
-    """``"START:STOP"`` (either side may be empty) -> image-number range ``[START, STOP)``."""
-    from airpose_lib.cli import parse_range
-
-    return parse_range(text)
+# Handlers import the library when they run, never at module level: the whole parser is built
+# on every call (``airpose --help``, a drone's start-up) and must not import torch.
 
 
 # -- finetune -------------------------------------------------------------------------------------
 def _cmd_finetune(args: argparse.Namespace) -> int:
-    from airpose_lib.cli import SEQUENCE_FOLDER, CLIError, _parse_sets, require_file, require_folder, require_path
     from airpose_lib.finetune.loss import FineTuneLossConfig
     from airpose_lib.finetune.train import FineTuneConfig, finetune, finetune_config
-    from airpose_lib.prior import PriorError
 
-    overrides = _parse_sets(args.set, FineTuneConfig, {"loss": FineTuneLossConfig})
+    overrides = parse_sets(args.set, FineTuneConfig, {"loss": FineTuneLossConfig})
     for name, field in (("steps", "steps"), ("batch_size", "batch_size"), ("seed", "seed"), ("threads", "num_threads"),
                         ("prior", "prior"), ("input_size", "input_size"), ("device", "device")):
         if getattr(args, name) is not None:
             overrides[field] = getattr(args, name)
     if args.prior_path is not None:
         overrides["prior_path"] = str(args.prior_path)
-    frames = _frame_range(args.frames)
+    frames = parse_range(args.frames)
     if frames is not None:
         if None in frames:
             raise CLIError("--frames for fine-tuning needs both ends, e.g. 0:7000")
@@ -72,7 +60,7 @@ def _cmd_finetune(args: argparse.Namespace) -> int:
     return 0
 
 
-def _add_finetune(sub) -> None:
+def add_finetune(sub) -> None:
     """``airpose finetune``: add the parser to the subcommand group ``sub``."""
     ft = sub.add_parser(
         "finetune", help="fine-tune a trained network on a recording's 2D detections",
@@ -86,7 +74,7 @@ def _add_finetune(sub) -> None:
     ft.add_argument("--checkpoint", type=Path, required=True, help="a checkpoints/*.pt of `airpose train`")
     ft.add_argument("--sequence", type=Path, required=True, help="recording folder (official layout)")
     ft.add_argument("--out", type=Path, required=True, help="run folder")
-    ft.add_argument("--profile", choices=_profiles(), default="smoke",
+    ft.add_argument("--profile", choices=PROFILES, default="smoke",
                     help="sizes from the profile's `finetune:` section; defaults where it has none (default: smoke)")
     ft.add_argument("--frames", default=None, metavar="START:STOP",
                     help="train on the images numbered START..STOP-1 (paper: 0:7000); default: the profile's or all")
@@ -112,7 +100,6 @@ def _add_finetune(sub) -> None:
 
 # -- predict --------------------------------------------------------------------------------------
 def _cmd_predict(args: argparse.Namespace) -> int:
-    from airpose_lib.cli import SEQUENCE_FOLDER, CLIError, require_file, require_folder
     from airpose_lib.data.official_layout import load_sequence
     from airpose_lib.finetune.network import load_network
     from airpose_lib.finetune.predict import frames_in_range, predict_sequence, save_predictions
@@ -125,7 +112,7 @@ def _cmd_predict(args: argparse.Namespace) -> int:
             import torch
 
             torch.set_num_threads(args.threads)
-        rng = _frame_range(args.frames)
+        rng = parse_range(args.frames)
         frames = None if rng is None else frames_in_range(args.sequence, *rng)
         seq = load_sequence(args.sequence, frames=frames, detectors=(args.detector,), ground_truth=False,
                             missing_detections="zero" if args.allow_missing_detections else "error")
@@ -142,7 +129,7 @@ def _cmd_predict(args: argparse.Namespace) -> int:
     return 0
 
 
-def _add_predict(sub) -> None:
+def add_predict(sub) -> None:
     """``airpose predict``: add the parser to the subcommand group ``sub``."""
     pr = sub.add_parser(
         "predict", help="run a network over a recording, write per-view parameters (.npz)",

@@ -1,20 +1,24 @@
-"""``airpose data list | verify NAME | fetch NAME``: the asset subcommands of ``airpose data``.
+"""``airpose data list | verify NAME | fetch NAME``: the asset subcommands of ``airpose data``
+over :mod:`airpose_lib.assets`.
 
-:func:`add_asset_commands` adds them to the ``airpose data`` sub-parser group built in
-:mod:`airpose_lib.cli`. Errors are raised as that module's ``CLIError`` (printed without a
-traceback, exit status 2); ``verify`` exits with 1 when the asset is not complete.
+:func:`add_asset_commands` adds them to the ``airpose data`` sub-parser group of :mod:`.data`.
+Errors are raised as :class:`~.common.CLIError` (printed without a traceback, exit status 2);
+``verify`` and ``fetch`` exit with 1 when the asset is not complete.
 """
 from __future__ import annotations
 
 import argparse
 from pathlib import Path
 
+from .common import CLIError
+
 __all__ = ["add_asset_commands"]
+
+# Handlers import the library when they run (as every command group: the parser is built on
+# every call and stays free of the libraries' imports).
 
 
 def _cli_error(exc: Exception) -> Exception:
-    from airpose_lib.cli import CLIError
-
     return CLIError(str(exc))
 
 
@@ -27,9 +31,9 @@ def _how(manifest) -> str:
 
 
 def _cmd_list(args: argparse.Namespace) -> int:
-    from .locate import locate
-    from .manifest import AssetError, list_manifests
-    from .verify import verify
+    from airpose_lib.assets.locate import locate
+    from airpose_lib.assets.manifest import AssetError, list_manifests
+    from airpose_lib.assets.verify import verify
 
     try:
         manifests = list_manifests()
@@ -54,8 +58,8 @@ def _cmd_list(args: argparse.Namespace) -> int:
 
 
 def _cmd_verify(args: argparse.Namespace) -> int:
-    from .manifest import AssetError
-    from .verify import verify
+    from airpose_lib.assets.manifest import AssetError
+    from airpose_lib.assets.verify import verify
 
     try:
         report = verify(args.name, root=args.root, checksums=not args.no_checksums)
@@ -66,8 +70,8 @@ def _cmd_verify(args: argparse.Namespace) -> int:
 
 
 def _cmd_fetch(args: argparse.Namespace) -> int:
-    from .fetch import fetch
-    from .manifest import AssetError
+    from airpose_lib.assets.fetch import fetch
+    from airpose_lib.assets.manifest import AssetError
 
     try:
         report = fetch(args.name, root=args.root, base_url=args.base_url, progress=not args.quiet,

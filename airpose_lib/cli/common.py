@@ -1,0 +1,206 @@
+"""What every command group of ``airpose`` shares: the user-error type and policy, path and range
+checks, ``--set KEY=VALUE`` parsing, and the choices of common flags.
+
+Only the standard library and pathlib at import time: the parser is built from these on every
+``airpose`` call, ``--help`` included (yaml is imported when ``--set`` is parsed).
+"""
+from __future__ import annotations
+
+import dataclasses
+import difflib
+import errno
+import sys
+import types
+import typing
+from pathlib import Path
+
+__all__ = [
+    "CLIError", "EXIT_USER_ERROR", "GENDERS", "PROFILES", "SEQUENCE_FOLDER", "VARIANTS", "parse_range",
+    "parse_sets", "require_file", "require_folder", "require_path", "user_error_message",
+]
+
+GENDERS = ("neutral", "male", "female")
+VARIANTS = ("baseline", "multiview", "fullcam", "airpose")
+# Profile names from the files, without importing the runner (papermill is slow to import).
+PROFILES = tuple(sorted(p.stem for p in (Path(__file__).parents[1] / "reproduce" / "profiles").glob("*.yaml"))
+                 ) or ("smoke", "cpu", "paper")
+SEQUENCE_FOLDER = "a recording folder in the official layout (machine_1/, machine_2/ with openpose_res.pkl)"
+
+EXIT_USER_ERROR = 2  # as argparse for a bad flag: the user can fix it
+
+
+class CLIError(Exception):
+    """A user-facing error: printed on one line without a traceback, exit status 2."""
+
+
+# Kit exceptions that carry a message for the user (which file, what is wrong, the fix); checked
+# through sys.modules so that an error path never imports torch. Any other exception is a bug in
+# the kit and keeps its traceback.
+_USER_ERRORS = (
+    "airpose_lib.errors:DamagedFileError",
+    "airpose_lib.folder_lock:FolderBusyError",
+    "airpose_lib.assets.manifest:AssetError",
+    "airpose_lib.body.loader:BodyModelError",
+    "airpose_lib.data.manifest:DatasetError",
+    "airpose_lib.data.official_layout:SequenceFormatError",
+    "airpose_lib.finetune.predict:PredictionFormatError",
+    "airpose_lib.model.official:OfficialCheckpointError",
+    "airpose_lib.prior.checkpoint:PriorError",
+    "airpose_lib.reproduce.runner:ReproductionError",
+    "airpose_lib.runtime.launcher:LaunchError",
+    "airpose_lib.runtime.keys:SwarmKeyError",
+)
+
+# errno -> how to fix an OSError about a path the user gave.
+_OS_FIXES = {
+    errno.ENOENT: "no such file or folder; check the path",
+    errno.ENOTDIR: "a part of the path is a file, not a folder; check the path",
+    errno.EISDIR: "is a folder where a file was expected; give a file",
+    errno.EACCES: "permission denied; choose a place you can read/write (e.g. another --out) or fix its permissions",
+    errno.EPERM: "operation not permitted; choose another place (e.g. another --out) or fix its permissions",
+    errno.EROFS: "read-only file system; choose another place (e.g. another --out)",
+    errno.ENOSPC: "no space left on the device; free some space or choose another --out",
+    errno.EEXIST: "already exists; remove it or choose another path",
+    errno.ENAMETOOLONG: "name too long; choose a shorter path",
+}
+
+
+def user_error_message(exc: BaseException) -> str | None:
+    """The one-line message for an error the user can fix, None for anything else (a bug)."""
+    if isinstance(exc, CLIError) or any(
+            isinstance(exc, cls) for cls in (_class(spec) for spec in _USER_ERRORS) if cls is not None):
+        return " ".join(str(exc).split()) or type(exc).__name__
+    if isinstance(exc, OSError) and exc.filename is not None and exc.errno in _OS_FIXES:
+        return f"{exc.filename}: {_OS_FIXES[exc.errno]}"
+    if isinstance(exc, FileNotFoundError):  # raised by the kit with its own message
+        return " ".join(str(exc).split())
+    return None
+
+
+def _class(spec: str) -> type | None:
+    module, _, name = spec.partition(":")
+    return getattr(sys.modules.get(module), name, None)
+
+
+def parse_range(text: str | None, what: str = "image numbers",
+                example: str = "0:7000") -> tuple[int | None, int | None] | None:
+    """``--frames START:STOP`` (either side may be empty) -> ``(START, STOP)``; None if not given."""
+    if not text:
+        return None
+    start, sep, stop = text.partition(":")
+    try:
+        if not sep:
+            raise ValueError
+        return (int(start) if start else None, int(stop) if stop else None)
+    except ValueError:
+        raise CLIError(f"--frames expects START:STOP {what} (e.g. {example}), got {text!r}") from None
+
+
+def require_file(path: Path | str | None, flag: str, what: str) -> Path | None:
+    """``path`` (None passes) if it is an existing file, else a :class:`CLIError` naming the flag."""
+    if path is None:
+        return None
+    p = Path(path)
+    if p.is_dir():
+        raise CLIError(f"{flag} {p} is a folder; give {what}")
+    if not p.is_file():
+        raise CLIError(f"{flag} {p}: no such file; give {what}")
+    return p
+
+
+def require_folder(path: Path | str | None, flag: str, what: str) -> Path | None:
+    """``path`` (None passes) if it is an existing folder, else a :class:`CLIError` naming the flag."""
+    if path is None:
+        return None
+    p = Path(path)
+    if not p.is_dir():
+        raise CLIError(f"{flag} {p}: {'not a folder' if p.exists() else 'no such folder'}; give {what}")
+    return p
+
+
+def require_path(path: Path | str | None, flag: str, what: str) -> Path | None:
+    """``path`` (None passes) if it exists (file or folder), else a :class:`CLIError` naming the flag."""
+    if path is not None and not Path(path).exists():
+        raise CLIError(f"{flag} {path}: no such file or folder; give {what}")
+    return None if path is None else Path(path)
+
+
+def _type_name(tp) -> str:
+    return getattr(tp, "__name__", str(tp).replace("typing.", ""))
+
+
+def _check_value(item: str, value, annotation) -> object:
+    """``value`` if it fits the field type ``annotation`` (ints widen to floats), else CLIError."""
+    options = typing.get_args(annotation) if typing.get_origin(annotation) in (typing.Union, types.UnionType) \
+        else (annotation,)
+    if value is None and type(None) in options:
+        return None
+    for tp in options:
+        base = typing.get_origin(tp) or tp
+        if base is typing.Any:
+            return value
+        if base is float and isinstance(value, (int, float)) and not isinstance(value, bool):
+            return float(value)
+        if base is int and isinstance(value, int) and not isinstance(value, bool):
+            return value
+        if base in (bool, str, dict, list) and isinstance(value, base):
+            return value
+        if base is tuple and isinstance(value, list):
+            return tuple(value)
+    wanted = " or ".join(_type_name(t) for t in options)
+    raise CLIError(f"--set {item}: expected {wanted}, got {value!r} ({type(value).__name__})")
+
+
+def parse_sets(items, config_cls=None, nested: dict | None = None) -> dict:
+    """``KEY=VALUE`` pairs -> ``{key: value}`` (VALUE parsed as YAML; ``loss.w_V=10`` sets a key of a
+    dict field, returned as ``{"loss": {"w_V": 10.0}}``).
+
+    With ``config_cls`` (a dataclass) every key must be one of its fields and every value must fit
+    the field's type; ``nested`` maps a dict field to the dataclass its keys belong to (``{"loss":
+    LossConfig}``), whose fields and types check the dotted keys. A bad key or value is a one-line
+    :class:`CLIError` naming it, the expected type and, for a typo, the closest key.
+    """
+    import yaml  # only when --set is given: the parser is built on every call, --help included
+
+    def fields_of(cls) -> dict:
+        hints = typing.get_type_hints(cls)
+        return {f.name: hints.get(f.name, typing.Any) for f in dataclasses.fields(cls)}
+
+    def unknown(item: str, key: str, known: dict, where: str) -> CLIError:
+        close = difflib.get_close_matches(key, list(known), n=1)
+        hint = f"; did you mean {close[0]!r}?" if close else f"; known: {', '.join(sorted(known))}"
+        return CLIError(f"--set {item}: unknown key {key!r} of {where}{hint}")
+
+    top = fields_of(config_cls) if config_cls is not None else None
+    out: dict = {}
+    for item in items or ():
+        key, sep, value = item.partition("=")
+        if not sep or not key:
+            raise CLIError(f"--set expects KEY=VALUE, got {item!r}")
+        try:
+            parsed = yaml.safe_load(value) if value else None
+        except yaml.YAMLError:
+            parsed = value  # not YAML: keep the text, the type check below decides
+        if isinstance(parsed, str):  # YAML 1.1 reads "1e-4" as a string
+            try:
+                parsed = float(parsed)
+            except ValueError:
+                pass
+        field_name, dot, sub = key.partition(".")
+        if top is not None:
+            if field_name not in top:
+                raise unknown(item, field_name, top, config_cls.__name__)
+            if not dot:
+                parsed = _check_value(item, parsed, top[field_name])
+            elif typing.get_origin(top[field_name]) not in (dict,) and top[field_name] is not dict:
+                raise CLIError(f"--set {item}: {field_name!r} is not a dict option; write {field_name}=VALUE")
+            elif nested and field_name in nested:
+                sub_fields = fields_of(nested[field_name])
+                if sub not in sub_fields:
+                    raise unknown(item, sub, sub_fields, f"{field_name} ({nested[field_name].__name__})")
+                parsed = _check_value(item, parsed, sub_fields[sub])
+        if dot:
+            out.setdefault(field_name, {})[sub] = parsed
+        else:
+            out[key] = parsed
+    return out

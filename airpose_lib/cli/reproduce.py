@@ -1,0 +1,95 @@
+"""``airpose reproduce``: run the notebooks of a profile and check notebook 02's table against
+``results/<profile>/``."""
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from .common import PROFILES, CLIError
+
+__all__ = ['add_reproduce']
+
+# Handlers import the library when they run, never at module level: the whole parser is built
+# on every call (``airpose --help``, a drone's start-up) and must not import torch, ZeroMQ,
+# smplx or papermill.
+
+
+def _cmd_reproduce(args: argparse.Namespace) -> int:
+    from airpose_lib.reproduce import ReproductionError, load_catalog, load_profile, run_profile
+
+    if args.list:
+        prof = load_profile(args.profile)
+        print(f"profile {prof['name']}: {prof['description']}")
+        for entry in load_catalog():
+            params = prof["notebooks"].get(entry.name, {})
+            print(f"  {entry.name:<24} {entry.file:<28} {params}")
+        return 0
+    try:
+        report = run_profile(args.profile, only=args.only, out_dir=args.out, figures_dir=args.figures,
+                             kernel_name=args.kernel, keep_going=args.keep_going,
+                             log_output=args.log_output and not args.quiet, verbose=not args.quiet,
+                             data_source=args.data_source)
+    except ReproductionError as e:
+        raise CLIError(str(e)) from None
+    if not report.ok:
+        print(f"\nreproduction FAILED (report: {report.run_dir}/report.json)", file=sys.stderr)
+        print(report.failure_message(), file=sys.stderr)
+        return 1
+    if args.quiet:
+        print(report.figures_dir)
+    else:
+        print(f"figures collected in {report.figures_dir}")
+    _check_reference(report, args.write_reference)
+    return 0
+
+
+def _check_reference(report, write: bool) -> None:
+    """After notebook 02: its Table I bundle against ``results/<profile>/``, or installed there
+    with ``--write-reference``. Here, not in the runner: the runner imports nothing of the kit."""
+    from airpose_lib.eval.reference import reference_report
+
+    nb = next((r for r in report.results if r.name == "02_ablation_table" and r.status == "ok"), None)
+    if nb is None:
+        if write:
+            raise CLIError("--write-reference: notebook 02_ablation_table did not run; add --only 02_ablation_table")
+        return
+    msg = reference_report(Path(nb.parameters["output_dir"]) / "results", report.profile, write=write,
+                           command=" ".join(["airpose", *sys.argv[1:]]))
+    if msg:
+        print(msg)
+
+
+def add_reproduce(sub) -> None:
+    rep = sub.add_parser(
+        "reproduce", help="run the notebooks with a profile and collect the figures",
+        description="Execute the catalogued notebooks (notebooks/NN_*.ipynb) in order with papermill, "
+                    "with the sizes of a profile, write the executed notebooks to "
+                    "<out>/<profile>/notebooks/ and collect the figures into <figures>. Fails "
+                    "(exit 1) if a notebook raises or an expected figure is missing.")
+    rep.add_argument("--profile", choices=PROFILES, default="smoke",
+                     help="smoke: minutes on a CPU; cpu: hours on a CPU; paper: the paper's sizes "
+                          "(GPU); the sizes are in airpose_lib/reproduce/profiles/ (default: smoke)")
+    rep.add_argument("--only", nargs="+", metavar="NAME",
+                     help="run only these notebooks (names or unique prefixes, e.g. 00_body_model or 00)")
+    rep.add_argument("--out", type=Path, default=None,
+                     help="run folder (default: $AIRPOSE_RUNS, else runs/ at the checkout root; training "
+                          "runs of `airpose train` are found there too)")
+    rep.add_argument("--figures", type=Path, default=None,
+                     help="where figures are collected (default: figures/<profile>/ at the checkout root)")
+    rep.add_argument("--data-source", choices=("generated", "official"), default=None,
+                     help="data_source of every notebook that takes one (official: the official assets, "
+                          "see `airpose data list`); a profile's per-notebook data_source wins "
+                          "(default: each notebook's, generated)")
+    rep.add_argument("--kernel", default="python3", help="Jupyter kernel name (default: python3)")
+    rep.add_argument("--keep-going", action="store_true",
+                     help="run the remaining notebooks after a failure")
+    rep.add_argument("--log-output", action="store_true", help="stream the notebooks' cell output")
+    rep.add_argument("--list", action="store_true",
+                     help="list the notebooks and the profile's parameters, run nothing")
+    rep.add_argument("--quiet", action="store_true",
+                     help="print only failures and where the figures are (no per-notebook lines or table)")
+    rep.add_argument("--write-reference", action="store_true",
+                     help="store notebook 02's Table I files as the reference in results/<profile>/ "
+                          "(default: only compare with it)")
+    rep.set_defaults(func=_cmd_reproduce)

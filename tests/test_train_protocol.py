@@ -13,8 +13,8 @@ from torch import nn
 from airpose_lib.eval.tables import per_view_table
 from airpose_lib.geometry import axis_angle_to_matrix, matrix_to_rot6d, project_points
 from airpose_lib.losses import BaselineLossConfig, PaperBody, SupervisedLoss
-from airpose_lib.losses.pretrain import PretrainLoss
-from airpose_lib.model.pretrain import PretrainNet, heading_bin, heading_of
+from airpose_lib.losses.pretrain import PretrainLoss, heading_bin, heading_of
+from airpose_lib.model.pretrain import PretrainNet
 from airpose_lib.train.evaluate import predict
 from airpose_lib.train.features import feature_key
 from airpose_lib.train.loop import MIN_WEAK_SCALE, _supervised_terms

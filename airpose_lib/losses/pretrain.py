@@ -3,7 +3,7 @@
 Every term compares one head with the sample's ground truth, per crop (the views of a sample are
 independent crops here; nothing couples them):
 
-``heading``  cross-entropy of the heading class (:func:`airpose_lib.model.pretrain.heading_bin`)
+``heading``  cross-entropy of the heading class (:func:`heading_bin`)
 ``phi``      ``||R(phi6d) - phi||^2`` on rotation matrices (mean over entries)
 ``theta``    ``||R(theta6d) - theta||^2`` on the 21 body rotations
 ``beta``     ``||beta - beta_gt||^2``
@@ -15,6 +15,7 @@ is favoured by the starting point they share.
 """
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from dataclasses import asdict, dataclass
 
@@ -26,7 +27,29 @@ from airpose_lib.geometry import axis_angle_to_matrix, full_to_crop_pixels, rot6
 
 from .supervised import SupervisedLoss
 
-__all__ = ["PretrainLossConfig", "PretrainLoss"]
+__all__ = ["PretrainLossConfig", "PretrainLoss", "heading_of", "heading_bin"]
+
+
+# The targets of the heading head: defined here, with the objective that trains it (the network
+# only knows how many classes it has).
+def heading_of(phi: Tensor) -> Tensor:
+    """Heading of the body in the camera, radians in ``(-pi, pi]``.
+
+    Args:
+        phi: ``(..., 3, 3)`` root rotation (model -> camera); the model faces +Z.
+
+    Returns:
+        ``(...)`` azimuth of the body's forward axis ``phi[:, :, 2]`` in the camera's x-z plane
+        (0: facing away from the camera, pi: facing it).
+    """
+    forward = phi[..., :, 2]
+    return torch.atan2(forward[..., 0], forward[..., 2])
+
+
+def heading_bin(phi: Tensor, n_bins: int) -> Tensor:
+    """Class index ``(...)`` int64 of :func:`heading_of` in ``n_bins`` equal bins of ``(-pi, pi]``."""
+    h = heading_of(phi)
+    return torch.floor((h + math.pi) / (2 * math.pi) * n_bins).long().clamp_(0, n_bins - 1)
 
 
 @dataclass(frozen=True)
@@ -71,8 +94,6 @@ class PretrainLoss(nn.Module):
                 ``j2d (B, V, 22, 2)``, ``bbox (B, V, 4)``, ``images (B, V, 3, S, S)``.
             n_bins: heading classes.
         """
-        from airpose_lib.model.pretrain import heading_bin
-
         c = self.config
         B, V = batch["phi"].shape[:2]
         S = batch["images"].shape[-1]

@@ -11,7 +11,8 @@ Heads on the feature ``f (N, C)``:
 
 ==============  ==============  =================================================================
 ``heading``     (N, n_bins)     the body's heading in the camera (azimuth of the body's forward
-                                axis in the camera's x-z plane) as classes: a classification does
+                                axis in the camera's x-z plane) as classes
+                                (:func:`airpose_lib.losses.pretrain.heading_bin`): a classification does
                                 not average the front and back modes of a small, ambiguous
                                 person the way a mean-squared rotation regression does
 ``phi6d``       (N, 6)          root rotation in the camera (6D, first two columns of R)
@@ -30,32 +31,12 @@ from torch import Tensor, nn
 
 from .backbone import ResNet, build_backbone
 
-__all__ = ["PretrainNet", "heading_of", "heading_bin", "PRETRAIN_HEADS"]
+__all__ = ["PretrainNet", "PRETRAIN_HEADS"]
 
 #: Output widths of the linear heads (besides ``heading``, whose width is the number of bins).
 PRETRAIN_HEADS: dict[str, tuple[int, ...]] = {
     "phi6d": (6,), "theta6d": (21, 6), "beta": (10,), "j3d": (22, 3), "j2d": (22, 2),
 }
-
-
-def heading_of(phi: Tensor) -> Tensor:
-    """Heading of the body in the camera, radians in ``(-pi, pi]``.
-
-    Args:
-        phi: ``(..., 3, 3)`` root rotation (model -> camera); the model faces +Z.
-
-    Returns:
-        ``(...)`` azimuth of the body's forward axis ``phi[:, :, 2]`` in the camera's x-z plane
-        (0: facing away from the camera, pi: facing it).
-    """
-    forward = phi[..., :, 2]
-    return torch.atan2(forward[..., 0], forward[..., 2])
-
-
-def heading_bin(phi: Tensor, n_bins: int) -> Tensor:
-    """Class index ``(...)`` int64 of :func:`heading_of` in ``n_bins`` equal bins of ``(-pi, pi]``."""
-    h = heading_of(phi)
-    return torch.floor((h + math.pi) / (2 * math.pi) * n_bins).long().clamp_(0, n_bins - 1)
 
 
 class PretrainNet(nn.Module):

@@ -30,7 +30,7 @@ from airpose_lib.data.dataset import StillFrameDataset
 from airpose_lib.data.shards import sha256_file
 from airpose_lib.eval.metrics import rotation_error
 from airpose_lib.geometry import rot6d_to_matrix
-from airpose_lib.model.pretrain import heading_bin
+from airpose_lib.losses.pretrain import heading_bin
 from airpose_lib.paths import run_path
 
 from .checkpoint import kit_version, load_checkpoint

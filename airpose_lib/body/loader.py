@@ -14,7 +14,10 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from airpose_lib.assets import locate
+
 from .joint_sets import EXTRA_JOINT_NAMES
+from .open_model import build_open_model, open_model_path
 
 SMPLX_REGISTRATION_URL = "https://smpl-x.is.tue.mpg.de"
 SMPLX_FILES = {g: f"SMPLX_{g.upper()}.npz" for g in ("neutral", "male", "female")}
@@ -37,8 +40,6 @@ def smplx_dir() -> Path | None:
 def _located(asset: str) -> Path | None:
     """An existing folder for ``asset`` from data_manifests/ + the asset config (None if none)."""
     try:
-        from airpose_lib.assets import locate
-
         path = locate(asset).path
     except Exception:  # no manifests folder (non-editable install) or an unreadable config
         return None
@@ -57,8 +58,6 @@ def resolve_model_file(source: str = "open", gender: str = "neutral", build: boo
     if gender not in SMPLX_FILES:
         raise ValueError(f"gender must be one of {tuple(SMPLX_FILES)}, got {gender!r}")
     if source == "open":
-        from .open_model import build_open_model, open_model_path
-
         path = open_model_path(gender)
         if not path.exists() and build:
             path = build_open_model(genders=(gender,))[gender]

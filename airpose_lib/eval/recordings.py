@@ -25,6 +25,7 @@ import pandas as pd
 import torch
 
 from airpose_lib.geometry import relative_camera_pose
+from airpose_lib.model.smplx_params import posed_joints_and_vertices
 
 from . import metrics as M
 
@@ -106,8 +107,6 @@ def body_joints(params: Mapping, body_model, chunk: int = 4096) -> np.ndarray:
     Returns:
         ``(F, V, 22, 3)`` joints in metres.
     """
-    from airpose_lib.model.smplx_params import posed_joints_and_vertices
-
     p = per_view_params(params)
     F, V = p["phi"].shape[:2]
     dtype = body_model.v_template.dtype

@@ -35,6 +35,7 @@ from pathlib import Path
 import nbformat
 import yaml
 
+from airpose_lib import __version__  # the package root holds only the version
 from airpose_lib.paths import figures_root, runs_root
 
 __all__ = [
@@ -332,8 +333,6 @@ def _socket_dir() -> Path:
 
 
 def _kit_version() -> str:
-    from airpose_lib import __version__  # the package root imports nothing else of the kit
-
     return __version__
 
 

@@ -15,7 +15,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from .backends import BackendSpec, StageModel, fresh_copy, make_stage_model, to_numpy
+from .backends import BackendSpec, StageModel, build_torch_model, fresh_copy, make_stage_model, to_numpy
 from .results import PARAM_KEYS, mask_to_ids
 from .source import crop_input, open_source, person_box
 
@@ -107,8 +107,6 @@ def offline_batched(model, crops: np.ndarray, P: np.ndarray) -> dict[str, np.nda
         crops: ``(F, V, 3, S, S)``; P: ``(F, V, 3)``.
     """
     import torch
-
-    from .backends import build_torch_model
 
     if isinstance(model, BackendSpec):
         model = build_torch_model(model)

@@ -11,7 +11,7 @@ from airpose_lib.eval.ablation import VARIANT_LABELS
 
 from .config import load_train_config
 from .evaluate import evaluate_checkpoint
-from .loop import TrainResult, default_out_dir, train
+from .loop import TrainResult, default_out_dir, prepare_data, train
 from .pretrain import profile_backbone_key
 
 __all__ = ["AblationRun", "run_ablation", "trained_checkpoint"]
@@ -87,8 +87,6 @@ def _train_parallel(profile: str, variants: Sequence[str], seeds: Sequence[int],
     """Train the unfinished runs in ``workers`` spawned single-thread processes."""
     import multiprocessing as mp
     from concurrent.futures import ProcessPoolExecutor
-
-    from .loop import prepare_data
 
     todo = [(profile, v, s, out_root) for s in seeds for v in variants
             if _finished_run(_run_dir(profile, v, s, out_root), profile, v, s) is None]

@@ -22,6 +22,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from airpose_lib.progress import in_notebook
+
 from .style import VIEW_COLORS
 
 __all__ = ["RecordingScene", "camera_frustum", "interactive_available",
@@ -94,8 +96,6 @@ def interactive_available() -> bool:
     headless: papermill under ``airpose reproduce`` (``AIRPOSE_INTERACTIVE=0``) or CI (``CI``)."""
     if os.environ.get("AIRPOSE_INTERACTIVE", "1") == "0" or os.environ.get("CI"):
         return False
-    from airpose_lib.progress import in_notebook
-
     if not in_notebook():
         return False
     try:

@@ -18,6 +18,8 @@ from pathlib import Path
 
 import matplotlib as mpl
 
+from airpose_lib import __version__  # the package root holds only the version
+
 __all__ = [
     "METHOD_COLORS",
     "VIEW_COLORS",
@@ -101,8 +103,6 @@ def use_kit_style() -> None:
 
 def kit_version() -> str:
     """Version string of the kit, recorded in every figure's metadata."""
-    from airpose_lib import __version__
-
     return __version__
 
 

@@ -14,7 +14,7 @@ from collections.abc import Mapping, Sequence
 
 import numpy as np
 
-from .style import METHOD_COLORS, method_color
+from .style import MESH_COLOR, METHOD_COLORS, method_color
 
 __all__ = ["line_style", "plot_person_positions", "plot_relative_camera", "plot_mesh_overlays",
            "overlay_mesh"]
@@ -151,8 +151,7 @@ def plot_mesh_overlays(images: np.ndarray, vertices: Mapping[str, np.ndarray], f
     """
     import matplotlib.pyplot as plt
 
-    from .render import OffscreenRenderer
-    from .style import MESH_COLOR
+    from .render import OffscreenRenderer  # VTK: imported only when a figure is rendered (optional GL)
 
     n, V, H, W = images.shape[:4]
     methods = list(vertices)

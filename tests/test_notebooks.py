@@ -53,3 +53,35 @@ def test_notebook_is_set_up_in_one_call(path):
 def test_notebook_has_no_outputs(path):
     for i, cell in enumerate(_code_cells(nbformat.read(path, as_version=4))):
         assert cell.outputs == [] and cell.execution_count is None, f"{path.name} code cell {i} has outputs"
+
+
+# -- the set-up helper ------------------------------------------------------------------------------
+def test_setup_notebook_fills_parameters_and_records_the_source(monkeypatch, tmp_path, capsys):
+    from airpose_lib import paths
+    from airpose_lib.reproduce import setup_notebook
+
+    monkeypatch.setenv(paths.RUNS_ENV, str(tmp_path))
+    ctx = setup_notebook("02_ablation_table", "cpu", seeds=None, train_workers=None, n_qualitative=5,
+                         record={"variants": ["airpose"]})
+    assert ctx.seeds == [123, 124, 125] and ctx.train_workers == 2 and ctx.n_qualitative == 5
+    assert ctx.out == tmp_path / "cpu" / "02_ablation_table" and ctx.out.is_dir() and ctx.runs == tmp_path
+    assert ctx.figures == paths.figures_root() / "cpu"
+    assert not ctx.official and ctx.params == {"notebook": "02_ablation_table", "profile": "cpu",
+                                               "data_source": "generated", "seeds": [123, 124, 125],
+                                               "train_workers": 2, "n_qualitative": 5, "variants": ["airpose"]}
+    assert "generated data" in capsys.readouterr().out
+    with pytest.raises(AttributeError, match="no parameter"):
+        ctx.backbone
+
+
+def test_setup_notebook_falls_back_to_generated_data_and_says_why(monkeypatch, tmp_path, capsys):
+    from airpose_lib import paths
+    from airpose_lib.reproduce import setup_notebook
+
+    monkeypatch.setenv(paths.RUNS_ENV, str(tmp_path))
+    monkeypatch.setenv("AIRPOSE_OFFICIAL_REAL_DIR", str(tmp_path / "nothing here"))
+    ctx = setup_notebook("03_trajectories", "smoke", data_source="official", needs=["official_real"])
+    assert ctx.source.requested == "official" and not ctx.official and ctx.params["data_source"] == "generated"
+    assert "falling back" in capsys.readouterr().out
+    ctx = setup_notebook("07_recording_3d", "smoke", data_source="official", generated_only="no true cameras")
+    assert not ctx.official and "no true cameras" in capsys.readouterr().out

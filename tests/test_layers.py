@@ -37,7 +37,7 @@ ALLOWED: dict[str, set[str]] = {
     "finetune": {"geometry", "body", "data", "model", "losses", "prior", "train", "runtime"},
     "experiments": {"geometry", "body", "assets", "data", "model", "losses", "eval", "viz", "prior", "fitting",
                     "train", "finetune", "runtime"},
-    "reproduce": set(),
+    "reproduce": {"assets", "viz"},
     "cli": {"geometry", "body", "assets", "data", "model", "losses", "eval", "viz", "prior", "fitting", "train",
             "finetune", "runtime", "experiments", "reproduce"},
 }

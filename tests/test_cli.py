@@ -39,6 +39,24 @@ def test_help_is_fast_and_light():
     assert "HEAVY []" in res.stdout, res.stdout + res.stderr
 
 
+def test_parser_build_imports_no_runtime_libraries():
+    """Building the whole parser (every `airpose` call, a drone's start-up included) imports neither
+    torch nor ZeroMQ nor ONNX Runtime: the command groups import the library in their handlers."""
+    code = ("import sys\nfrom airpose_lib import cli\ncli.build_parser()\n"
+            "print('HEAVY', [m for m in ('torch', 'zmq', 'onnxruntime', 'numpy') if m in sys.modules])")
+    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60,
+                         cwd=Path(__file__).resolve().parents[1])
+    assert "HEAVY []" in res.stdout, res.stdout + res.stderr
+
+
+def test_drone_process_entry_point_is_airpose_node():
+    """The launcher starts drones as `python -m airpose_lib.cli.drone`: `airpose node` itself."""
+    res = subprocess.run([sys.executable, "-m", "airpose_lib.cli.drone", "--help"], capture_output=True,
+                         text=True, timeout=60, cwd=Path(__file__).resolve().parents[1])
+    assert res.returncode == 0 and res.stdout.startswith("usage: airpose node"), res.stdout + res.stderr
+    assert "RuntimeWarning" not in res.stderr  # runpy: the module is not imported twice
+
+
 def test_parse_reproduce():
     p = cli.build_parser()
     a = p.parse_args(["reproduce", "--profile", "cpu", "--only", "00", "01_data", "--out", "x/runs",

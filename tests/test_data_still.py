@@ -11,11 +11,12 @@ from airpose_lib.body import BODY_25_FROM_SMPLX, load_body_model
 from airpose_lib.data.dataset import PER_VIEW_KEYS, SAMPLE_KEYS, StillFrameDataset, decode_image, denormalize_images
 from airpose_lib.data.generate import GenerationConfig, generate_still_dataset
 from airpose_lib.data.manifest import DatasetError, ShardIntegrityError, load_manifest
-from airpose_lib.data.render import SceneRenderer, box_in_crop
+from airpose_lib.data.render import SceneRenderer
 from airpose_lib.data.scene import SceneConfig
 from airpose_lib.data.shards import read_shard, shard_name
 from airpose_lib.geometry import (
     body_in_camera,
+    box_in_crop,
     crop_intrinsics,
     crop_vector,
     full_to_crop_pixels,

@@ -392,9 +392,7 @@ class StillFrameGenerator:
         """Encoded crops ``[V]`` of the scene set on the renderer, one per box ``bbox (V, 4)``."""
         import torch
 
-        from airpose_lib.geometry import crop_intrinsics
-
-        from .render import pad_outside_box
+        from airpose_lib.geometry import crop_intrinsics, pad_outside_box
 
         cfg = self.config
         T = lambda a: torch.as_tensor(a, dtype=torch.float64)  # noqa: E731

@@ -603,7 +603,7 @@ def _cmd_fit(args: argparse.Namespace) -> int:
 
     import numpy as np
 
-    from airpose_lib.body.cache import atomic_path
+    from airpose_lib.atomic import atomic_path
     from airpose_lib.data.official_layout import load_sequence
     from airpose_lib.fitting import AirPosePlusConfig, airpose_plus, fitting_profile
     from airpose_lib.prior import PriorError, load_prior

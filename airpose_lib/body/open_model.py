@@ -32,7 +32,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .cache import atomic_path, cache_dir, file_lock
+from airpose_lib.atomic import atomic_path
+from .cache import cache_dir, file_lock
 from .joint_sets import EXTRA_JOINT_NAMES, SMPLX_JOINT_NAMES, SMPLX_PARENTS
 
 log = logging.getLogger(__name__)

@@ -31,7 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
-from airpose_lib.body.cache import atomic_path
+from airpose_lib.atomic import atomic_path
 
 from .official_synthetic import OFFICIAL_CROP_MARGIN, stored_image_box, subject_of
 from .scene import PersonSample, SceneConfig, body_world_pose, sample_cameras, sample_person

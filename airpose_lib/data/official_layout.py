@@ -45,6 +45,8 @@ from pathlib import Path
 
 import numpy as np
 
+from airpose_lib.atomic import atomic_path
+
 __all__ = [
     "SequenceFormatError",
     "OfficialLayoutWriter",
@@ -108,12 +110,6 @@ def read_camera_calib(path: str | Path) -> np.ndarray:
 # ------------------------------------------------------------------------------------------
 # Writer
 
-def _atomic_write(path: Path, data: bytes) -> None:
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_bytes(data)
-    tmp.replace(path)
-
-
 class OfficialLayoutWriter:
     """Streams a sequence into the official layout.
 
@@ -157,7 +153,8 @@ class OfficialLayoutWriter:
                                    [cv2.IMWRITE_JPEG_QUALITY, self.jpeg_quality])
             if not ok:
                 raise RuntimeError(f"JPEG encoding failed for frame {index} view {v}")
-            _atomic_write(self.machine(v) / "images" / f"{int(index):06d}.jpg", buf.tobytes())
+            with atomic_path(self.machine(v) / "images" / f"{int(index):06d}.jpg") as tmp:
+                tmp.write_bytes(buf.tobytes())
             self.image_sizes[v] = (img.shape[1], img.shape[0])
         self.frames.append(int(index))
 
@@ -200,7 +197,8 @@ class OfficialLayoutWriter:
                 raise ValueError(f"timestamps must be ({F}, {self.num_views}), got {ts.shape}")
             for v in range(self.num_views):
                 lines = ["frame,timestamp"] + [f"{i},{t:.9f}" for i, t in zip(frames, ts[:, v])]
-                _atomic_write(self.machine(v) / "timestamps.csv", ("\n".join(lines) + "\n").encode())
+                with atomic_path(self.machine(v) / "timestamps.csv") as tmp:
+                    tmp.write_bytes(("\n".join(lines) + "\n").encode())
         if ground_truth is not None:
             tmp = self.root / "ground_truth.tmp.npz"
             np.savez_compressed(tmp, **{k: np.asarray(v) for k, v in ground_truth.items()})
@@ -209,14 +207,16 @@ class OfficialLayoutWriter:
 
         info = {"kit_version": __version__, "num_frames": F, "num_views": self.num_views,
                 "frames": [frames[0], frames[-1]] if frames else [], **(dict(meta) if meta else {})}
-        _atomic_write(self.root / "sequence.json", json.dumps(info, indent=1, default=_json_default).encode())
+        with atomic_path(self.root / "sequence.json") as tmp:
+            tmp.write_bytes(json.dumps(info, indent=1, default=_json_default).encode())
 
     @staticmethod
     def _write_openpose(path: Path, frames: list[int], kp: np.ndarray) -> None:
         res = {}
         for i, k in zip(frames, kp):
             res[int(i)] = k[None].astype(np.float32) if np.any(k[:, 2] > 0) else np.zeros((0, 25, 3), np.float32)
-        _atomic_write(path, pickle.dumps(res, protocol=4))
+        with atomic_path(path) as tmp:
+            tmp.write_bytes(pickle.dumps(res, protocol=4))
 
     @staticmethod
     def _write_alphapose(path: Path, frames: list[int], kp: np.ndarray) -> None:
@@ -228,7 +228,8 @@ class OfficialLayoutWriter:
             out.append({"image_id": f"{int(i):06d}.jpg", "category_id": 1,
                         "keypoints": [round(float(x), 3) for x in k.reshape(-1)],
                         "score": round(float(c[c > 0].mean() * (c > 0).mean()), 4)})
-        _atomic_write(path, json.dumps(out).encode())
+        with atomic_path(path) as tmp:
+            tmp.write_bytes(json.dumps(out).encode())
 
 
 def _json_default(o):

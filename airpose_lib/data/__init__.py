@@ -18,7 +18,7 @@ from airpose_lib._lazy import lazy_namespace
 _EXPORTS = {
     # scene
     "SceneConfig": "scene", "sample_person": "scene", "sample_cameras": "scene",
-    "sample_environment": "scene", "GENDER_CODES": "scene",
+    "sample_environment": "scene",
     # poses
     "sample_body_pose": "poses",
     # appearance

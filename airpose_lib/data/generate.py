@@ -32,6 +32,7 @@ import numpy as np
 import yaml
 
 from airpose_lib.body.cache import cache_dir
+from airpose_lib.body.genders import GENDER_CODES
 from airpose_lib.folder_lock import locks_folder
 from airpose_lib.process_guard import die_with_parent
 
@@ -45,7 +46,6 @@ from .manifest import (
     write_manifest,
 )
 from .scene import (
-    GENDER_CODES,
     SceneConfig,
     body_world_pose,
     jitter_bbox,

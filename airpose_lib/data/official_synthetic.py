@@ -89,11 +89,12 @@ import numpy as np
 import torch
 from torch.utils.data import Dataset
 
+from airpose_lib.body.genders import GENDER_CODES
 from airpose_lib.geometry import body_in_camera, crop_affine_matrix, crop_from_image, crop_vector, project_points
 
 from .dataset import normalize_images, swap_views
 from .manifest import DatasetError
-from .scene import GENDER_CODES, points_in_frame
+from .scene import points_in_frame
 
 __all__ = [
     "OfficialDataError",

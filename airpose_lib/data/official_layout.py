@@ -420,6 +420,14 @@ def _zero_bad(out: np.ndarray) -> int:
     return int(bad.sum())
 
 
+def _release_entries(path: Path, frames: Iterable[int], data, layout: str) -> list[tuple[int, object]]:
+    """``(frame, entry or None)`` per frame of a release detection file (a dict ``"%06d" -> layout``)."""
+    res = _load_detector_file(path) if data is None else data
+    if not isinstance(res, Mapping):
+        raise SequenceFormatError(f"{path}: expected a dict '%06d' -> {layout}")
+    return [(int(i), _lookup(res, int(i))) for i in frames]
+
+
 def read_official_openpose(path: Path | str, frames: Iterable[int], data=None) -> tuple[np.ndarray, dict]:
     """BODY_25 keypoints of person 0 from a release ``openpose_res.pkl``.
 
@@ -433,14 +441,10 @@ def read_official_openpose(path: Path | str, frames: Iterable[int], data=None) -
         ``{"missing_frames": n, "nan_keypoints": n}``.
     """
     path = Path(path)
-    res = _load_detector_file(path) if data is None else data
-    if not isinstance(res, Mapping):
-        raise SequenceFormatError(f"{path}: expected a dict '%06d' -> {{'pose': (persons, 25, 3)}}")
-    frames = [int(i) for i in frames]
-    out = np.zeros((len(frames), 25, 3))
+    entries = _release_entries(path, frames, data, "{'pose': (persons, 25, 3)}")
+    out = np.zeros((len(entries), 25, 3))
     missing = 0
-    for n, i in enumerate(frames):
-        e = _lookup(res, i)
+    for n, (i, e) in enumerate(entries):
         pose = e.get("pose") if isinstance(e, Mapping) else e
         if pose is None:
             missing += 1
@@ -470,14 +474,12 @@ def read_official_alphapose(path: Path | str, frames: Iterable[int], data=None) 
         :func:`read_official_openpose`.
     """
     path = Path(path)
-    res = _load_detector_file(path) if data is None else data
-    if not isinstance(res, Mapping):
-        raise SequenceFormatError(f"{path}: expected a dict '%06d' -> {{'people': [...]}}")
-    frames = [int(i) for i in frames]
-    out = np.zeros((len(frames), 18, 3))
+    # Same loop as read_official_openpose over a different per-frame entry (people[0]'s flat
+    # list, not a (persons, 25, 3) array): the two release formats share only their frame table.
+    entries = _release_entries(path, frames, data, "{'people': [...]}")
+    out = np.zeros((len(entries), 18, 3))
     missing = 0
-    for n, i in enumerate(frames):
-        e = _lookup(res, i)
+    for n, (i, e) in enumerate(entries):
         people = e.get("people") if isinstance(e, Mapping) else None
         if not people:
             missing += 1

@@ -18,7 +18,7 @@ _EXPORTS = {
     **dict.fromkeys(("BodyModelError", "body_model_info", "check_model_file", "load_body_model", "open_model_texture",
                      "resolve_model_file", "stature"), "loader"),
     **dict.fromkeys(("build_open_model", "open_model_path"), "open_model"),
-    **dict.fromkeys(("axis_angle", "body_pose_from_joints"), "pose"),
+    **dict.fromkeys(("axis_angle", "body_pose_from_joints", "pose_at_origin"), "pose"),
 }
 
 __all__ = sorted(_EXPORTS)

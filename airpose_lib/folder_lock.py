@@ -28,7 +28,7 @@ from pathlib import Path
 from typing import TypeVar
 
 __all__ = ["LOCK_NAME", "STALE_PATTERNS", "FolderBusyError", "folder_lock", "file_lock_for", "locks_folder",
-           "lock_holder"]
+           "lock_holder", "file_lock"]
 
 F = TypeVar("F", bound=Callable)
 
@@ -141,3 +141,18 @@ def locks_folder(param: str, what: str = "run folder",
                 return fn(*args, **kwargs)
         return locked  # type: ignore[return-value]
     return decorate
+
+
+@contextlib.contextmanager
+def file_lock(path: str | Path) -> Iterator[None]:
+    """Exclusive inter-process lock on the file ``path`` that *waits* for its holder (unlike
+    :func:`folder_lock`, which refuses a second writer): N processes that need the same cached
+    artefact (the open body model, an ONNX export, a backbone) build it once, the others wait."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with open(path, "a+") as handle:
+        fcntl.flock(handle, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(handle, fcntl.LOCK_UN)

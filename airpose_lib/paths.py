@@ -1,9 +1,13 @@
-"""Where the kit writes runs: one folder, whatever the current working directory.
+"""Where the kit writes runs (one folder, whatever the current working directory) and where it
+caches what it builds.
 
 Training runs, fine-tuning, the recordings experiment, the reproduction runner and notebooks run
 by hand all put their outputs under :func:`runs_root`, so that a run made by one of them is found
 by the others (``airpose train --profile cpu`` from the repository root and ``airpose reproduce
 --profile cpu`` share checkpoints; so does a notebook opened in JupyterLab from ``notebooks/``).
+:func:`cache_dir` (``$AIRPOSE_CACHE``, default ``~/.cache/airpose``) holds what the kit builds
+once and reuses: the open body model (and anny's own build cache, ``<cache>/anny`` unless
+``ANNY_CACHE_DIR`` is set), datasets, priors, backbones, ONNX exports, the assets' default folders.
 This module imports nothing else of the kit.
 """
 from __future__ import annotations
@@ -11,10 +15,19 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-__all__ = ["RUNS_ENV", "repo_root", "runs_root", "run_path", "figures_root"]
+__all__ = ["CACHE_ENV", "RUNS_ENV", "cache_dir", "repo_root", "runs_root", "run_path", "figures_root"]
 
 #: Environment variable naming the runs folder (overrides the checkout's ``runs/``).
 RUNS_ENV = "AIRPOSE_RUNS"
+#: Environment variable naming the cache folder (overrides ``~/.cache/airpose``).
+CACHE_ENV = "AIRPOSE_CACHE"
+
+
+def cache_dir() -> Path:
+    """The kit's cache folder (``$AIRPOSE_CACHE`` or ``~/.cache/airpose``), created on demand."""
+    root = Path(os.environ.get(CACHE_ENV, Path.home() / ".cache" / "airpose")).expanduser()
+    root.mkdir(parents=True, exist_ok=True)
+    return root
 
 
 def repo_root() -> Path | None:

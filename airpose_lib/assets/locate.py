@@ -8,7 +8,7 @@ First match wins:
    (``$XDG_CONFIG_HOME/airpose/assets.yaml`` when that is set): a YAML mapping
    ``name: folder``; relative folders are relative to the config file, ``~`` is expanded;
 4. the default under the kit cache: ``<cache>/assets/<name>`` (``<cache>`` =
-   :func:`airpose_lib.body.cache.cache_dir`); a generated dataset's default is where the
+   :func:`airpose_lib.paths.cache_dir`); a generated dataset's default is where the
    generator writes it, ``<cache>/data/still_<profile>``.
 
 Nothing here creates the folder.
@@ -20,6 +20,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import yaml
+
+from airpose_lib.paths import cache_dir
 
 from .manifest import AssetError, AssetManifest, load_asset_manifest
 
@@ -83,8 +85,6 @@ def read_config(path: str | Path | None = None) -> dict[str, Path]:
 
 def default_root(manifest: AssetManifest) -> Path:
     """The asset's folder when nothing else says where it is."""
-    from airpose_lib.body.cache import cache_dir  # lazy: airpose_lib.body imports torch
-
     if manifest.generated:
         return cache_dir() / "data" / f"still_{manifest.profile}"
     return cache_dir() / "assets" / manifest.name

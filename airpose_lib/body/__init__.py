@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from airpose_lib._lazy import lazy_namespace
 
-_MODULES = ("genders", "joint_sets", "loader", "open_model", "pose", "cache", "fast")
+_MODULES = ("genders", "joint_sets", "loader", "open_model", "pose", "fast")
 _EXPORTS = {
     **dict.fromkeys(("GENDERS", "GENDER_CODES", "GENDER_NAMES"), "genders"),
     **dict.fromkeys(("BODY22_NAMES", "BODY_25_EDGES", "BODY_25_FROM_SMPLX", "BODY_25_NAMES", "COCO17_FROM_SMPLX",

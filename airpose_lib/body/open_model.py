@@ -33,7 +33,9 @@ from pathlib import Path
 import numpy as np
 
 from airpose_lib.atomic import atomic_path
-from .cache import cache_dir, file_lock
+from airpose_lib.folder_lock import file_lock
+from airpose_lib.paths import cache_dir
+
 from .genders import GENDERS
 from .joint_sets import EXTRA_JOINT_NAMES, SMPLX_JOINT_NAMES, SMPLX_PARENTS
 

@@ -14,12 +14,13 @@ import types
 import typing
 from pathlib import Path
 
+from airpose_lib.body.genders import GENDERS  # a leaf of the lazy body package: no torch
+
 __all__ = [
     "CLIError", "EXIT_USER_ERROR", "GENDERS", "PROFILES", "SEQUENCE_FOLDER", "VARIANTS", "parse_range",
     "parse_sets", "require_file", "require_folder", "require_path", "user_error_message",
 ]
 
-GENDERS = ("neutral", "male", "female")
 VARIANTS = ("baseline", "multiview", "fullcam", "airpose")
 # Profile names from the files, without importing the runner (papermill is slow to import).
 PROFILES = tuple(sorted(p.stem for p in (Path(__file__).parents[1] / "reproduce" / "profiles").glob("*.yaml"))

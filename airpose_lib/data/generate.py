@@ -31,9 +31,9 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from airpose_lib.body.cache import cache_dir
 from airpose_lib.body.genders import GENDER_CODES
 from airpose_lib.folder_lock import locks_folder
+from airpose_lib.paths import cache_dir
 from airpose_lib.process_guard import die_with_parent
 
 from .appearance import AppearanceConfig, sample_appearance

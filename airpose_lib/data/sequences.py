@@ -807,7 +807,7 @@ def profile_sequences(profile: str) -> dict[str, SequenceConfig]:
 
 def default_sequence_root(profile: str) -> Path:
     """Where a profile's recordings live by default: ``<kit cache>/data/sequences_<profile>``."""
-    from airpose_lib.body.cache import cache_dir
+    from airpose_lib.paths import cache_dir
 
     return cache_dir() / "data" / f"sequences_{profile}"
 

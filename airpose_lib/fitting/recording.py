@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from airpose_lib.body.cache import atomic_path
+from airpose_lib.atomic import atomic_path
 from airpose_lib.errors import reading
 
 from .airpose_plus import AirPosePlusConfig, AirPosePlusResult, fitting_profile

@@ -1,7 +1,7 @@
 """Saving and loading pose priors: the kit's own checkpoints and the official VPoser V02_05.
 
 Kit priors (trained by :func:`airpose_lib.prior.train_prior`, ``airpose prior train``) live in
-``<cache>/prior/<tag>/vposer.pt`` (``<cache>`` = :func:`airpose_lib.body.cache.cache_dir`; the tag
+``<cache>/prior/<tag>/vposer.pt`` (``<cache>`` = :func:`airpose_lib.paths.cache_dir`; the tag
 is the profile that trained it: ``smoke``, ``cpu`` or ``paper``). The file is a plain
 ``torch.save`` dict::
 
@@ -28,8 +28,8 @@ from typing import Any
 import torch
 
 from airpose_lib.atomic import atomic_path
-from airpose_lib.body.cache import cache_dir
 from airpose_lib.errors import reading
+from airpose_lib.paths import cache_dir
 
 from .vposer import LATENT_DIM, NUM_NEURONS, VPoser
 

@@ -20,11 +20,12 @@ import torch
 from torch.utils.data import DataLoader, Dataset
 
 from airpose_lib.atomic import atomic_path
-from airpose_lib.body.cache import cache_dir, file_lock
 from airpose_lib.data.dataset import PER_VIEW_KEYS, StillFrameDataset, swap_views
 from airpose_lib.data.manifest import load_manifest
 from airpose_lib.data.shards import sha256_file
+from airpose_lib.folder_lock import file_lock
 from airpose_lib.model.backbone import build_backbone
+from airpose_lib.paths import cache_dir
 from airpose_lib.progress import progress_bar
 
 __all__ = ["feature_key", "ensure_features", "compute_features", "FeatureDataset", "load_backbone_file"]

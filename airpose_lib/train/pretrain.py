@@ -26,13 +26,13 @@ import torch
 from torch.utils.data import DataLoader
 
 from airpose_lib.atomic import atomic_path
-from airpose_lib.body.cache import cache_dir, file_lock
 from airpose_lib.data.dataset import StillFrameDataset
 from airpose_lib.data.shards import sha256_file
 from airpose_lib.eval.metrics import rotation_error
+from airpose_lib.folder_lock import file_lock
 from airpose_lib.geometry import rot6d_to_matrix
 from airpose_lib.losses.pretrain import heading_bin
-from airpose_lib.paths import run_path
+from airpose_lib.paths import cache_dir, run_path
 
 from .checkpoint import kit_version, load_checkpoint
 from .config import TrainConfig, load_train_config

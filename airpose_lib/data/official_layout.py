@@ -47,6 +47,7 @@ from pathlib import Path
 
 import numpy as np
 
+from airpose_lib import __version__  # the package root holds only the version
 from airpose_lib.atomic import atomic_path
 
 __all__ = [
@@ -209,8 +210,6 @@ class OfficialLayoutWriter:
             tmp = self.root / "ground_truth.tmp.npz"
             np.savez_compressed(tmp, **{k: np.asarray(v) for k, v in ground_truth.items()})
             tmp.replace(self.root / "ground_truth.npz")
-        from airpose_lib import __version__
-
         info = {"kit_version": __version__, "num_frames": F, "num_views": self.num_views,
                 "frames": [frames[0], frames[-1]] if frames else [], **(dict(meta) if meta else {})}
         with atomic_path(self.root / "sequence.json") as tmp:

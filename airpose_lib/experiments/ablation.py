@@ -37,6 +37,7 @@ from airpose_lib.eval.significance import claims_table
 from airpose_lib.geometry import axis_angle_to_matrix, crop_intrinsics, full_to_crop_pixels, project_points
 from airpose_lib.body.genders import GENDER_NAMES
 from airpose_lib.model import posed_joints_and_vertices
+from airpose_lib.model.official import load_official_checkpoint
 from airpose_lib.train import load_trained_model, predict
 from airpose_lib.train.ablation import run_ablation
 from airpose_lib.train.official import official_ablation
@@ -196,8 +197,6 @@ class AblationSamples:
 
 def _network(run, official: bool):
     if official:
-        from airpose_lib.model.official import load_official_checkpoint
-
         return load_official_checkpoint(run.checkpoint, variant=run.variant, backbone=None)
     return load_trained_model(run.checkpoint)[0]
 

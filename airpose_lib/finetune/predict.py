@@ -48,7 +48,13 @@ import numpy as np
 import torch
 from torch import Tensor, nn
 
+from airpose_lib import __version__  # the package root holds only the version
 from airpose_lib.atomic import atomic_path
+from airpose_lib.data.official_layout import load_sequence
+from airpose_lib.model import to_smplx_params
+from airpose_lib.progress import progress_bar
+from airpose_lib.runtime.offline import offline_inputs
+from airpose_lib.runtime.source import network_camera, person_box
 
 __all__ = [
     "PREDICTION_KEYS",
@@ -121,8 +127,6 @@ def detection_boxes(keypoints: np.ndarray, image_sizes: SequenceABC[tuple[int, i
     Raises:
         ValueError: a view has no usable detection in any frame.
     """
-    from airpose_lib.runtime.source import person_box
-
     kp = np.asarray(keypoints, np.float64)
     if kp.ndim != 4 or kp.shape[-1] != 3:
         raise ValueError(f"keypoints must be (F, V, J, 3), got {kp.shape}")
@@ -177,8 +181,6 @@ class _Views:
 def frames_in_range(root: str | Path, start: int | None, stop: int | None) -> np.ndarray:
     """Image numbers ``start <= n < stop`` present in every view of the recording at ``root``
     (None: open end), for ``load_sequence(root, frames=...)``. Raises ``ValueError`` if none."""
-    from airpose_lib.data.official_layout import load_sequence
-
     numbers = np.asarray(load_sequence(root, detectors=(), ground_truth=False).frames)  # image numbers only
     lo = numbers[0] if start is None else start
     hi = numbers[-1] + 1 if stop is None else stop
@@ -210,8 +212,6 @@ def _positions(sequence, frames) -> np.ndarray:
 def network_camera_of(model: nn.Module, K_net=None) -> np.ndarray:
     """``(3, 3)`` virtual camera of a network: ``K_net`` if given, else ``model.camera_K`` (set by
     ``load_network``), else ``runtime.source.network_camera()``."""
-    from airpose_lib.runtime.source import network_camera
-
     if K_net is None:
         K_net = getattr(model, "camera_K", None)
     return np.asarray(network_camera() if K_net is None else K_net, np.float64).reshape(3, 3)
@@ -262,8 +262,6 @@ def sequence_features(model: nn.Module, sequence, *, input_size: int, detector: 
         ``valid (F, V)`` bool, ``frames (F,)`` int64 image numbers, ``positions (F,)`` int64 rows
         of ``sequence``.
     """
-    from airpose_lib.runtime.offline import offline_inputs
-
     if detector not in sequence.keypoints:
         raise ValueError(f"{sequence.root}: no {detector!r} detections loaded (have {sorted(sequence.keypoints)})")
     if batch_size < 1:
@@ -286,8 +284,6 @@ def sequence_features(model: nn.Module, sequence, *, input_size: int, detector: 
     feats, Ps = [], []
     chunks = range(0, len(pos), batch_size)
     if progress:
-        from airpose_lib.progress import progress_bar
-
         chunks = progress_bar(chunks, desc="features", unit="batch")
     try:
         for a in chunks:
@@ -332,9 +328,6 @@ def predict_sequence(model: nn.Module, sequence, *, input_size: int | None = Non
         the predictions contract (module docstring): numpy arrays ``phi``, ``tau``, ``theta``,
         ``beta``, ``frames``, ``P``, ``boxes``, ``valid`` and the ``provenance`` JSON string.
     """
-    from airpose_lib import __version__
-    from airpose_lib.model import to_smplx_params
-
     size = _resolve_input_size(model, input_size)
     K_net = network_camera_of(model, K_net)
     cache = sequence_features(model, sequence, input_size=size, detector=detector, frames=frames,

@@ -27,7 +27,9 @@ from typing import Any
 
 import torch
 
+from airpose_lib import __version__  # the package root holds only the version
 from airpose_lib.atomic import atomic_path
+from airpose_lib.body.loader import _located
 from airpose_lib.errors import reading
 from airpose_lib.paths import cache_dir
 
@@ -77,8 +79,6 @@ def save_prior(model: VPoser, path: str | Path, provenance: Mapping[str, Any] | 
     Returns:
         ``path``.
     """
-    from airpose_lib import __version__
-
     path = Path(path)
     blob = {
         "format": KIT_FORMAT,
@@ -132,8 +132,6 @@ def find_vposer_checkpoint(root: str | Path | None = None) -> Path:
     if root is None:
         env = os.environ.get(VPOSER_ENV)
         if not env:
-            from airpose_lib.body.loader import _located
-
             env = _located("vposer_v02_05")  # the asset config file or the kit cache default
         if not env:
             raise _vposer_missing(f"${VPOSER_ENV} is not set")

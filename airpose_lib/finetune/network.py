@@ -19,6 +19,8 @@ import numpy as np
 import torch
 from torch import nn
 
+from airpose_lib.profiles import ProfileError, profile_section
+
 __all__ = ["checkpoint_input_size", "checkpoint_camera", "load_network"]
 
 
@@ -41,16 +43,18 @@ def checkpoint_input_size(state: Mapping[str, Any]) -> int | None:
             return int(manifest["crop_size"])
     profile = data.get("profile") or cfg.get("profile")
     if profile:
-        import yaml
-
-        from airpose_lib.train.config import profile_path
-
-        path = profile_path(profile)
-        if path.is_file():
-            still = ((yaml.safe_load(path.read_text()) or {}).get("data") or {}).get("still") or {}
-            if still.get("crop_size"):
-                return int(still["crop_size"])
+        still = _profile_still(profile)
+        if still.get("crop_size"):
+            return int(still["crop_size"])
     return None
+
+
+def _profile_still(profile: str) -> dict:
+    """The ``data: still:`` section of the profile that made a checkpoint's data ({} if unknown)."""
+    try:
+        return profile_section(profile, "data.still")
+    except ProfileError:  # a profile since renamed or removed: the checkpoint does not say
+        return {}
 
 
 def _data_scene(state: Mapping[str, Any]) -> dict:
@@ -70,14 +74,7 @@ def _data_scene(state: Mapping[str, Any]) -> dict:
             return dict((manifest.get("config") or {}).get("scene") or {})
     profile = data.get("profile") or cfg.get("profile")
     if profile:
-        import yaml
-
-        from airpose_lib.train.config import profile_path
-
-        path = profile_path(profile)
-        if path.is_file():
-            still = ((yaml.safe_load(path.read_text()) or {}).get("data") or {}).get("still") or {}
-            return dict(still.get("scene") or {})
+        return dict(_profile_still(profile).get("scene") or {})
     return {}
 
 

@@ -64,6 +64,7 @@ from torch import nn
 
 from airpose_lib.body.cache import atomic_path
 from airpose_lib.folder_lock import folder_lock
+from airpose_lib.profiles import profile_path, profile_section
 
 __all__ = ["FineTuneConfig", "FineTuneResult", "finetune_config", "finetune", "evaluate_finetune_loss",
            "heldout_split"]
@@ -164,17 +165,10 @@ class FineTuneConfig:
 def finetune_config(profile: str | Path | None, **overrides: Any) -> FineTuneConfig:
     """:class:`FineTuneConfig` from a profile's ``finetune:`` section (defaults where the profile
     has none), then ``overrides``. Unknown keys raise ``ValueError`` naming the file."""
-    import yaml
-
-    from airpose_lib.train.config import profile_path
-
     values: dict[str, Any] = {}
     if profile is not None:
-        path = profile_path(profile)
-        if not path.is_file():
-            raise ValueError(f"profile file not found: {path}")
-        values.update((yaml.safe_load(path.read_text()) or {}).get("finetune") or {})
-        where = f"{path} `finetune:`"
+        values.update(profile_section(profile, "finetune"))
+        where = f"{profile_path(profile)} `finetune:`"
     else:
         where = "fine-tuning options"
     values.update(overrides)

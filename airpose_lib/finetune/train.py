@@ -64,6 +64,7 @@ from torch import nn
 
 from airpose_lib.body.cache import atomic_path
 from airpose_lib.folder_lock import folder_lock
+from airpose_lib.model.record import network_record
 from airpose_lib.profiles import profile_path, profile_section
 
 __all__ = ["FineTuneConfig", "FineTuneResult", "finetune_config", "finetune", "evaluate_finetune_loss",
@@ -559,10 +560,12 @@ def _finetune(checkpoint: Path, root: Path, out_dir: Path, cfg: FineTuneConfig, 
             "num_heldout": len(held), "keypoints": agreement_summary(masks), "pixels": pixels,
             "camera_K": K_net_np.tolist(), "initial": initial, "selection": selection}
 
+    network = network_record(train_cfg.variant, train_cfg.backbone, train_cfg.model, input_size, K_net_np)
+
     def state_dict() -> dict:
         return {"model": model.state_dict(), "optimizer": optimizer.state_dict(), "rng": [capture_rng_state()],
                 "step": step, "epoch": epoch, "batch_in_epoch": batch_in_epoch, "config": train_cfg.to_dict(),
-                "world_size": 1, "input_size": input_size, "camera_K": K_net_np.tolist(), "finetune": info}
+                "world_size": 1, "network": network, "finetune": info}
 
     def save() -> Path:
         return save_checkpoint(out_dir, state_dict(), keep=cfg.keep_checkpoints)

@@ -6,7 +6,8 @@ Imports only ``geometry`` and ``body`` from the kit (and onnxruntime lazily, for
 from .backbone import BACKBONES, BasicBlock, Bottleneck, ResNet, build_backbone, resnet18, resnet34, resnet50
 from .regressor import DECODER_GAIN, HIDDEN_WIDTH, IterativeRegressor
 from .onnx_export import OnnxDroneNode, export_onnx
-from .official import load_official_checkpoint, save_kit_checkpoint, to_official_state_dict, write_official_checkpoint
+from .record import NetworkRecord, network_record, read_network
+from .official import load_official_checkpoint, to_official_state_dict, write_official_checkpoint
 from .smplx_params import posed_joints_and_vertices, to_smplx_params
 from .staged import DroneNode, decode_message, encode_message, fuse_message_list, message_nbytes
 from .variants import (

@@ -31,8 +31,8 @@ the agreement threshold ``threshold_px r`` and the 2D residuals divided by ``r``
 as its full-resolution original would be.
 
 Crops and P are formed in the network's virtual camera (``geometry.virtual_crop``; the
-checkpoint's training camera, :func:`~airpose_lib.finetune.network.checkpoint_camera`); the 2D
-loss projects the predicted body with the recording's own intrinsics.
+checkpoint's training camera, ``camera_K`` of its network record, :mod:`airpose_lib.model.record`);
+the 2D loss projects the predicted body with the recording's own intrinsics.
 
 Determinism and resume follow ``airpose_lib.train``: the frame order of epoch e is drawn from
 ``(seed, e)`` only; dropout and the VPoser sample use torch's global RNG, seeded from the seed and

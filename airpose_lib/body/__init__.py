@@ -27,6 +27,6 @@ from .loader import (
     stature,
 )
 from .open_model import GENDERS, build_open_model, open_model_path
-from .pose import axis_angle, body_pose_from_joints
+from .pose import axis_angle, body_pose_from_joints, pose_at_origin
 
 __all__ = [name for name in dir() if not name.startswith("_")]

@@ -46,11 +46,11 @@ from pathlib import Path
 
 import numpy as np
 
+from airpose_lib.body.genders import GENDER_CODES
 from airpose_lib.body.joint_sets import BODY_25_FROM_SMPLX, COCO18_FROM_SMPLX
 from airpose_lib.profiles import profile_section
 
 from .motions import MotionScript, body_forward, evaluate_motion, sample_script, world_root_pose
-from .scene import GENDER_CODES
 
 #: Bumped whenever the same settings would produce a different recording.
 SEQUENCE_GENERATOR_VERSION = 1
@@ -64,7 +64,6 @@ __all__ = [
     "SequenceConfig",
     "SimulatedSequence",
     "GROUND_TRUTH_KEYS",
-    "GENDER_CODES",
     "scale_intrinsics",
     "simulate_sequence",
     "SequenceRenderer",

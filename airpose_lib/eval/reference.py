@@ -29,7 +29,7 @@ import numpy as np
 import pandas as pd
 
 from airpose_lib import __version__
-from airpose_lib.body.cache import atomic_path
+from airpose_lib.atomic import atomic_path
 
 from .ablation import PER_SEED_METRICS, table_to_markdown
 

@@ -35,7 +35,7 @@ from airpose_lib.eval.oracle import oracle_per_view
 from airpose_lib.eval.reference import train_wall_s, write_reference
 from airpose_lib.eval.significance import claims_table
 from airpose_lib.geometry import axis_angle_to_matrix, crop_intrinsics, full_to_crop_pixels, project_points
-from airpose_lib.losses.supervised import GENDER_CODES
+from airpose_lib.body.genders import GENDER_NAMES
 from airpose_lib.model import posed_joints_and_vertices
 from airpose_lib.train import load_trained_model, predict
 from airpose_lib.train.ablation import run_ablation
@@ -238,7 +238,7 @@ def ablation_samples(runs: Mapping, dataset, n: int, official: bool = False) -> 
     V = arr["phi"].shape[1]
     gt_vertices = []
     for i in range(len(idx)):  # ground truth with the sample's own (gendered) body
-        gendered = load_body_model(source, GENDER_CODES[int(arr["gender"][i])], dtype=torch.float64)
+        gendered = load_body_model(source, GENDER_NAMES[int(arr["gender"][i])], dtype=torch.float64)
         p = {"phi": torch.from_numpy(arr["phi"][i]).double(), "tau": torch.from_numpy(arr["tau"][i]).double(),
              "theta": axis_angle_to_matrix(torch.from_numpy(arr["theta"][i]).double()).expand(V, 21, 3, 3),
              "beta": torch.from_numpy(arr["beta"][i]).double().expand(V, 10)}

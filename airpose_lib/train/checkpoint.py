@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from airpose_lib.body.cache import atomic_path
+from airpose_lib.atomic import atomic_path
 from airpose_lib.data.training_input import training_input
 from airpose_lib.errors import reading
 from airpose_lib.model.record import NETWORK_KEY, network_record

@@ -13,7 +13,7 @@ from typing import Any
 
 import torch
 
-from airpose_lib.body.cache import atomic_path
+from airpose_lib.atomic import atomic_path
 from airpose_lib.model import AirPoseNet
 from airpose_lib.model.official import backbone_name
 

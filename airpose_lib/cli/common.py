@@ -15,6 +15,7 @@ import typing
 from pathlib import Path
 
 from airpose_lib.body.genders import GENDERS  # a leaf of the lazy body package: no torch
+from airpose_lib.profiles import profile_names  # yaml only
 
 __all__ = [
     "CLIError", "EXIT_USER_ERROR", "GENDERS", "PROFILES", "SEQUENCE_FOLDER", "VARIANTS", "parse_range",
@@ -23,8 +24,7 @@ __all__ = [
 
 VARIANTS = ("baseline", "multiview", "fullcam", "airpose")
 # Profile names from the files, without importing the runner (papermill is slow to import).
-PROFILES = tuple(sorted(p.stem for p in (Path(__file__).parents[1] / "reproduce" / "profiles").glob("*.yaml"))
-                 ) or ("smoke", "cpu", "paper")
+PROFILES = tuple(profile_names()) or ("smoke", "cpu", "paper")
 SEQUENCE_FOLDER = "a recording folder in the official layout (machine_1/, machine_2/ with openpose_res.pkl)"
 
 EXIT_USER_ERROR = 2  # as argparse for a bad flag: the user can fix it
@@ -39,6 +39,7 @@ class CLIError(Exception):
 # the kit and keeps its traceback.
 _USER_ERRORS = (
     "airpose_lib.errors:DamagedFileError",
+    "airpose_lib.errors:ProfileError",
     "airpose_lib.folder_lock:FolderBusyError",
     "airpose_lib.assets.manifest:AssetError",
     "airpose_lib.body.loader:BodyModelError",

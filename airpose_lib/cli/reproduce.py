@@ -69,7 +69,7 @@ def add_reproduce(sub) -> None:
                     "(exit 1) if a notebook raises or an expected figure is missing.")
     rep.add_argument("--profile", choices=PROFILES, default="smoke",
                      help="smoke: minutes on a CPU; cpu: hours on a CPU; paper: the paper's sizes "
-                          "(GPU); the sizes are in airpose_lib/reproduce/profiles/ (default: smoke)")
+                          "(GPU); the sizes are in airpose_lib/profiles/ (default: smoke)")
     rep.add_argument("--only", nargs="+", metavar="NAME",
                      help="run only these notebooks (names or unique prefixes, e.g. 00_body_model or 00)")
     rep.add_argument("--out", type=Path, default=None,

@@ -69,7 +69,8 @@ def main() -> int:
     from airpose_lib.data.dataset import StillFrameDataset
     from airpose_lib.eval import paper_table, per_view_table
     from airpose_lib.model.quantize import QuantSettings
-    from airpose_lib.runtime.backends import BackendSpec, make_stage_model
+    from airpose_lib.runtime.backends import BackendSpec
+    from airpose_lib.runtime.networks import make_stage_model
     from airpose_lib.runtime.edge import ensure_export
     from airpose_lib.train.evaluate import load_trained_model, predict
     from airpose_lib.train.loop import default_dataset_factory, prepare_data

@@ -49,7 +49,6 @@ PENDING_EDGES: dict[tuple[str, str], str] = {
 }
 PENDING_MODULE_CYCLES: dict[frozenset[str], str] = {
     frozenset({"airpose_lib.train.loop", "airpose_lib.train.pretrain"}): "wip-14d: the training engine",
-    frozenset({"airpose_lib.runtime.backends", "airpose_lib.runtime.edge"}): "wip-14c/14g",
 }
 
 

@@ -13,6 +13,7 @@
 * ``fake``: :class:`FakeStageModel`, a few small matrix products with the same inputs, outputs and
   message dependence, so that the runtime's tests run in milliseconds per frame.
 
+:func:`airpose_lib.runtime.networks.make_stage_model` builds a backend from its :class:`BackendSpec`.
 A node keeps one *prototype* per process and a shallow copy per frame in flight
 (:func:`fresh_copy`): the copies share weights / sessions, each holds one frame's state.
 """
@@ -34,7 +35,6 @@ __all__ = [
     "StageModel",
     "BackendSpec",
     "FakeStageModel",
-    "make_stage_model",
     "build_torch_model",
     "checkpoint_settings",
     "fresh_copy",
@@ -240,34 +240,6 @@ def build_torch_model(spec: BackendSpec):
             state = state[key]
     model.load_state_dict(state)
     return model.eval()
-
-
-def make_stage_model(spec: BackendSpec) -> StageModel:
-    """Build the prototype :class:`StageModel` of a node (one per process)."""
-    if spec.kind == "fake":
-        return FakeStageModel(spec.seed, message_dtype=spec.message_dtype,
-                              compute_s=spec.fake_compute_ms / 1000.0)
-    if spec.kind == "torch":
-        import torch
-
-        from airpose_lib.model import DroneNode
-
-        torch.set_num_threads(spec.threads)
-        return DroneNode(build_torch_model(spec), message_dtype=spec.message_dtype)
-    if spec.kind in ONNX_PRECISIONS:
-        from airpose_lib.model.onnx_export import OnnxDroneNode
-
-        folder = spec.onnx_dir
-        if not folder:
-            from .edge import ensure_export
-
-            folder = ensure_export(spec)
-        elif not (Path(folder) / "meta.json").exists():
-            raise FileNotFoundError(f"{spec.kind} backend: no meta.json in {folder} (make the folder with "
-                                    f"`airpose export`, or leave --onnx-dir out to export into the cache)")
-        return OnnxDroneNode(folder, num_threads=spec.threads, message_dtype=spec.message_dtype,
-                             precision=ONNX_PRECISIONS[spec.kind])
-    raise ValueError(f"unknown backend {spec.kind!r}: choose torch, onnx, onnx-int8 or fake")
 
 
 def warm_up(model: StageModel, input_size: int) -> None:

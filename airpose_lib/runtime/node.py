@@ -60,9 +60,9 @@ import numpy as np
 import zmq
 
 from . import results as R
-from .backends import (BackendSpec, StageModel, checkpoint_settings, fresh_copy, make_stage_model, to_numpy,
-                       warm_up)
+from .backends import BackendSpec, StageModel, checkpoint_settings, fresh_copy, to_numpy, warm_up
 from .keys import KEYS_ENV, SwarmKeyError, keys_folder, load_swarm_keys
+from .networks import make_stage_model
 from .source import crop_input, open_source, person_box
 from .sync import CameraReplay, Clock, Mailbox, PeerTable, Schedule
 from .transport import LinkConfig, Transport, endpoint

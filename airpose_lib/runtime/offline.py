@@ -15,7 +15,8 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from .backends import BackendSpec, StageModel, build_torch_model, fresh_copy, make_stage_model, to_numpy
+from .backends import BackendSpec, StageModel, build_torch_model, fresh_copy, to_numpy
+from .networks import make_stage_model
 from .results import PARAM_KEYS, mask_to_ids
 from .source import crop_input, open_source, person_box
 

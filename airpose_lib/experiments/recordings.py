@@ -35,8 +35,31 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from airpose_lib.assets import resolve_data_source
 from airpose_lib.atomic import atomic_path
+from airpose_lib.body import load_body_model
+from airpose_lib.body.joint_sets import BODY_25_FROM_SMPLX
+from airpose_lib.data.official_layout import load_sequence
+from airpose_lib.data.official_real import load_official_real
+from airpose_lib.data.sequences import ensure_sequences
+from airpose_lib.eval import metrics as M
+from airpose_lib.eval.recordings import body_joints, paper_claims, per_view_params, recording_table
+from airpose_lib.finetune.keypoints import resolution_scales
+from airpose_lib.finetune.network import load_network
+from airpose_lib.finetune.predict import (image_sizes, network_camera_of, predict_sequence, regress_features,
+                                          sequence_features)
+from airpose_lib.finetune.train import FineTuneConfig, finetune, finetune_config
+from airpose_lib.fitting import airpose_plus, fitting_profile
 from airpose_lib.folder_lock import folder_lock
+from airpose_lib.model import posed_joints_and_vertices, to_smplx_params
+from airpose_lib.model.official import load_official_checkpoint
+from airpose_lib.paths import run_path
+from airpose_lib.prior import load_prior
+from airpose_lib.prior.build import ensure_prior
+from airpose_lib.train.ablation import trained_checkpoint
+from airpose_lib.train.checkpoint import last_checkpoint, load_checkpoint
+from airpose_lib.train.config import load_train_config
+from airpose_lib.train.official import find_official_checkpoint
 
 __all__ = ["METHODS", "RecordingExperiment", "default_experiment_dir", "run_recording_experiment",
            "body_vertices", "recording_prior", "ground_truth_diagnostic", "finetune_table", "selection_table",
@@ -55,8 +78,6 @@ OFFICIAL_REAL_CHECKPOINTS = {"Baseline": "hmr_real_ckpt", "AirPose": "copenet_tw
 
 def default_experiment_dir(profile: str) -> Path:
     """``<runs>/recordings/<profile>`` (:func:`airpose_lib.paths.runs_root`, like training runs)."""
-    from airpose_lib.paths import run_path
-
     return run_path("recordings", profile)
 
 
@@ -153,17 +174,12 @@ _ESTIMATE_VERSION = 2
 
 
 def _network_estimate(checkpoint: Path, sequence, out: Path) -> dict:
-    from airpose_lib.finetune import predict_sequence
-    from airpose_lib.finetune.network import load_network
-
     key = _key("predict", _ESTIMATE_VERSION, _stamp(checkpoint), str(sequence.root), sequence.frames.tolist(),
                _sequence_stamp(sequence))
     cached = _cached_npz(out, key)
     if cached is not None:
         return cached
     if Path(checkpoint).suffix == ".ckpt":  # an official Lightning checkpoint: ResNet-50 at 224 px
-        from airpose_lib.model.official import load_official_checkpoint
-
         model, size = load_official_checkpoint(checkpoint, backbone=None), OFFICIAL_INPUT_SIZE
     else:
         model, _, size = load_network(checkpoint)
@@ -176,10 +192,6 @@ def _network_estimate(checkpoint: Path, sequence, out: Path) -> dict:
 def _airpose_plus(sequence, init: dict, profile: str, prior, prior_info: dict, out: Path,
                   progress: bool) -> tuple[dict, dict]:
     import dataclasses
-
-    from airpose_lib.finetune.keypoints import resolution_scales
-    from airpose_lib.finetune.predict import image_sizes
-    from airpose_lib.fitting import airpose_plus, fitting_profile
 
     cfg = fitting_profile(profile)
     # The Geman-McClure scale (30 px) is a full-resolution value: rho is a function of residual / sigma.
@@ -212,10 +224,6 @@ def recording_prior(profile: str, progress: bool = False):
         ``(prior, info)``: the :class:`~airpose_lib.prior.VPoser` and ``{"source": "vposer" | "kit",
         "file", "stamp", "message"}`` (the message says which prior and why).
     """
-    from airpose_lib.assets import resolve_data_source
-    from airpose_lib.prior import load_prior
-    from airpose_lib.prior.build import ensure_prior
-
     found = resolve_data_source("official", needs=["vposer_v02_05"])
     if found.source == "official":
         prior, prov = load_prior("vposer", found.roots["vposer_v02_05"], return_provenance=True)
@@ -244,13 +252,6 @@ def ground_truth_diagnostic(model, sequence, *, input_size: int, features: dict 
         features: precomputed :func:`~airpose_lib.finetune.predict.sequence_features` output.
     """
     import torch
-
-    from airpose_lib.body import load_body_model
-    from airpose_lib.body.joint_sets import BODY_25_FROM_SMPLX
-    from airpose_lib.eval import metrics as M
-    from airpose_lib.finetune.keypoints import resolution_scales
-    from airpose_lib.finetune.predict import image_sizes, network_camera_of, regress_features, sequence_features
-    from airpose_lib.model import posed_joints_and_vertices, to_smplx_params
 
     gt = sequence.ground_truth
     if gt is None:
@@ -299,9 +300,6 @@ def body_vertices(params: dict, body_model, index, view: int) -> np.ndarray:
     """
     import torch
 
-    from airpose_lib.eval.recordings import per_view_params
-    from airpose_lib.model.smplx_params import posed_joints_and_vertices
-
     p = per_view_params(params)
     idx = np.asarray(index)
     part = {k: torch.as_tensor(np.ascontiguousarray(v[idx, view]), dtype=body_model.v_template.dtype)
@@ -313,8 +311,6 @@ def body_vertices(params: dict, body_model, index, view: int) -> np.ndarray:
 def official_recordings(root: str | Path) -> dict:
     """The official real-data release as the experiment's recordings: person 1 (frames 0-6999,
     fine-tuning) and person 2 (frames 8000-14999, test), without ground truth."""
-    from airpose_lib.data.official_real import load_official_real
-
     return {"person1": load_official_real(root, person=1), "person2": load_official_real(root, person=2)}
 
 
@@ -322,8 +318,6 @@ def official_networks(checkpoints_root: str | Path) -> dict[str, Path]:
     """The authors' networks for the experiment's methods: the synthetic-data checkpoints of
     Baseline and AirPose (pre-trained) and their real-data fine-tuned ones (``hmr_real_ckpt``,
     ``copenet_twoview_real_ckpt``)."""
-    from airpose_lib.train.official import find_official_checkpoint
-
     root = Path(checkpoints_root)
     nets = {"Baseline (pre-trained)": find_official_checkpoint(root, "baseline"),
             "AirPose (pre-trained)": find_official_checkpoint(root, "airpose")}
@@ -341,7 +335,6 @@ def networks_for(source) -> dict[str, Path] | None:
     present (see :func:`official_networks`), else None (the kit trains and fine-tunes its own)."""
     if getattr(source, "source", "generated") != "official":
         return None
-    from airpose_lib.assets import resolve_data_source
 
     ckpts = resolve_data_source("official", needs=["official_checkpoints"])
     if ckpts.source != "official":
@@ -361,9 +354,6 @@ def recordings_for(source, profile: str) -> dict | None:
 def _finetune_done(run_dir: Path, cfg) -> bool:
     """A finished fine-tuning run with these settings in ``run_dir`` (it will be loaded, not
     trained: no diagnostics needed)."""
-    from airpose_lib.finetune.train import FineTuneConfig
-    from airpose_lib.train.checkpoint import last_checkpoint, load_checkpoint
-
     last = last_checkpoint(run_dir)
     try:
         state = load_checkpoint(last) if last is not None else None
@@ -380,11 +370,6 @@ def _kit_networks(profile: str, seed: int, tuning, tests: dict, prior, prior_inf
     """Table I's Baseline and AirPose of the profile, their fine-tuning on ``tuning`` (model
     selected on its held-out frames) with the ``tests`` recordings' errors logged per checkpoint."""
     import dataclasses
-
-    from airpose_lib.finetune import finetune, finetune_config
-    from airpose_lib.finetune.network import load_network
-    from airpose_lib.finetune.predict import sequence_features
-    from airpose_lib.train.ablation import trained_checkpoint
 
     checkpoints, finetune_info = {}, {}
     ft_cfg = finetune_config(profile)
@@ -448,14 +433,7 @@ def _run_recording_experiment(profile: str, out: Path, sequences: dict | None, s
                               fine_tune_on: str, networks: dict | None, progress: bool) -> RecordingExperiment:
     import torch
 
-    from airpose_lib.body import load_body_model
-    from airpose_lib.data.official_layout import load_sequence
-    from airpose_lib.eval.recordings import body_joints, recording_table
-    from airpose_lib.train.config import load_train_config
-
     if sequences is None:
-        from airpose_lib.data.sequences import ensure_sequences
-
         sequences = ensure_sequences(profile, progress=progress)
     seqs = {name: s if hasattr(s, "keypoints") else load_sequence(s) for name, s in sequences.items()}
     if fine_tune_on not in seqs:
@@ -543,8 +521,6 @@ def overlay_inputs(exp: RecordingExperiment, person: str, methods, n_frames: int
         ``images (n, V, H, W, 3)``, ``vertices {method: (n, V, N, 3)}``, ``faces (M, 3)``,
         ``K (V, 3, 3)``, frame labels, ``zoom (n, V, J, 2)`` (the detections' confident joints).
     """
-    from airpose_lib.body import load_body_model
-
     seq = exp.sequences[person]
     F, V = seq.num_frames, seq.num_views
     idx = np.linspace(0, F - 1, n_frames + 2).round().astype(int)[1:-1]
@@ -623,8 +599,6 @@ def selection_table(exp: RecordingExperiment) -> pd.DataFrame:
 
 def claims_table(exp: RecordingExperiment, spin: str = "Baseline (pre-trained)") -> pd.DataFrame:
     """:func:`airpose_lib.eval.recordings.paper_claims` of the experiment (SPIN-style = ``spin``)."""
-    from airpose_lib.eval.recordings import paper_claims
-
     depth = depth_summary(exp, {"SPIN-style": spin, "AirPose": "AirPose"})
     persons = exp.persons
     return paper_claims(exp.tables, depth, tuning=persons[0], test=persons[-1])

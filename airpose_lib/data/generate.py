@@ -32,6 +32,7 @@ import numpy as np
 import yaml
 
 from airpose_lib.body.cache import cache_dir
+from airpose_lib.body.forward import rest_body
 from airpose_lib.folder_lock import locks_folder
 from airpose_lib.process_guard import die_with_parent
 
@@ -223,24 +224,6 @@ def default_root(profile: str) -> Path:
 
 
 # -- one process's generator ----------------------------------------------------------------------
-def _body_forward(model, betas: np.ndarray, theta: np.ndarray):
-    """Vertices ``(B, V, 3)`` and joints ``(B, J, 3)`` (float64) with identity root, zero translation.
-
-    ``betas (B, 10)``, ``theta (B, 21, 3)`` axis-angle.
-    """
-    import torch
-
-    B = len(betas)
-    dt = model.shapedirs.dtype
-    z = lambda n: torch.zeros(B, n, dtype=dt)  # noqa: E731
-    with torch.no_grad():
-        out = model(betas=torch.as_tensor(betas, dtype=dt), body_pose=torch.as_tensor(theta, dtype=dt).reshape(B, 63),
-                    global_orient=z(3), transl=z(3), jaw_pose=z(3), leye_pose=z(3), reye_pose=z(3),
-                    left_hand_pose=z(45), right_hand_pose=z(45),
-                    expression=z(model.num_expression_coeffs))
-    return out.vertices.double().numpy(), out.joints.double().numpy()
-
-
 def _blur(img: np.ndarray, sigma: float) -> np.ndarray:
     import cv2
 
@@ -311,8 +294,8 @@ class StillFrameGenerator:
             idx = [i for i, p in enumerate(people) if p.gender == g]
             if not idx:
                 continue
-            v, j = _body_forward(self.models[g], np.stack([people[i].betas for i in idx]),
-                                 np.stack([people[i].theta for i in idx]))
+            v, j = rest_body(self.models[g], np.stack([people[i].betas for i in idx]),
+                             np.stack([people[i].theta for i in idx]))
             for k, i in enumerate(idx):
                 verts[i], joints[i] = v[k], j[k]
         return rngs, people, verts, joints

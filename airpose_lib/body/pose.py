@@ -4,6 +4,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from .forward import rest_body
 from .joint_sets import NUM_POSE_JOINTS, joint_index
 
 
@@ -33,3 +34,22 @@ def body_pose_from_joints(rotations: dict[str, np.ndarray]) -> np.ndarray:
             raise KeyError(f"{name!r} is not one of the 21 body joints of body_pose")
         theta[k] = rotvec
     return theta.reshape(-1)
+
+
+def pose_at_origin(model, body_pose: np.ndarray | None = None,
+                   betas: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """One body at the model origin with no root rotation (``V0``).
+
+    A one-body adapter of :func:`airpose_lib.body.forward.rest_body` for the notebooks.
+
+    Args:
+        model: a body model (:func:`~airpose_lib.body.load_body_model`, 10 betas).
+        body_pose: ``(63,)`` axis-angle of the 21 body joints (None: rest pose).
+        betas: ``(10,)`` shape (None: the mean shape).
+    Returns:
+        vertices ``(V, 3)`` and the 76 joints ``(76, 3)``, float32 numpy, metres.
+    """
+    theta = np.zeros((1, 63)) if body_pose is None else np.asarray(body_pose, dtype=np.float64)[None]
+    beta = np.zeros((1, 10)) if betas is None else np.asarray(betas, dtype=np.float64)[None]
+    v, j = rest_body(model, beta, theta)
+    return v[0].astype(np.float32), j[0].astype(np.float32)

@@ -18,7 +18,7 @@ process's :class:`StillFrameGenerator`: sampling and rendering), this one (shard
 manifest, resumption and the worker pool).
 
 Command line: ``airpose data generate --profile smoke|cpu|paper [--out DIR] [--workers N]``;
-sizes come from the ``data: still:`` section of ``airpose_lib/reproduce/profiles/<profile>.yaml``.
+sizes come from the ``data: still:`` section of ``airpose_lib/profiles/<profile>.yaml``.
 """
 from __future__ import annotations
 
@@ -40,14 +40,12 @@ from .manifest import (
 )
 from .shards import sha256_file, shard_name
 from .still_config import GENERATOR_VERSION, GenerationConfig, default_root, profile_config
-from .still_frames import StillFrameGenerator, _limit_threads
 
 __all__ = [
-    # the settings and the generator live in still_config / still_frames; re-exported here
-    # because callers (CLI, training, tests) import them from this entry point
+    # the settings live in still_config; re-exported here because callers (CLI, training,
+    # runtime, tests) import them from this entry point
     "GENERATOR_VERSION",
     "GenerationConfig",
-    "StillFrameGenerator",
     "generate_still_dataset",
     "ensure_still_dataset",
     "profile_config",
@@ -61,6 +59,8 @@ _WORKER: dict = {}
 
 def _worker_init(config_dict: dict, progress_queue, parent: int | None = None) -> None:
     die_with_parent(parent)  # no orphaned renderers if the parent is killed (even before this runs)
+    from .still_frames import StillFrameGenerator, _limit_threads  # heavy: see _run_inprocess
+
     os.environ.setdefault("LP_NUM_THREADS", "1")  # Mesa llvmpipe: one raster thread per worker
     os.environ.setdefault("OMP_NUM_THREADS", "1")
     _limit_threads()
@@ -218,6 +218,10 @@ def generate_still_dataset(
 
 
 def _run_inprocess(config, root, todo, bar, finished) -> None:
+    # still_frames pulls in torch and smplx: imported here, not at the top, because a drone's
+    # start-up imports this module (default_root) and must stay light
+    from .still_frames import StillFrameGenerator, _limit_threads
+
     import torch
 
     threads = torch.get_num_threads()

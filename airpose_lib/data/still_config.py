@@ -9,9 +9,8 @@ import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import yaml
-
 from airpose_lib.body.cache import cache_dir
+from airpose_lib.profiles import ProfileError, profile_path, profile_section
 
 from .appearance import AppearanceConfig
 from .manifest import DatasetError
@@ -22,9 +21,6 @@ __all__ = ["GENERATOR_VERSION", "GenerationConfig", "profile_config", "default_r
 #: Bumped whenever the same configuration would produce different shards.
 #: 2: test crops are jittered like training crops; test shards also hold the tight-box crops.
 GENERATOR_VERSION = 2
-
-_PROFILES_DIR = Path(__file__).resolve().parents[1] / "reproduce" / "profiles"
-
 
 # -- configuration --------------------------------------------------------------------------------
 @dataclass(frozen=True)
@@ -150,20 +146,15 @@ def _tuplify(x):
 def profile_config(profile: str) -> GenerationConfig:
     """The still-frame dataset settings of a reproduction profile.
 
-    Reads the ``data: still:`` section of ``airpose_lib/reproduce/profiles/<profile>.yaml`` (the
-    one place sizes live; keys are :class:`GenerationConfig` fields, ``scene:`` / ``appearance:``
-    sub-dicts allowed); the file is read as data, the reproduce package is not imported.
+    Reads the ``data: still:`` section of the profile (:mod:`airpose_lib.profiles`; keys are
+    :class:`GenerationConfig` fields, ``scene:`` / ``appearance:`` sub-dicts allowed).
     """
-    path = _PROFILES_DIR / f"{profile}.yaml"
-    if not path.is_file():
-        known = sorted(p.stem for p in _PROFILES_DIR.glob("*.yaml"))
-        raise DatasetError(f"unknown profile {profile!r}; available: {known}")
-    raw = yaml.safe_load(path.read_text()) or {}
-    section = (raw.get("data") or {}).get("still")
-    if not isinstance(section, dict):
-        raise DatasetError(f"{path} has no `data: still:` section with the still-frame dataset sizes")
-    try:
-        return GenerationConfig.from_dict(section)
+    try:  # the data commands report every unusable input as a DatasetError
+        path = profile_path(profile)
+        return GenerationConfig.from_dict(profile_section(path, "data.still",
+                                                          required="the still-frame dataset sizes"))
+    except ProfileError as e:  # before ValueError: it is one
+        raise DatasetError(str(e)) from None
     except (TypeError, ValueError) as e:
         raise DatasetError(f"{path}, `data: still:` section: {e}") from None
 

@@ -11,11 +11,11 @@ from pathlib import Path
 import numpy as np
 
 from airpose_lib.body.forward import rest_body
+from airpose_lib.body.genders import GENDER_CODES
 
 from .appearance import sample_appearance
 from .manifest import DATASET_KIND
 from .scene import (
-    GENDER_CODES,
     body_world_pose,
     jitter_bbox,
     points_in_frame,
@@ -183,9 +183,7 @@ class StillFrameGenerator:
         """Encoded crops ``[V]`` of the scene set on the renderer, one per box ``bbox (V, 4)``."""
         import torch
 
-        from airpose_lib.geometry import crop_intrinsics
-
-        from .render import pad_outside_box
+        from airpose_lib.geometry import crop_intrinsics, pad_outside_box
 
         cfg = self.config
         T = lambda a: torch.as_tensor(a, dtype=torch.float64)  # noqa: E731

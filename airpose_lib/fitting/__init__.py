@@ -12,11 +12,10 @@ from .airpose_plus import (
     frame_confidence,
     init_from_views,
 )
-from .kinematics import KeypointBody
 from .recording import fit_config, initialisation_for, open_initialisation, refined_path, save_refinement
 
 __all__ = [
     "AirPosePlusConfig", "AirPosePlusLoss", "AirPosePlusResult", "DETECTOR_JOINTS", "airpose_plus", "fit_sequence",
-    "fitting_profile", "frame_confidence", "init_from_views", "KeypointBody", "fit_config", "initialisation_for",
+    "fitting_profile", "frame_confidence", "init_from_views", "fit_config", "initialisation_for",
     "open_initialisation", "refined_path", "save_refinement",
 ]

@@ -27,8 +27,10 @@ import os
 import queue as queue_mod
 from pathlib import Path
 
+from airpose_lib import __version__
 from airpose_lib.folder_lock import locks_folder
 from airpose_lib.process_guard import die_with_parent
+from airpose_lib.progress import progress_bar
 
 from .manifest import (
     DATASET_KIND,
@@ -83,8 +85,6 @@ def _body_model_hashes(config: GenerationConfig) -> dict[str, str]:
 
 
 def _new_manifest(config: GenerationConfig, profile: str | None, body_models: dict) -> dict:
-    from airpose_lib import __version__
-
     return {
         "kind": DATASET_KIND,
         "generator_version": GENERATOR_VERSION,
@@ -194,8 +194,6 @@ def generate_still_dataset(
 
     bar = None
     if progress and todo:
-        from airpose_lib.progress import progress_bar
-
         bar = progress_bar(total=config.num_samples, initial=manifest["totals"]["samples"], unit="sample",
                    desc=f"still frames -> {root.name}", smoothing=0.1)
 

@@ -89,6 +89,7 @@ import numpy as np
 import torch
 from torch.utils.data import Dataset
 
+from airpose_lib.body import BODY_25_FROM_SMPLX, load_body_model
 from airpose_lib.body.forward import rest_body
 from airpose_lib.body.genders import GENDER_CODES
 from airpose_lib.geometry import body_in_camera, crop_affine_matrix, crop_from_image, crop_vector, project_points
@@ -367,7 +368,6 @@ class OfficialSyntheticDataset(Dataset):
         self.body_source = body_source
         self.frame_size = (int(frame_size[0]), int(frame_size[1]))
         self._models: dict = {}
-        from airpose_lib.body import BODY_25_FROM_SMPLX
 
         self._body25 = np.asarray(BODY_25_FROM_SMPLX)
 
@@ -431,8 +431,6 @@ class OfficialSyntheticDataset(Dataset):
 
     def model_joints(self, sample: dict) -> np.ndarray:
         """World joints ``(76, 3)`` from the body model (``joints="model"``): ``R_wb J0 + t_wb``."""
-        from airpose_lib.body import load_body_model
-
         g = sample["gender"].lower()
         g = g if g in ("male", "female") else "neutral"
         if g not in self._models:

@@ -12,6 +12,7 @@ import numpy as np
 
 from airpose_lib.body.forward import rest_body
 from airpose_lib.body.genders import GENDER_CODES
+from airpose_lib.geometry import body_in_camera, crop_intrinsics, crop_vector, pad_outside_box, project_points
 
 from .appearance import sample_appearance
 from .manifest import DATASET_KIND
@@ -116,8 +117,6 @@ class StillFrameGenerator:
         """
         import torch
 
-        from airpose_lib.geometry import body_in_camera, crop_vector, project_points
-
         cfg, sc = self.config, self.config.scene
         R_wb, t_wb = body_world_pose(person, v0)
         cams = sample_cameras(rng, sc)
@@ -182,8 +181,6 @@ class StillFrameGenerator:
     def _render_crops(self, bbox: np.ndarray, K: np.ndarray, R_cw: np.ndarray, t_cw: np.ndarray) -> list[bytes]:
         """Encoded crops ``[V]`` of the scene set on the renderer, one per box ``bbox (V, 4)``."""
         import torch
-
-        from airpose_lib.geometry import crop_intrinsics, pad_outside_box
 
         cfg = self.config
         T = lambda a: torch.as_tensor(a, dtype=torch.float64)  # noqa: E731

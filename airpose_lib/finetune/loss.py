@@ -43,9 +43,12 @@ from typing import Literal
 import torch
 from torch import Tensor, nn
 
+from airpose_lib.body import load_body_model
 from airpose_lib.body.joint_sets import BODY_25_FROM_SMPLX
 from airpose_lib.geometry import matrix_to_axis_angle, project_points
 from airpose_lib.losses import cross_view_mse, view_mse
+from airpose_lib.model import posed_joints_and_vertices
+from airpose_lib.prior import load_prior
 
 __all__ = ["FineTuneLossConfig", "FINETUNE_LOSS_DEFAULTS", "finetune_loss_config", "FineTuneLoss"]
 
@@ -132,13 +135,9 @@ class FineTuneLoss(nn.Module):
         super().__init__()
         self.config = config if config is not None else FineTuneLossConfig()
         if body_model is None:
-            from airpose_lib.body import load_body_model
-
             body_model = load_body_model("open", "neutral")
         self.body_model = body_model
         if prior is None and self.config.w_vposer != 0:
-            from airpose_lib.prior import load_prior
-
             prior = load_prior("kit")
         if prior is not None:
             prior.eval()  # batch norms on running statistics (B = 1 works), no dropout
@@ -158,8 +157,6 @@ class FineTuneLoss(nn.Module):
         Args:
             pred: phi (..., 3, 3), theta (..., 21, 3, 3), beta (..., 10), tau (..., 3).
         """
-        from airpose_lib.model import posed_joints_and_vertices
-
         joints = posed_joints_and_vertices(self.body_model, pred, joints_only=True)["joints"]
         return joints[..., self.joint_index, :].to(pred["theta"].dtype)
 

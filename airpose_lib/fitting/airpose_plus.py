@@ -60,7 +60,7 @@ import roma
 import torch
 from torch import Tensor
 
-from airpose_lib.body import BODY_25_FROM_SMPLX, COCO18_FROM_SMPLX
+from airpose_lib.body import BODY_25_FROM_SMPLX, COCO18_FROM_SMPLX, load_body_model
 from airpose_lib.body.forward import BodyForward
 from airpose_lib.geometry import (
     axis_angle_to_matrix,
@@ -71,8 +71,9 @@ from airpose_lib.geometry import (
     rot6d_to_matrix,
 )
 from airpose_lib.losses.robust import geman_mcclure
-from airpose_lib.prior import VPoser
+from airpose_lib.prior import VPoser, load_prior
 from airpose_lib.profiles import profile_path, profile_section
+from airpose_lib.progress import progress_bar
 
 __all__ = [
     "AirPosePlusConfig",
@@ -319,8 +320,6 @@ def _keypoint_body(body, outputs: Sequence[int]) -> BodyForward:
     """Joints-only body of the requested outputs, in float32 (own copies: ``body``, an
     ``smplx.SMPLX``, default the open neutral model, keeps its dtype)."""
     if body is None:
-        from airpose_lib.body import load_body_model
-
         body = load_body_model("open", "neutral")
     return BodyForward(body, outputs, vertices=None).float()
 
@@ -462,8 +461,6 @@ def airpose_plus(
     start = init_from_views(init["phi"], init["tau"], init["theta"], init["beta"], num_frames=F,
                             weights=kept.float())
     if prior is None:
-        from airpose_lib.prior import load_prior
-
         prior = load_prior("kit")
     if next(prior.parameters()).dtype != torch.float32:
         prior = prior.float()
@@ -504,8 +501,6 @@ def _optimise(cfg, prior, kbody, xy, w, gather, K, start, kept, progress) -> Air
     theta_fixed = None
     bar = None
     if progress:
-        from airpose_lib.progress import progress_bar
-
         bar = progress_bar(total=cfg.iterations, desc=f"AirPose+ ({n} frames)", unit="it")
     t0 = time.perf_counter()
     for it in range(cfg.iterations + 1):  # the extra pass only records the final loss

@@ -81,6 +81,7 @@ from airpose_lib.geometry import (
     project_points,
     transform_points,
 )
+from airpose_lib.body import load_body_model
 
 __all__ = [
     "LIMB_JOINTS_X1",
@@ -349,8 +350,6 @@ class SupervisedLoss(nn.Module):
         super().__init__()
         self.config = config if config is not None else BaselineLossConfig()
         if body_models is None:
-            from airpose_lib.body import load_body_model
-
             body_models = {g: load_body_model(source, g) for g in GENDER_NAMES.values()}
         ids = None
         n_vertices = body_models["neutral"].v_template.shape[0]

@@ -11,6 +11,9 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from airpose_lib.body import BodyForward, load_body_model
+from airpose_lib.data.motions import evaluate_motion, sample_script
+from airpose_lib.data.poses import sample_body_pose, within_limits
 from airpose_lib.folder_lock import file_lock_for
 
 from .checkpoint import kit_prior_path, save_prior
@@ -25,9 +28,6 @@ def prior_corpus(corpus: CorpusConfig, stream: int, n_still: int, n_motion: int)
     Returns:
         ``(n_still + n_motion, 21, 3)`` float32 axis-angle body poses.
     """
-    from airpose_lib.data.motions import evaluate_motion, sample_script
-    from airpose_lib.data.poses import sample_body_pose
-
     rng = np.random.default_rng([corpus.seed, stream])
     parts = [sample_body_pose(rng, n_still)] if n_still else []
     got = 0
@@ -56,9 +56,6 @@ def train_and_save_prior(profile: str, out: str | Path | None = None, *, steps: 
 
 def _train_and_save_prior(profile: str, path: Path, steps: int | None, seed: int | None,
                           progress: bool) -> tuple[Path, dict]:
-    from airpose_lib.body import BodyForward, load_body_model
-    from airpose_lib.data.poses import within_limits
-
     cfg, corpus = prior_profile(profile)
     if steps is not None:
         cfg.steps = steps

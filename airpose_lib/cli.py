@@ -18,9 +18,10 @@ import traceback
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
+from airpose_lib.body.genders import GENDERS  # a leaf: `airpose --help` stays free of torch
+
 __all__ = ["build_parser", "main"]
 
-GENDERS = ("neutral", "male", "female")
 # Profile names from the files, without importing the runner (papermill is slow to import).
 PROFILES = tuple(sorted(p.stem for p in (Path(__file__).parent / "reproduce" / "profiles").glob("*.yaml"))
                  ) or ("smoke", "cpu", "paper")
@@ -603,7 +604,7 @@ def _cmd_fit(args: argparse.Namespace) -> int:
 
     import numpy as np
 
-    from airpose_lib.body.cache import atomic_path
+    from airpose_lib.atomic import atomic_path
     from airpose_lib.data.official_layout import load_sequence
     from airpose_lib.fitting import AirPosePlusConfig, airpose_plus, fitting_profile
     from airpose_lib.prior import PriorError, load_prior

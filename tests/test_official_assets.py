@@ -20,7 +20,7 @@ import roma
 import torch
 
 from airpose_lib.data.dataset import PER_VIEW_KEYS, SAMPLE_KEYS, denormalize_images
-from airpose_lib.data.official_fixtures import (
+from official_fixtures import (
     AUTHOR_ROOT,
     write_official_real_fixture,
     write_official_synthetic_fixture,

@@ -32,6 +32,7 @@ import numpy as np
 import yaml
 
 from airpose_lib.body.cache import cache_dir
+from airpose_lib.body.genders import GENDER_CODES
 from airpose_lib.folder_lock import locks_folder
 from airpose_lib.process_guard import die_with_parent
 
@@ -45,7 +46,6 @@ from .manifest import (
     write_manifest,
 )
 from .scene import (
-    GENDER_CODES,
     SceneConfig,
     body_world_pose,
     jitter_bbox,
@@ -392,9 +392,7 @@ class StillFrameGenerator:
         """Encoded crops ``[V]`` of the scene set on the renderer, one per box ``bbox (V, 4)``."""
         import torch
 
-        from airpose_lib.geometry import crop_intrinsics
-
-        from .render import pad_outside_box
+        from airpose_lib.geometry import crop_intrinsics, pad_outside_box
 
         cfg = self.config
         T = lambda a: torch.as_tensor(a, dtype=torch.float64)  # noqa: E731

@@ -62,7 +62,7 @@ import numpy as np
 import torch
 from torch import nn
 
-from airpose_lib.body.cache import atomic_path
+from airpose_lib.atomic import atomic_path
 from airpose_lib.folder_lock import folder_lock
 
 __all__ = ["FineTuneConfig", "FineTuneResult", "finetune_config", "finetune", "evaluate_finetune_loss",

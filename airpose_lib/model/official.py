@@ -68,6 +68,8 @@ from typing import Any
 import torch
 from torch import Tensor
 
+from airpose_lib.atomic import atomic_path
+
 from .backbone import BACKBONES
 from .variants import BETA_DIM, TAU_INIT, TAU_SCALE, THETA_DIM, WEAK_CAM_INIT, AirPoseNet, _spec
 
@@ -457,7 +459,6 @@ def write_official_checkpoint(model: AirPoseNet, path: str | Path, *, epoch: int
     ``pytorch-lightning_version`` ("1.2.0", the official pin), ``hparams_name`` and
     ``hyper_parameters`` (``{"model": <official name>}``), plus ``extra`` entries.
     """
-    from airpose_lib.body.cache import atomic_path
 
     path = Path(path)
     ckpt = {"epoch": int(epoch), "global_step": int(global_step), "pytorch-lightning_version": "1.2.0",
@@ -479,7 +480,6 @@ def save_kit_checkpoint(model: AirPoseNet, path: str | Path, *, source: str | Pa
     weights for evaluation or fine-tuning, not a run to resume. ``source`` (e.g. the official
     file) is recorded with its SHA-256.
     """
-    from airpose_lib.body.cache import atomic_path
     from airpose_lib.train.checkpoint import FORMAT_VERSION, kit_version
     from airpose_lib.train.config import TrainConfig
 

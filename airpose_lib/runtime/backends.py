@@ -27,8 +27,7 @@ from typing import Protocol, runtime_checkable
 import numpy as np
 
 from airpose_lib.errors import reading
-
-from .wire import MESSAGE_VALUES
+from airpose_lib.model.message import MESSAGE_DIM
 
 __all__ = [
     "ONNX_PRECISIONS",
@@ -103,11 +102,11 @@ class FakeStageModel:
         self.num_stages = int(num_stages)
         self.message_dtype = np.dtype(message_dtype)
         self.compute_s = float(compute_s)
-        self._A = g.normal(scale=0.5, size=(MESSAGE_VALUES, 9))
-        self._B = g.normal(scale=0.5 / np.sqrt(MESSAGE_VALUES), size=(MESSAGE_VALUES, MESSAGE_VALUES))
-        self._C = g.normal(scale=0.5 / np.sqrt(MESSAGE_VALUES), size=(MESSAGE_VALUES, MESSAGE_VALUES))
+        self._A = g.normal(scale=0.5, size=(MESSAGE_DIM, 9))
+        self._B = g.normal(scale=0.5 / np.sqrt(MESSAGE_DIM), size=(MESSAGE_DIM, MESSAGE_DIM))
+        self._C = g.normal(scale=0.5 / np.sqrt(MESSAGE_DIM), size=(MESSAGE_DIM, MESSAGE_DIM))
         self._D = g.normal(scale=0.3, size=(9, 9))
-        self._mean = np.tanh(g.normal(size=MESSAGE_VALUES)) * 0.1
+        self._mean = np.tanh(g.normal(size=MESSAGE_DIM)) * 0.1
         self._k = 0
 
     def mean_message(self) -> np.ndarray:
@@ -135,7 +134,7 @@ class FakeStageModel:
             raise ValueError(f"expected stage {self._k + 1} (of {self.num_stages}), got {k}")
         if len(other_messages):
             # float32 first, as the real DroneNode: float16 messages are widened before fusion.
-            other = np.stack([to_numpy(m).astype(np.float32).astype(np.float64).reshape(MESSAGE_VALUES)
+            other = np.stack([to_numpy(m).astype(np.float32).astype(np.float64).reshape(MESSAGE_DIM)
                               for m in other_messages]).mean(0)
         else:
             other = self._mean

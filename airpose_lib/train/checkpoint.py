@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from airpose_lib.body.cache import atomic_path
+from airpose_lib.atomic import atomic_path
 from airpose_lib.errors import reading
 
 __all__ = [

@@ -42,7 +42,6 @@ Modules: ``config`` (cameras, persons, flights, :class:`SequenceConfig`, a profi
 """
 from __future__ import annotations
 
-from ..scene import GENDER_CODES
 from .cache import default_sequence_root, ensure_sequences
 from .config import (
     PAPER_CAMERAS,
@@ -70,7 +69,6 @@ __all__ = [
     "SequenceConfig",
     "SimulatedSequence",
     "GROUND_TRUTH_KEYS",
-    "GENDER_CODES",
     "scale_intrinsics",
     "simulate_sequence",
     "SequenceRenderer",

@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from ..scene import GENDER_CODES
+from airpose_lib.body.genders import GENDER_CODES
 
 __all__ = [
     "CameraSpec",

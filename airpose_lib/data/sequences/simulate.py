@@ -9,10 +9,10 @@ import torch
 
 from airpose_lib.body import load_body_model
 from airpose_lib.body.fast import JointsOnly
+from airpose_lib.body.genders import GENDER_CODES
 from airpose_lib.body.joint_sets import BODY_25_FROM_SMPLX, COCO18_FROM_SMPLX
 
 from ..motions import MotionScript, evaluate_motion, sample_script, world_root_pose
-from ..scene import GENDER_CODES
 from .config import SequenceConfig
 from .flight import Flights, look_at_rotation
 

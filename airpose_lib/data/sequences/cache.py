@@ -61,6 +61,8 @@ def ensure_sequences(profile: str | None = None, root: str | Path | None = None,
         name -> sequence folder (read it with
         :func:`airpose_lib.data.official_layout.load_sequence`).
     """
+    # A profile gives both the settings and the default folder, as for the still frames
+    # (data.generate.ensure_still_dataset); explicit settings need an explicit folder.
     if configs is None:
         if profile is None:
             raise ValueError("give a profile or configs")

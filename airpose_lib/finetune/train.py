@@ -31,8 +31,8 @@ the agreement threshold ``threshold_px r`` and the 2D residuals divided by ``r``
 as its full-resolution original would be.
 
 Crops and P are formed in the network's virtual camera (``geometry.virtual_crop``; the
-checkpoint's training camera, :func:`~airpose_lib.finetune.network.checkpoint_camera`); the 2D
-loss projects the predicted body with the recording's own intrinsics.
+checkpoint's training camera, ``camera_K`` of its network record, :mod:`airpose_lib.model.record`);
+the 2D loss projects the predicted body with the recording's own intrinsics.
 
 Determinism and resume follow ``airpose_lib.train``: the frame order of epoch e is drawn from
 ``(seed, e)`` only; dropout and the VPoser sample use torch's global RNG, seeded from the seed and
@@ -64,6 +64,8 @@ from torch import nn
 
 from airpose_lib.atomic import atomic_path
 from airpose_lib.folder_lock import folder_lock
+from airpose_lib.model.record import network_record
+from airpose_lib.profiles import profile_path, profile_section
 
 __all__ = ["FineTuneConfig", "FineTuneResult", "finetune_config", "finetune", "evaluate_finetune_loss",
            "heldout_split"]
@@ -164,17 +166,10 @@ class FineTuneConfig:
 def finetune_config(profile: str | Path | None, **overrides: Any) -> FineTuneConfig:
     """:class:`FineTuneConfig` from a profile's ``finetune:`` section (defaults where the profile
     has none), then ``overrides``. Unknown keys raise ``ValueError`` naming the file."""
-    import yaml
-
-    from airpose_lib.train.config import profile_path
-
     values: dict[str, Any] = {}
     if profile is not None:
-        path = profile_path(profile)
-        if not path.is_file():
-            raise ValueError(f"profile file not found: {path}")
-        values.update((yaml.safe_load(path.read_text()) or {}).get("finetune") or {})
-        where = f"{path} `finetune:`"
+        values.update(profile_section(profile, "finetune"))
+        where = f"{profile_path(profile)} `finetune:`"
     else:
         where = "fine-tuning options"
     values.update(overrides)
@@ -565,10 +560,12 @@ def _finetune(checkpoint: Path, root: Path, out_dir: Path, cfg: FineTuneConfig, 
             "num_heldout": len(held), "keypoints": agreement_summary(masks), "pixels": pixels,
             "camera_K": K_net_np.tolist(), "initial": initial, "selection": selection}
 
+    network = network_record(train_cfg.variant, train_cfg.backbone, train_cfg.model, input_size, K_net_np)
+
     def state_dict() -> dict:
         return {"model": model.state_dict(), "optimizer": optimizer.state_dict(), "rng": [capture_rng_state()],
                 "step": step, "epoch": epoch, "batch_in_epoch": batch_in_epoch, "config": train_cfg.to_dict(),
-                "world_size": 1, "input_size": input_size, "camera_K": K_net_np.tolist(), "finetune": info}
+                "world_size": 1, "network": network, "finetune": info}
 
     def save() -> Path:
         return save_checkpoint(out_dir, state_dict(), keep=cfg.keep_checkpoints)

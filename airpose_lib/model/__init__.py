@@ -9,16 +9,16 @@ from __future__ import annotations
 
 from airpose_lib._lazy import lazy_namespace
 
-_MODULES = ("message", "backbone", "regressor", "variants", "staged", "onnx_export", "official", "smplx_params",
-            "pretrain", "quantize")
+_MODULES = ("message", "backbone", "regressor", "variants", "staged", "onnx_export", "official", "record",
+            "smplx_params", "pretrain", "quantize")
 _EXPORTS = {
     **dict.fromkeys(("BETA_DIM", "MESSAGE_DIM", "NUM_BODY_JOINTS", "THETA_DIM"), "message"),
     **dict.fromkeys(("BACKBONES", "BasicBlock", "Bottleneck", "ResNet", "build_backbone", "resnet18", "resnet34",
                      "resnet50"), "backbone"),
     **dict.fromkeys(("DECODER_GAIN", "HIDDEN_WIDTH", "IterativeRegressor"), "regressor"),
     **dict.fromkeys(("OnnxDroneNode", "export_onnx"), "onnx_export"),
-    **dict.fromkeys(("load_official_checkpoint", "save_kit_checkpoint", "to_official_state_dict",
-                     "write_official_checkpoint"), "official"),
+    **dict.fromkeys(("load_official_checkpoint", "to_official_state_dict", "write_official_checkpoint"), "official"),
+    **dict.fromkeys(("NetworkRecord", "network_record", "read_network"), "record"),
     **dict.fromkeys(("posed_joints_and_vertices", "to_smplx_params"), "smplx_params"),
     **dict.fromkeys(("DroneNode", "decode_message", "encode_message", "fuse_message_list", "message_nbytes"),
                     "staged"),

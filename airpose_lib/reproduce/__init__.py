@@ -1,7 +1,8 @@
 """Reproduce the paper's artefacts by running the kit's notebooks (papermill) under a profile.
 
-Profiles (``profiles/smoke.yaml``, ``cpu.yaml``, ``paper.yaml``) are the one place where sizes
-live; ``catalog.yaml`` lists the notebooks in order and the figures each must write.
+Profiles (``airpose_lib/profiles/smoke.yaml``, ``cpu.yaml``, ``paper.yaml``, read through
+:mod:`airpose_lib.profiles`) are the one place where sizes live; ``catalog.yaml`` lists the
+notebooks in order and the figures each must write.
 Library code never imports this package; ``airpose reproduce``, CI and the notebooks
 (:func:`setup_notebook`) do.
 """

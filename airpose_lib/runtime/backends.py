@@ -198,23 +198,24 @@ _CKPT_FIX = "give another --checkpoint (e.g. the newest checkpoints/step_*.pt of
 
 
 def checkpoint_settings(path: str | Path) -> dict:
-    """Network settings stored in a training checkpoint (``airpose_lib.train``'s ``config``):
-    ``variant``, ``backbone``, ``model`` (extra ``build_model`` kwargs) and ``input_size`` (the
-    crop size, :func:`airpose_lib.finetune.network.checkpoint_input_size`) when present; empty for
-    a bare ``state_dict``."""
+    """Network settings of a training or fine-tuning checkpoint (its network record,
+    :func:`airpose_lib.model.record.read_network`): ``variant``, ``backbone``, ``model`` (extra
+    ``build_model`` kwargs) and ``input_size`` (the crop size) when known; empty for a bare
+    ``state_dict``."""
     import torch
 
     with reading(path, "a model checkpoint (a state_dict or a checkpoint of `airpose train`)", _CKPT_FIX):
         state = torch.load(path, map_location="cpu", weights_only=True)
-    cfg = state.get("config") if isinstance(state, dict) else None
-    if not isinstance(cfg, dict):
+    if not isinstance(state, dict) or not isinstance(state.get("config"), dict):
         return {}
-    from airpose_lib.finetune.network import checkpoint_input_size
+    # lazy: only a drone with a checkpoint needs the data readers (a drone's start-up stays short)
+    from airpose_lib.data.training_input import training_input
+    from airpose_lib.model.record import read_network
 
-    out = {k: cfg[k] for k in ("variant", "backbone", "model") if cfg.get(k) is not None}
-    size = checkpoint_input_size(state)  # also fine-tuned checkpoints and manifests of the data
-    if size:
-        out["input_size"] = int(size)
+    record = read_network(state, legacy=training_input)  # old checkpoints: from their data
+    out = {"variant": record.variant, "backbone": record.backbone, "model": record.model}
+    if record.input_size:
+        out["input_size"] = int(record.input_size)
     return out
 
 

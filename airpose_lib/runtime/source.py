@@ -266,7 +266,7 @@ def person_box(keypoints: np.ndarray | None, image_size: tuple[int, int], min_co
 def network_camera() -> np.ndarray:
     """``(3, 3)`` intrinsics of the camera every kit and official network is trained with: the
     still-frame data's (``data.scene.SceneConfig``: f = 1475 px, 1920x1080, principal point at
-    the image centre). A network trained otherwise records its own (``finetune.network``)."""
+    the image centre). A checkpoint records its own (``model.record``, ``camera_K``)."""
     from airpose_lib.data.scene import SceneConfig
 
     return SceneConfig().K

@@ -48,6 +48,7 @@ from .checkpoint import (
     last_checkpoint,
     load_checkpoint,
     restore_rng_state,
+    run_network_entry,
     save_checkpoint,
 )
 from .config import TrainConfig, load_train_config
@@ -418,6 +419,7 @@ def _run_training(cfg: TrainConfig, out_dir: Path, resume: bool, model_factory: 
     loss_fn = loss_factory(cfg).to(device)
     train_ds = dataset_factory(cfg, cfg.train_split)
     val_ds = dataset_factory(cfg, cfg.val_split) if cfg.val_every is not None and rank == 0 else None
+    network = run_network_entry(cfg.to_dict(), train_ds) if rank == 0 else {}
     optimizer = torch.optim.Adam([p for p in model.parameters() if p.requires_grad], lr=cfg.lr,
                                  amsgrad=cfg.amsgrad, weight_decay=cfg.weight_decay)
 
@@ -465,7 +467,7 @@ def _run_training(cfg: TrainConfig, out_dir: Path, resume: bool, model_factory: 
             path = save_checkpoint(out_dir, {
                 "model": model.state_dict(), "optimizer": optimizer.state_dict(), "rng": all_rng,
                 "step": step, "epoch": epoch, "batch_in_epoch": batch_in_epoch, "config": cfg.to_dict(),
-                "world_size": world}, keep=cfg.keep_checkpoints)
+                "world_size": world, **network}, keep=cfg.keep_checkpoints)
         if distributed:
             dist.barrier()
         return path

@@ -6,12 +6,10 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from pathlib import Path
-
 import numpy as np
-import yaml
 
 from airpose_lib.body.genders import GENDER_CODES
+from airpose_lib.profiles import profile_section
 
 __all__ = [
     "CameraSpec",
@@ -28,7 +26,6 @@ __all__ = [
 
 #: Bumped whenever the same settings would produce a different recording.
 SEQUENCE_GENERATOR_VERSION = 1
-_PROFILES_DIR = Path(__file__).resolve().parents[2] / "reproduce" / "profiles"
 
 
 @dataclass(frozen=True)
@@ -256,14 +253,5 @@ def sequence_configs_from_profile(profile_section: Mapping) -> dict[str, Sequenc
 
 
 def profile_sequences(profile: str) -> dict[str, SequenceConfig]:
-    """The recordings of a reproduction profile (its ``sequences:`` section; the YAML file is read
-    as data, the reproduce package is not imported)."""
-    path = _PROFILES_DIR / f"{profile}.yaml"
-    if not path.is_file():
-        known = sorted(p.stem for p in _PROFILES_DIR.glob("*.yaml"))
-        raise ValueError(f"unknown profile {profile!r}; available: {known}")
-    section = (yaml.safe_load(path.read_text()) or {}).get("sequences")
-    if not section:
-        raise ValueError(f"{path} has no `sequences:` section with the recordings' sizes")
-    return sequence_configs_from_profile(section)
-
+    """The recordings of a reproduction profile (its ``sequences:`` section, :mod:`airpose_lib.profiles`)."""
+    return sequence_configs_from_profile(profile_section(profile, "sequences", required="the recordings' sizes"))

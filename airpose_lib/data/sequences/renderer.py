@@ -6,8 +6,9 @@ from collections.abc import Iterator
 
 import numpy as np
 
+from airpose_lib.body.forward import rest_body
+
 from ..appearance import BodyPaint, sample_appearance
-from ..motions import body_forward
 from ..scene import Distractor, EnvironmentSample
 from .simulate import SimulatedSequence, person_body_model
 
@@ -117,7 +118,7 @@ class SequenceRenderer:
         for a in range(0, len(frames), chunk):
             idx = frames[a:a + chunk]
             theta = gt["theta_view"][idx].reshape(-1, 21, 3)
-            v0, _ = body_forward(self.model, np.broadcast_to(betas, (len(theta), 10)), theta)
+            v0, _ = rest_body(self.model, np.broadcast_to(betas, (len(theta), 10)), theta)
             v0 = v0.reshape(len(idx), V, -1, 3)
             for k, i in enumerate(idx):
                 images = []

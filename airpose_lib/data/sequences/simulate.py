@@ -8,7 +8,7 @@ import numpy as np
 import torch
 
 from airpose_lib.body import load_body_model
-from airpose_lib.body.fast import JointsOnly
+from airpose_lib.body.forward import rest_body
 from airpose_lib.body.genders import GENDER_CODES
 from airpose_lib.body.joint_sets import BODY_25_FROM_SMPLX, COCO18_FROM_SMPLX
 
@@ -111,11 +111,7 @@ def simulate_sequence(config: SequenceConfig, body_model=None) -> SimulatedSeque
     betas = np.asarray(person.betas, dtype=np.float64)
     R_wb, t_wb, pelvis = world_root_pose(state, model, betas)
 
-    jo = JointsOnly(model)
-    with torch.no_grad():
-        dt = jo.J_template.dtype
-        J0 = jo(betas=torch.as_tensor(np.broadcast_to(betas, (F * V, 10)).copy(), dtype=dt),
-                body_pose=torch.as_tensor(state.theta.reshape(-1, 63), dtype=dt)).double().numpy()
+    _, J0 = rest_body(model, np.broadcast_to(betas, (F * V, 10)), state.theta, mesh=False)
     Jw = np.einsum("tij,tkj->tki", R_wb, J0) + t_wb[:, None]  # (FV, 76, 3)
 
     flights = Flights(rng_flight, config.flight, np.asarray(script.start_xz))

@@ -185,7 +185,7 @@ def test_no_cycles_between_modules():
     assert not cycles, "import cycles between modules:\n" + "\n".join(" <-> ".join(c) for c in cycles)
 
 
-@pytest.mark.parametrize("module", ["airpose_lib.cli", "airpose_lib.runtime.node"])
+@pytest.mark.parametrize("module", ["airpose_lib.cli", "airpose_lib.runtime.source"])
 def test_graph_sees_lazy_imports(module):
     """The reader finds imports inside functions too (the check would be blind without them)."""
     path = ROOT.parent / (module.replace(".", "/") + ".py")

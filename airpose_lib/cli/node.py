@@ -129,9 +129,9 @@ def build_node_parser(p: argparse.ArgumentParser | None = None) -> argparse.Argu
 def config_from_args(args: argparse.Namespace, drone_id: int, port: int, peers: dict[int, str],
                      t0: float | None, clock_offset_ms: float = 0.0, host: str = "127.0.0.1",
                      view: int | None = None):
-    """A :class:`~.node.NodeConfig` from parsed options."""
+    """A :class:`~airpose_lib.runtime.config.NodeConfig` from parsed options."""
     from airpose_lib.runtime.backends import BackendSpec
-    from airpose_lib.runtime.node import NodeConfig
+    from airpose_lib.runtime.config import NodeConfig
     from airpose_lib.runtime.transport import LinkConfig
 
     backend = BackendSpec(kind=args.backend, variant=args.variant, backbone=args.backbone,
@@ -154,7 +154,7 @@ def config_from_args(args: argparse.Namespace, drone_id: int, port: int, peers: 
 
 def run_node(args: argparse.Namespace) -> int:
     """Handler of ``airpose node``."""
-    from airpose_lib.runtime.node import DroneProcess
+    from airpose_lib.runtime.drone import DroneProcess
     from airpose_lib.runtime.transport import parse_peers
 
     check_inputs(args)

@@ -362,7 +362,7 @@ def _finetune_done(run_dir: Path, cfg) -> bool:
     """A finished fine-tuning run with these settings in ``run_dir`` (it will be loaded, not
     trained: no diagnostics needed)."""
     from airpose_lib.finetune.train import FineTuneConfig
-    from airpose_lib.train.checkpoint import last_checkpoint, load_checkpoint
+    from airpose_lib.engine.checkpoint import last_checkpoint, load_checkpoint
 
     last = last_checkpoint(run_dir)
     try:

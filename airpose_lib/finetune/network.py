@@ -1,6 +1,6 @@
 """A trained network, the crop size and the camera it expects, from a kit training checkpoint.
 
-Kit checkpoints (``airpose_lib.train.checkpoint``) store the :class:`~airpose_lib.train.TrainConfig`
+Kit checkpoints (``airpose_lib.engine.checkpoint``) store the :class:`~airpose_lib.train.TrainConfig`
 but not the crop size directly: it is the still-frame dataset's. :func:`checkpoint_input_size`
 looks, in order, at the checkpoint's ``input_size`` (written by fine-tuning), ``config.data.crop_size``,
 the manifest of ``config.data.root``, and the ``data: still: crop_size`` of the profile that made
@@ -119,7 +119,7 @@ def load_network(checkpoint: str | Path, device: str | torch.device = "cpu",
     Raises:
         FileNotFoundError: no such file. ValueError: the crop size is unknown (pass it).
     """
-    from airpose_lib.train.checkpoint import load_checkpoint
+    from airpose_lib.engine.checkpoint import load_checkpoint
     from airpose_lib.train.evaluate import load_trained_model
 
     path = Path(checkpoint)

@@ -480,7 +480,7 @@ def save_kit_checkpoint(model: AirPoseNet, path: str | Path, *, source: str | Pa
     file) is recorded with its SHA-256.
     """
     from airpose_lib.body.cache import atomic_path
-    from airpose_lib.train.checkpoint import FORMAT_VERSION, kit_version
+    from airpose_lib.engine.checkpoint import FORMAT_VERSION, kit_version
     from airpose_lib.train.config import TrainConfig
 
     cfg = TrainConfig(**{"variant": model.variant, "backbone": _backbone_name(model), "steps": 0,

@@ -19,11 +19,11 @@ import torch
 from torch import nn
 from torch.utils.data import DataLoader
 
+from airpose_lib.engine.checkpoint import load_checkpoint
 from airpose_lib.eval import per_joint_table, per_view_table, relative_camera_table
 from airpose_lib.geometry import axis_angle_to_matrix
 from airpose_lib.losses import PaperBody
 
-from .checkpoint import load_checkpoint
 from .config import TrainConfig
 
 __all__ = ["predict", "evaluate", "load_trained_model", "evaluate_checkpoint"]

@@ -28,12 +28,12 @@ from torch.utils.data import DataLoader
 from airpose_lib.body.cache import atomic_path, cache_dir, file_lock
 from airpose_lib.data.dataset import StillFrameDataset
 from airpose_lib.data.shards import sha256_file
+from airpose_lib.engine.checkpoint import kit_version, load_checkpoint
 from airpose_lib.eval.metrics import rotation_error
 from airpose_lib.geometry import rot6d_to_matrix
 from airpose_lib.model.pretrain import heading_bin
 from airpose_lib.paths import run_path
 
-from .checkpoint import kit_version, load_checkpoint
 from .config import TrainConfig, load_train_config
 
 __all__ = ["PRETRAIN_VERSION", "pretrain_config", "backbone_key", "ensure_backbone", "profile_backbone", "profile_backbone_key",

@@ -6,7 +6,11 @@ A checkpoint (``torch.save`` dict, loadable with ``weights_only=True``) holds
 ``optimizer``    the optimiser's ``state_dict``
 ``rng``          per process: torch CPU (and CUDA), numpy and python RNG states
 ``step``         optimiser steps done; ``epoch`` and ``batch_in_epoch``: the data-order position
-``config``       the :class:`TrainConfig` as a dict; ``kit_version``; ``world_size``
+``format_version``, ``kit_version``
+
+and the task's own entries (:meth:`airpose_lib.engine.TrainingTask.checkpoint_state`): the
+still-frame trainings add ``config`` (the ``TrainConfig`` as a dict) and ``world_size``,
+fine-tuning also ``input_size``, ``camera_K`` and ``finetune``.
 
 ``<out>/checkpoints/last.pt`` is always the newest; ``step_<n>.pt`` copies are kept as configured.
 """

@@ -1,8 +1,10 @@
-"""One training loop for every variant: deterministic, resumable, single process or DDP.
+"""The still-frame trainings of every variant: deterministic, resumable, single process or DDP.
 
 ``train(variant, profile, seed, out_dir, resume=True)`` builds the model
 (``airpose_lib.model.build_model``), the still-frame datasets (``airpose_lib.data``) and the
-supervised loss of the variant (``airpose_lib.losses``), and optimises with Adam (AMSGrad).
+supervised loss of the variant (``airpose_lib.losses``), and optimises with Adam (AMSGrad) in the
+kit's one training loop (:func:`airpose_lib.engine.run_engine`); :class:`StillFrameTask` is its
+task, one ``train_step`` per ``cfg.task`` (:data:`TASK_FORWARD`).
 
 Determinism and resume. Python, numpy and torch are seeded from the config's seed; the data order
 and every sample's augmentation depend only on ``(seed, epoch, index)``

@@ -18,12 +18,13 @@ import traceback
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
+from airpose_lib.body.genders import GENDERS  # a leaf: `airpose --help` stays free of torch
+from airpose_lib.profiles import profile_names
+
 __all__ = ["build_parser", "main"]
 
-GENDERS = ("neutral", "male", "female")
 # Profile names from the files, without importing the runner (papermill is slow to import).
-PROFILES = tuple(sorted(p.stem for p in (Path(__file__).parent / "reproduce" / "profiles").glob("*.yaml"))
-                 ) or ("smoke", "cpu", "paper")
+PROFILES = tuple(profile_names()) or ("smoke", "cpu", "paper")
 
 
 EXIT_USER_ERROR = 2  # as argparse for a bad flag: the user can fix it
@@ -38,6 +39,7 @@ class CLIError(Exception):
 # the kit and keeps its traceback.
 _USER_ERRORS = (
     "airpose_lib.errors:DamagedFileError",
+    "airpose_lib.errors:ProfileError",
     "airpose_lib.folder_lock:FolderBusyError",
     "airpose_lib.assets.manifest:AssetError",
     "airpose_lib.body.loader:BodyModelError",
@@ -603,7 +605,7 @@ def _cmd_fit(args: argparse.Namespace) -> int:
 
     import numpy as np
 
-    from airpose_lib.body.cache import atomic_path
+    from airpose_lib.atomic import atomic_path
     from airpose_lib.data.official_layout import load_sequence
     from airpose_lib.fitting import AirPosePlusConfig, airpose_plus, fitting_profile
     from airpose_lib.prior import PriorError, load_prior
@@ -804,7 +806,7 @@ def _add_reproduce(sub) -> None:
                     "(exit 1) if a notebook raises or an expected figure is missing.")
     rep.add_argument("--profile", choices=PROFILES, default="smoke",
                      help="smoke: minutes on a CPU; cpu: hours on a CPU; paper: the paper's sizes "
-                          "(GPU); the sizes are in airpose_lib/reproduce/profiles/ (default: smoke)")
+                          "(GPU); the sizes are in airpose_lib/profiles/ (default: smoke)")
     rep.add_argument("--only", nargs="+", metavar="NAME",
                      help="run only these notebooks (names or unique prefixes, e.g. 00_body_model or 00)")
     rep.add_argument("--out", type=Path, default=None,

@@ -5,6 +5,7 @@ makes the underlying reader raise (``zipfile.BadZipFile``, ``EOFError``, pickle 
 a ``KeyError`` for a missing entry) becomes one :class:`DamagedFileError` that names the file,
 says what it should have been and how to get a good one. A missing file stays a
 ``FileNotFoundError`` (the ``airpose`` command reports both in one line, exit status 2).
+:class:`ProfileError` is an unknown profile or a profile file without a section it needs.
 Imports nothing of the kit.
 """
 from __future__ import annotations
@@ -16,7 +17,7 @@ import zipfile
 from collections.abc import Iterator
 from pathlib import Path
 
-__all__ = ["DamagedFileError", "reading"]
+__all__ = ["DamagedFileError", "ProfileError", "reading"]
 
 # What readers raise on a truncated, corrupted or foreign file (ImportError / AttributeError: a
 # pickle naming classes that do not exist here; UnicodeDecodeError is a ValueError).
@@ -31,6 +32,11 @@ class DamagedFileError(ValueError):
         self.path, self.what, self.fix = Path(path), what, fix
         detail = f" ({type(cause).__name__}: {_short(cause)})" if cause is not None else ""
         super().__init__(f"{path} is damaged or not {what}{detail}; {fix}")
+
+
+class ProfileError(ValueError):
+    """An unknown profile, or a profile file that lacks (or garbles) a section; the message names
+    the file and the fix. A ``ValueError``, as the readers it replaced raised."""
 
 
 def _short(exc: BaseException, limit: int = 120) -> str:

@@ -7,7 +7,7 @@ ends, however it ends (SIGKILL included), so there is never a stale lock to dele
 second writer is refused at once with :class:`FolderBusyError`, naming the holder's PID.
 
 Whoever acquires the lock is the folder's only live writer, so temp files left there (the
-``.NAME.XXXX.tmp`` of :func:`airpose_lib.body.cache.atomic_path`, ``.shard_*.tmp``) belong to
+``.NAME.XXXX.tmp`` of :func:`airpose_lib.atomic.atomic_path`, ``.shard_*.tmp``) belong to
 a writer that died midway; they are removed right after the lock is taken, never before.
 
 Within one process the lock is re-entrant (the training loop and its logger both hold it). With

@@ -66,6 +66,7 @@ def main() -> int:
 
     import pandas as pd
 
+    from airpose_lib.data.dataset import StillFrameDataset
     from airpose_lib.eval import paper_table, per_view_table
     from airpose_lib.model.quantize import QuantSettings
     from airpose_lib.runtime.backends import BackendSpec, make_stage_model
@@ -74,7 +75,15 @@ def main() -> int:
     from airpose_lib.train.loop import default_dataset_factory, prepare_data
 
     model, cfg = load_trained_model(args.checkpoint)
-    dataset = default_dataset_factory(prepare_data(cfg, progress=False), args.split)
+    cfg = prepare_data(cfg, progress=False)
+    dataset = default_dataset_factory(cfg, args.split)
+    # A regressor-task checkpoint evaluates in torch on the cached backbone features; the ONNX
+    # networks need the crops themselves (the same crops the features were computed from).
+    images = dataset
+    if cfg.task == "regressor":
+        crops = cfg.data.get("crops", "jittered")
+        images = StillFrameDataset(cfg.data["root"], split=args.split, crops=crops,
+                                   **{k: v for k, v in cfg.data.items() if k not in ("root", "profile", "source", "crops")})
     spec = BackendSpec(kind="onnx-int8", checkpoint=args.checkpoint, threads=args.threads)
     t = time.time()
     settings = QuantSettings(calibration=args.calibration_method, backbone_only=not args.quantize_regressor)
@@ -88,7 +97,7 @@ def main() -> int:
     tables, preds = {}, {}
     for name, net in runs.items():
         t = time.time()
-        preds[name], gt = predict(net, dataset, batch_size=4, max_samples=args.max_samples, body=cfg.body_source)
+        preds[name], gt = predict(net, dataset if name == "torch fp32" else images, batch_size=4, max_samples=args.max_samples, body=cfg.body_source)
         tables[name] = per_view_table(preds[name], gt, name, gt.get("index"))
         print(f"{name}: {len(tables[name])} views in {time.time() - t:.0f} s", flush=True)
 

@@ -47,7 +47,7 @@ def test_existing_file_is_not_rebuilt(small_build):
 
 
 def test_failed_write_keeps_the_previous_file(tmp_path):
-    from airpose_lib.body.cache import atomic_path
+    from airpose_lib.atomic import atomic_path
 
     target = tmp_path / "model.npz"
     target.write_bytes(b"old")

@@ -7,15 +7,16 @@ import numpy as np
 import pytest
 import torch
 
-from airpose_lib.body import BODY_25_FROM_SMPLX, load_body_model
+from airpose_lib.body import BODY_25_FROM_SMPLX, GENDER_NAMES, load_body_model
 from airpose_lib.data.dataset import PER_VIEW_KEYS, SAMPLE_KEYS, StillFrameDataset, decode_image, denormalize_images
 from airpose_lib.data.generate import GenerationConfig, generate_still_dataset
 from airpose_lib.data.manifest import DatasetError, ShardIntegrityError, load_manifest
-from airpose_lib.data.render import SceneRenderer, box_in_crop
+from airpose_lib.data.render import SceneRenderer
 from airpose_lib.data.scene import SceneConfig
 from airpose_lib.data.shards import read_shard, shard_name
 from airpose_lib.geometry import (
     body_in_camera,
+    box_in_crop,
     crop_intrinsics,
     crop_vector,
     full_to_crop_pixels,
@@ -24,7 +25,6 @@ from airpose_lib.geometry import (
 
 CFG = GenerationConfig(num_samples=12, shard_size=4, crop_size=64, seed=7,
                        scene=SceneConfig(num_distractors=(1, 2)))
-GENDERS = {1: "male", 2: "female"}
 
 
 def _generate(root, config=CFG, **kw):
@@ -57,7 +57,7 @@ def models():
 
 
 def _body(models, gender, beta, theta):
-    m = models[GENDERS[int(gender)]]
+    m = models[GENDER_NAMES[int(gender)]]
     with torch.no_grad():
         out = m(betas=torch.as_tensor(beta)[None], body_pose=torch.as_tensor(theta).reshape(1, 63))
     return out.vertices[0].numpy(), out.joints[0].numpy(), np.asarray(m.faces, dtype=np.int64)

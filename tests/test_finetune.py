@@ -386,6 +386,10 @@ def test_finetune_freezes_backbone_and_lowers_the_2d_loss(tiny_ckpt, smoke_root,
     assert res.keypoints["kept"] > 0 and res.keypoints["disagree"] + res.keypoints["unconfirmed"] > 0
     model, cfg = load_trained_model(res.checkpoint)  # the kit checkpoint format
     assert cfg.variant == "airpose" and load_network(res.checkpoint)[2] == S
+    net = load_checkpoint(res.checkpoint)["network"]  # the record of what rebuilds the network
+    assert (net["variant"], net["backbone"], net["input_size"], net["camera_rule"]) == ("airpose", "resnet18", S,
+                                                                                         "virtual_crop")
+    np.testing.assert_allclose(net["camera_K"], load_network(tiny_ckpt)[0].camera_K)
     assert [int(r["step"]) for r in read_log(tmp_path / "ft" / "log.csv")] == list(range(1, 9))
     assert res.history["step"] == list(range(1, 9)) and len(res.history["j2d"]) == 8
 

@@ -20,7 +20,7 @@ import roma
 import torch
 
 from airpose_lib.data.dataset import PER_VIEW_KEYS, SAMPLE_KEYS, denormalize_images
-from airpose_lib.data.official_fixtures import (
+from official_fixtures import (
     AUTHOR_ROOT,
     write_official_real_fixture,
     write_official_synthetic_fixture,
@@ -46,7 +46,6 @@ from airpose_lib.model.official import (
     load_official_checkpoint,
     official_to_kit,
     read_official_checkpoint,
-    save_kit_checkpoint,
     to_official_state_dict,
     write_official_checkpoint,
 )
@@ -414,6 +413,7 @@ def test_official_checkpoint_round_trip(tmp_path, variant):
         assert torch.equal(a[k], b[k]), k
     # back to the kit's own checkpoint format
     from airpose_lib.train.evaluate import load_trained_model
+    from airpose_lib.train.official import save_kit_checkpoint
 
     kit = save_kit_checkpoint(m2, tmp_path / f"{variant}_kit.pt", source=path)
     m3, cfg = load_trained_model(kit)

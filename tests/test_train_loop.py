@@ -83,6 +83,7 @@ class FakeStillFrames(Dataset):
     def __init__(self, n: int = 12, seed: int = 0, split: str = "train", genders: int = 3) -> None:
         self.data = make_samples(n, seed, genders=genders)
         self.split = split
+        self.crop_size = S  # as every kit dataset: the checkpoints' network record takes it
 
     def __len__(self) -> int:
         return self.data["images"].shape[0]
@@ -220,6 +221,14 @@ def test_checkpoint_contents_and_outputs(straight_run):
     group = state["optimizer"]["param_groups"][0]
     assert group["lr"] == 5e-5 and group["amsgrad"] is True  # paper: Adam (AMSGrad), lr 5e-5
     assert isinstance(state["kit_version"], str)
+    from airpose_lib.data.scene import SceneConfig
+    from airpose_lib.model import read_network
+
+    net = read_network(state)  # the record alone rebuilds the network and forms its input
+    assert (net.variant, net.backbone, net.model, net.input_size) == ("airpose", state["config"]["backbone"],
+                                                                      state["config"]["model"], S)
+    assert (net.normalisation, net.camera_rule) == ("imagenet", "virtual_crop")
+    np.testing.assert_array_equal(net.camera_K, SceneConfig().K)
     result = json.loads((out / "result.json").read_text())
     assert result["step"] == 4 and result["val_losses"]["total"] > 0
     assert json.loads((out / "config.json").read_text())["batch_size"] == 4

@@ -31,6 +31,8 @@ from dataclasses import dataclass
 from pathlib import Path, PurePosixPath
 from typing import Iterator
 
+from airpose_lib.atomic import atomic_path
+
 from .locate import AssetLocation, config_path, locate
 from .manifest import AssetError, AssetManifest, RemoteFile, load_asset_manifest
 from .verify import VerifyReport, sha256_file, verify
@@ -241,7 +243,6 @@ def _extract(archive: Path, f: RemoteFile, root: Path, progress: bool) -> str:
         top = [p for p in stage.iterdir()]
         base = top[0] if len(top) == 1 and top[0].is_dir() and not top[0].is_symlink() else stage
         moved, kept = _merge(base, dest)
-    from airpose_lib.body.cache import atomic_path  # lazy: airpose_lib.body imports torch
 
     with atomic_path(marker) as tmp:
         tmp.write_text(json.dumps({"archive": f.name, "into": str(dest), "files": moved, "kept_existing": kept}) + "\n")

@@ -1,32 +1,25 @@
-"""Body models: the open anny-derived SMPL-X-format model, the licensed SMPL-X, joint sets and a
-joints-only fast path. Everything is consumed through the ``smplx`` API."""
-from .joint_sets import (
-    BODY22_NAMES,
-    BODY_25_EDGES,
-    BODY_25_FROM_SMPLX,
-    BODY_25_NAMES,
-    COCO17_FROM_SMPLX,
-    COCO17_NAMES,
-    COCO18_FROM_SMPLX,
-    COCO18_NAMES,
-    EXTRA_JOINT_NAMES,
-    NUM_BODY_JOINTS,
-    NUM_POSE_JOINTS,
-    OUTPUT_JOINT_NAMES,
-    SMPLX_JOINT_NAMES,
-    SMPLX_PARENTS,
-    joint_index,
-)
-from .loader import (
-    BodyModelError,
-    body_model_info,
-    check_model_file,
-    load_body_model,
-    open_model_texture,
-    resolve_model_file,
-    stature,
-)
-from .open_model import GENDERS, build_open_model, open_model_path
-from .pose import axis_angle, body_pose_from_joints
+"""Body models: the open anny-derived SMPL-X-format model, the licensed SMPL-X, joint sets, the
+gender codes and a joints-only fast path. Everything is consumed through the ``smplx`` API.
 
-__all__ = [name for name in dir() if not name.startswith("_")]
+Names are imported lazily from their modules, so the light ones (``genders``, ``joint_sets``)
+can be used without importing torch and smplx (``data.scene`` and a drone's start-up need that).
+"""
+from __future__ import annotations
+
+from airpose_lib._lazy import lazy_namespace
+
+_MODULES = ("genders", "joint_sets", "loader", "open_model", "pose", "cache", "fast")
+_EXPORTS = {
+    **dict.fromkeys(("GENDERS", "GENDER_CODES", "GENDER_NAMES"), "genders"),
+    **dict.fromkeys(("BODY22_NAMES", "BODY_25_EDGES", "BODY_25_FROM_SMPLX", "BODY_25_NAMES", "COCO17_FROM_SMPLX",
+                     "COCO17_NAMES", "COCO18_FROM_SMPLX", "COCO18_NAMES", "EXTRA_JOINT_NAMES", "NUM_BODY_JOINTS",
+                     "NUM_POSE_JOINTS", "OUTPUT_JOINT_NAMES", "SMPLX_JOINT_NAMES", "SMPLX_PARENTS", "joint_index"),
+                    "joint_sets"),
+    **dict.fromkeys(("BodyModelError", "body_model_info", "check_model_file", "load_body_model", "open_model_texture",
+                     "resolve_model_file", "stature"), "loader"),
+    **dict.fromkeys(("build_open_model", "open_model_path"), "open_model"),
+    **dict.fromkeys(("axis_angle", "body_pose_from_joints", "pose_at_origin"), "pose"),
+}
+
+__all__ = sorted(_EXPORTS)
+__getattr__, __dir__ = lazy_namespace(__name__, globals(), _MODULES, _EXPORTS)

@@ -1,4 +1,4 @@
-"""Where the kit keeps what it builds, and how it writes files without leaving half of one.
+"""Where the kit keeps what it builds, and an inter-process lock for building it once.
 
 ``AIRPOSE_CACHE`` (default ``~/.cache/airpose``) holds the open body model and anny's own build
 cache (``<cache>/anny`` unless ``ANNY_CACHE_DIR`` is set).
@@ -8,7 +8,6 @@ from __future__ import annotations
 import contextlib
 import fcntl
 import os
-import tempfile
 from pathlib import Path
 from typing import Iterator
 
@@ -18,28 +17,6 @@ def cache_dir() -> Path:
     root = Path(os.environ.get("AIRPOSE_CACHE", Path.home() / ".cache" / "airpose")).expanduser()
     root.mkdir(parents=True, exist_ok=True)
     return root
-
-
-@contextlib.contextmanager
-def atomic_path(target: Path) -> Iterator[Path]:
-    """Yield a temporary path beside ``target``; move it over ``target`` only if the block succeeds.
-
-    A crash or Ctrl-C leaves the previous file (or none) in place, never a truncated one.
-    """
-    target = Path(target)
-    target.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=target.parent, prefix=f".{target.name}.", suffix=".tmp")
-    os.close(fd)
-    tmp_path = Path(tmp)
-    try:
-        yield tmp_path
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp_path, 0o666 & ~umask)  # mkstemp makes 0600; give the file normal permissions
-        os.replace(tmp_path, target)
-    finally:
-        if tmp_path.exists():
-            tmp_path.unlink()
 
 
 @contextlib.contextmanager

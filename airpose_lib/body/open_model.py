@@ -32,14 +32,15 @@ from pathlib import Path
 
 import numpy as np
 
-from .cache import atomic_path, cache_dir, file_lock
+from airpose_lib.atomic import atomic_path
+from .cache import cache_dir, file_lock
+from .genders import GENDERS
 from .joint_sets import EXTRA_JOINT_NAMES, SMPLX_JOINT_NAMES, SMPLX_PARENTS
 
 log = logging.getLogger(__name__)
 
 BUILD_VERSION = 1
 """Bumped whenever the builder's output changes; part of the cache path."""
-GENDERS = ("neutral", "male", "female")
 _ANNY_GENDER = {"male": (0.0, 0.0), "female": (1.0, 1.0), "neutral": (0.0, 1.0)}  # anny: 0 = male
 
 # SMPL-X joint -> the anny bone whose head is that joint. The jaw has no anny bone: it sits on the

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import numpy as np
+import torch
 from scipy.spatial.transform import Rotation
 
 from .joint_sets import NUM_POSE_JOINTS, joint_index
@@ -33,3 +34,25 @@ def body_pose_from_joints(rotations: dict[str, np.ndarray]) -> np.ndarray:
             raise KeyError(f"{name!r} is not one of the 21 body joints of body_pose")
         theta[k] = rotvec
     return theta.reshape(-1)
+
+
+def _batch_of_one(x: np.ndarray | None, n: int) -> torch.Tensor:
+    """``(1, n)`` float32 of ``x`` (zeros for None)."""
+    return torch.as_tensor(np.zeros(n) if x is None else x, dtype=torch.float32)[None]
+
+
+def pose_at_origin(model, body_pose: np.ndarray | None = None,
+                   betas: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """One body at the model origin with no root rotation, through the ``smplx`` forward.
+
+    Args:
+        model: a body model (:func:`~airpose_lib.body.load_body_model`, 10 betas, batch size 1).
+        body_pose: ``(63,)`` axis-angle of the 21 body joints (None: rest pose).
+        betas: ``(10,)`` shape (None: the mean shape).
+    Returns:
+        vertices ``(V, 3)`` and joints ``(J, 3)``, float32 numpy, metres.
+    """
+    with torch.no_grad():
+        o = model(betas=_batch_of_one(betas, 10), body_pose=_batch_of_one(body_pose, 63),
+                  global_orient=_batch_of_one(None, 3), transl=_batch_of_one(None, 3))
+    return o.vertices[0].numpy(), o.joints[0].numpy()

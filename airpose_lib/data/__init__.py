@@ -18,7 +18,7 @@ from airpose_lib._lazy import lazy_namespace
 _EXPORTS = {
     # scene
     "SceneConfig": "scene", "sample_person": "scene", "sample_cameras": "scene",
-    "sample_environment": "scene", "GENDER_CODES": "scene",
+    "sample_environment": "scene",
     # poses
     "sample_body_pose": "poses",
     # appearance
@@ -38,7 +38,7 @@ _EXPORTS = {
 
 # Other modules' public names (their ``__all__``) are found on first use, in this order; the
 # renderer comes last because importing it starts VTK.
-_SEARCHED = ("official_synthetic", "official_real", "official_fixtures", "official_layout", "sequences",
+_SEARCHED = ("official_synthetic", "official_real", "official_layout", "sequences",
              "motions", "detections", "poses", "scene", "appearance", "manifest", "shards", "generate",
              "dataset", "render")
 

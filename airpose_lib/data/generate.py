@@ -14,7 +14,7 @@ interrupted run resumes by skipping the shards the manifest lists (after re-chec
 SHA-256) and rebuilding the rest.
 
 Command line: ``airpose data generate --profile smoke|cpu|paper [--out DIR] [--workers N]``;
-sizes come from the ``data: still:`` section of ``airpose_lib/reproduce/profiles/<profile>.yaml``.
+sizes come from the ``data: still:`` section of ``airpose_lib/profiles/<profile>.yaml``.
 """
 from __future__ import annotations
 
@@ -29,11 +29,12 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-import yaml
 
 from airpose_lib.body.cache import cache_dir
+from airpose_lib.body.genders import GENDER_CODES
 from airpose_lib.folder_lock import locks_folder
 from airpose_lib.process_guard import die_with_parent
+from airpose_lib.profiles import ProfileError, profile_path, profile_section
 
 from .appearance import AppearanceConfig, sample_appearance
 from .manifest import (
@@ -45,7 +46,6 @@ from .manifest import (
     write_manifest,
 )
 from .scene import (
-    GENDER_CODES,
     SceneConfig,
     body_world_pose,
     jitter_bbox,
@@ -71,7 +71,6 @@ __all__ = [
 #: 2: test crops are jittered like training crops; test shards also hold the tight-box crops.
 GENERATOR_VERSION = 2
 
-_PROFILES_DIR = Path(__file__).resolve().parents[1] / "reproduce" / "profiles"
 _ATTEMPT_BATCH = 16  # body forwards are batched over this many attempts
 
 
@@ -199,20 +198,15 @@ def _tuplify(x):
 def profile_config(profile: str) -> GenerationConfig:
     """The still-frame dataset settings of a reproduction profile.
 
-    Reads the ``data: still:`` section of ``airpose_lib/reproduce/profiles/<profile>.yaml`` (the
-    one place sizes live; keys are :class:`GenerationConfig` fields, ``scene:`` / ``appearance:``
-    sub-dicts allowed); the file is read as data, the reproduce package is not imported.
+    Reads the ``data: still:`` section of the profile (:mod:`airpose_lib.profiles`; keys are
+    :class:`GenerationConfig` fields, ``scene:`` / ``appearance:`` sub-dicts allowed).
     """
-    path = _PROFILES_DIR / f"{profile}.yaml"
-    if not path.is_file():
-        known = sorted(p.stem for p in _PROFILES_DIR.glob("*.yaml"))
-        raise DatasetError(f"unknown profile {profile!r}; available: {known}")
-    raw = yaml.safe_load(path.read_text()) or {}
-    section = (raw.get("data") or {}).get("still")
-    if not isinstance(section, dict):
-        raise DatasetError(f"{path} has no `data: still:` section with the still-frame dataset sizes")
-    try:
-        return GenerationConfig.from_dict(section)
+    try:  # the data commands report every unusable input as a DatasetError
+        path = profile_path(profile)
+        return GenerationConfig.from_dict(profile_section(path, "data.still",
+                                                          required="the still-frame dataset sizes"))
+    except ProfileError as e:  # before ValueError: it is one
+        raise DatasetError(str(e)) from None
     except (TypeError, ValueError) as e:
         raise DatasetError(f"{path}, `data: still:` section: {e}") from None
 
@@ -392,9 +386,7 @@ class StillFrameGenerator:
         """Encoded crops ``[V]`` of the scene set on the renderer, one per box ``bbox (V, 4)``."""
         import torch
 
-        from airpose_lib.geometry import crop_intrinsics
-
-        from .render import pad_outside_box
+        from airpose_lib.geometry import crop_intrinsics, pad_outside_box
 
         cfg = self.config
         T = lambda a: torch.as_tensor(a, dtype=torch.float64)  # noqa: E731

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import yaml
 
-from airpose_lib.body.cache import atomic_path
+from airpose_lib.atomic import atomic_path
 
 from .shards import sha256_file
 

@@ -25,6 +25,8 @@ Reading (:func:`load_sequence`) conventions:
   arrays never contain NaN. ``Sequence.info`` counts what was zero-filled.
 * AlphaPose: several entries for one image -> the one with the highest ``score``. OpenPose:
   person 0.
+* Detector files come in the kit's formats (above) or the real-data release's per-frame dicts
+  (:mod:`airpose_lib.data.official_real`); this module reads both (:func:`detections_format`).
 * The machines must have the same frame indices (else :class:`SequenceFormatError`, naming both
   folders; ``strict=False`` keeps the common frames). An OpenPose file must have an entry for
   every frame read (it has one per processed frame); an AlphaPose file whose last entry is more
@@ -45,6 +47,8 @@ from pathlib import Path
 
 import numpy as np
 
+from airpose_lib.atomic import atomic_path
+
 __all__ = [
     "SequenceFormatError",
     "OfficialLayoutWriter",
@@ -54,6 +58,10 @@ __all__ = [
     "read_camera_calib",
     "write_camera_calib",
     "DETECTOR_FILES",
+    "detector_file_format",
+    "detections_format",
+    "read_official_openpose",
+    "read_official_alphapose",
 ]
 
 DETECTOR_FILES: dict[str, tuple[str, int]] = {"openpose": ("openpose_res.pkl", 25),
@@ -108,12 +116,6 @@ def read_camera_calib(path: str | Path) -> np.ndarray:
 # ------------------------------------------------------------------------------------------
 # Writer
 
-def _atomic_write(path: Path, data: bytes) -> None:
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_bytes(data)
-    tmp.replace(path)
-
-
 class OfficialLayoutWriter:
     """Streams a sequence into the official layout.
 
@@ -157,7 +159,8 @@ class OfficialLayoutWriter:
                                    [cv2.IMWRITE_JPEG_QUALITY, self.jpeg_quality])
             if not ok:
                 raise RuntimeError(f"JPEG encoding failed for frame {index} view {v}")
-            _atomic_write(self.machine(v) / "images" / f"{int(index):06d}.jpg", buf.tobytes())
+            with atomic_path(self.machine(v) / "images" / f"{int(index):06d}.jpg") as tmp:
+                tmp.write_bytes(buf.tobytes())
             self.image_sizes[v] = (img.shape[1], img.shape[0])
         self.frames.append(int(index))
 
@@ -200,7 +203,8 @@ class OfficialLayoutWriter:
                 raise ValueError(f"timestamps must be ({F}, {self.num_views}), got {ts.shape}")
             for v in range(self.num_views):
                 lines = ["frame,timestamp"] + [f"{i},{t:.9f}" for i, t in zip(frames, ts[:, v])]
-                _atomic_write(self.machine(v) / "timestamps.csv", ("\n".join(lines) + "\n").encode())
+                with atomic_path(self.machine(v) / "timestamps.csv") as tmp:
+                    tmp.write_bytes(("\n".join(lines) + "\n").encode())
         if ground_truth is not None:
             tmp = self.root / "ground_truth.tmp.npz"
             np.savez_compressed(tmp, **{k: np.asarray(v) for k, v in ground_truth.items()})
@@ -209,14 +213,16 @@ class OfficialLayoutWriter:
 
         info = {"kit_version": __version__, "num_frames": F, "num_views": self.num_views,
                 "frames": [frames[0], frames[-1]] if frames else [], **(dict(meta) if meta else {})}
-        _atomic_write(self.root / "sequence.json", json.dumps(info, indent=1, default=_json_default).encode())
+        with atomic_path(self.root / "sequence.json") as tmp:
+            tmp.write_bytes(json.dumps(info, indent=1, default=_json_default).encode())
 
     @staticmethod
     def _write_openpose(path: Path, frames: list[int], kp: np.ndarray) -> None:
         res = {}
         for i, k in zip(frames, kp):
             res[int(i)] = k[None].astype(np.float32) if np.any(k[:, 2] > 0) else np.zeros((0, 25, 3), np.float32)
-        _atomic_write(path, pickle.dumps(res, protocol=4))
+        with atomic_path(path) as tmp:
+            tmp.write_bytes(pickle.dumps(res, protocol=4))
 
     @staticmethod
     def _write_alphapose(path: Path, frames: list[int], kp: np.ndarray) -> None:
@@ -228,7 +234,8 @@ class OfficialLayoutWriter:
             out.append({"image_id": f"{int(i):06d}.jpg", "category_id": 1,
                         "keypoints": [round(float(x), 3) for x in k.reshape(-1)],
                         "score": round(float(c[c > 0].mean() * (c > 0).mean()), 4)})
-        _atomic_write(path, json.dumps(out).encode())
+        with atomic_path(path) as tmp:
+            tmp.write_bytes(json.dumps(out).encode())
 
 
 def _json_default(o):
@@ -376,6 +383,119 @@ def _load_detector_file(path: Path):
                                   f"{e}); {_DETECTIONS_FIX}") from None
 
 
+def _frame_name(i: int) -> str:
+    return f"{int(i):06d}"
+
+
+def _lookup(table: Mapping, i: int):
+    """Entry of frame ``i`` keyed ``"000123"``, ``"000123.jpg"`` or ``123``; None if absent."""
+    for key in (_frame_name(i), f"{_frame_name(i)}.jpg", int(i), str(int(i))):
+        if key in table:
+            return table[key]
+    return None
+
+
+def detections_format(data, json_file: bool = False) -> str:
+    """``"official"`` (the release's per-frame dicts) or ``"kit"`` (the generator's formats) of a
+    parsed detection file: the release keys both files by frame with a dict per frame; the kit
+    writes frame -> array (OpenPose pickle) and a list of detections (AlphaPose JSON)."""
+    if isinstance(data, Mapping):
+        if json_file:
+            return "official"
+        first = next(iter(data.values()), None)
+        if isinstance(first, Mapping):
+            return "official"
+    return "kit"
+
+
+def detector_file_format(path: Path | str) -> str:
+    """:func:`detections_format` of a file. Raises :class:`SequenceFormatError` if unreadable."""
+    path = Path(path)
+    return detections_format(_load_detector_file(path), json_file=path.suffix == ".json")
+
+
+def _zero_bad(out: np.ndarray) -> int:
+    bad = ~np.isfinite(out).all(-1)
+    out[bad] = 0.0
+    return int(bad.sum())
+
+
+def _release_entries(path: Path, frames: Iterable[int], data, layout: str) -> list[tuple[int, object]]:
+    """``(frame, entry or None)`` per frame of a release detection file (a dict ``"%06d" -> layout``)."""
+    res = _load_detector_file(path) if data is None else data
+    if not isinstance(res, Mapping):
+        raise SequenceFormatError(f"{path}: expected a dict '%06d' -> {layout}")
+    return [(int(i), _lookup(res, int(i))) for i in frames]
+
+
+def read_official_openpose(path: Path | str, frames: Iterable[int], data=None) -> tuple[np.ndarray, dict]:
+    """BODY_25 keypoints of person 0 from a release ``openpose_res.pkl``.
+
+    Args:
+        path: the file (dict ``"%06d" -> {"pose": (persons, 25, 3)}``).
+        frames: frame numbers to read.
+        data: the file's parsed content, if already read (``path`` then only names it in errors).
+
+    Returns:
+        ``(F, 25, 3)`` float64 ``[x, y, conf]`` (zeros: not detected) and
+        ``{"missing_frames": n, "nan_keypoints": n}``.
+    """
+    path = Path(path)
+    entries = _release_entries(path, frames, data, "{'pose': (persons, 25, 3)}")
+    out = np.zeros((len(entries), 25, 3))
+    missing = 0
+    for n, (i, e) in enumerate(entries):
+        pose = e.get("pose") if isinstance(e, Mapping) else e
+        if pose is None:
+            missing += 1
+            continue
+        arr = np.asarray(pose, dtype=np.float64)
+        if arr.size == 0:
+            missing += 1
+            continue
+        arr = arr[None] if arr.ndim == 2 else arr
+        if arr.ndim != 3 or arr.shape[1:] != (25, 3):
+            raise SequenceFormatError(f"{path}: frame {_frame_name(i)} has 'pose' of shape {arr.shape}, "
+                                      f"expected (persons, 25, 3)")
+        out[n] = arr[0]
+    return out, {"missing_frames": missing, "nan_keypoints": _zero_bad(out)}
+
+
+def read_official_alphapose(path: Path | str, frames: Iterable[int], data=None) -> tuple[np.ndarray, dict]:
+    """COCO-18 keypoints of person 0 from a release ``alphapose_res.json``.
+
+    Args:
+        path: the file (dict ``"%06d" -> {"people": [{"pose_keypoints_2d": 54 numbers}, ...]}``).
+        frames: frame numbers to read.
+        data: the file's parsed content, if already read.
+
+    Returns:
+        ``(F, 18, 3)`` float64 (zeros: not detected) and the counts as
+        :func:`read_official_openpose`.
+    """
+    path = Path(path)
+    # Same loop as read_official_openpose over a different per-frame entry (people[0]'s flat
+    # list, not a (persons, 25, 3) array): the two release formats share only their frame table.
+    entries = _release_entries(path, frames, data, "{'people': [...]}")
+    out = np.zeros((len(entries), 18, 3))
+    missing = 0
+    for n, (i, e) in enumerate(entries):
+        people = e.get("people") if isinstance(e, Mapping) else None
+        if not people:
+            missing += 1
+            continue
+        try:
+            kp = np.asarray(people[0]["pose_keypoints_2d"], dtype=np.float64)
+        except (KeyError, TypeError, ValueError):
+            raise SequenceFormatError(f"{path}: frame {_frame_name(i)} has no numeric "
+                                      f"people[0]['pose_keypoints_2d']") from None
+        if kp.size != 18 * 3:
+            raise SequenceFormatError(f"{path}: frame {_frame_name(i)} has {kp.size} keypoint values, "
+                                      f"expected 54 (COCO-18)")
+        out[n] = kp.reshape(18, 3)
+    return out, {"missing_frames": missing, "nan_keypoints": _zero_bad(out)}
+
+
 def _read_openpose(path: Path, res, frames: np.ndarray, missing: str) -> tuple[np.ndarray, dict]:
     """The kit's ``openpose_res.pkl`` (parsed ``res``: frame -> (persons, 25, 3))."""
     if not isinstance(res, Mapping):
@@ -392,7 +512,6 @@ def _read_openpose(path: Path, res, frames: np.ndarray, missing: str) -> tuple[n
             f"{path} lacks {len(absent)} of the {len(frames)} frames read (first missing: {absent[0]}; "
             f"file has {span}); the detector file is shorter than the image sequence; {_MISSING_FIX}")
     out = np.zeros((len(frames), 25, 3))
-    nan = 0
     for n, i in enumerate(frames):
         arr = res.get(int(i))
         if arr is None or (isinstance(arr, (list, tuple)) and len(arr) == 0):
@@ -405,10 +524,7 @@ def _read_openpose(path: Path, res, frames: np.ndarray, missing: str) -> tuple[n
         if arr.shape[1:] != (25, 3):
             raise SequenceFormatError(f"{path}: frame {i} has shape {arr.shape}, expected (persons, 25, 3)")
         out[n] = arr[0]
-    bad = ~np.isfinite(out).all(-1)
-    nan += int(bad.sum())
-    out[bad] = 0.0
-    return out, {"missing_frames": len(absent), "nan_keypoints": nan}
+    return out, {"missing_frames": len(absent), "nan_keypoints": _zero_bad(out)}
 
 
 def _read_alphapose(path: Path, entries, frames: np.ndarray, last_image: int, missing: str,
@@ -445,9 +561,7 @@ def _read_alphapose(path: Path, entries, frames: np.ndarray, last_image: int, mi
             absent += 1
             continue
         out[n] = np.asarray(hit[1], dtype=np.float64).reshape(18, 3)
-    bad = ~np.isfinite(out).all(-1)
-    out[bad] = 0.0
-    return out, {"missing_frames": absent, "nan_keypoints": int(bad.sum())}
+    return out, {"missing_frames": absent, "nan_keypoints": _zero_bad(out)}
 
 
 def _read_timestamps(path: Path, frames: np.ndarray) -> np.ndarray | None:
@@ -528,8 +642,6 @@ def load_sequence(root: str | Path, frames: Iterable[int] | slice | None = None,
         if name not in DETECTOR_FILES:
             raise ValueError(f"unknown detector {name!r}; known: {tuple(DETECTOR_FILES)}")
         # The real-data release stores per-frame dicts; the kit's generator writes arrays.
-        from .official_real import detections_format, read_official_alphapose, read_official_openpose
-
         per_view, stats, formats = [], {"missing_frames": 0, "nan_keypoints": 0}, set()
         for m in machines:
             path = m / DETECTOR_FILES[name][0]

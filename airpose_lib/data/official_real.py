@@ -16,8 +16,8 @@ on frames 8000-14999 of that folder. The paper fine-tunes on person 1 and tests 
 person 1 is frames 0-6999 and person 2 frames 8000-14999 (:data:`REAL_DATA_SPLITS`,
 :data:`PERSON_SPLITS`); frames 7000-7999 belong to neither.
 
-Detection files in the release differ from the ones the kit's generator writes
-(:mod:`airpose_lib.data.official_layout`), so :func:`load_official_real` reads both:
+Detection files in the release differ from the ones the kit's generator writes; the one reader
+of detection files, :mod:`airpose_lib.data.official_layout` (``load_sequence``), reads both:
 
 * ``openpose_res.pkl``: a dict ``"%06d" -> {"pose": (persons, 25, 3)}`` (BODY_25 ``[x, y, c]``;
   person 0 is the subject). The kit's files map the frame to the array directly.
@@ -39,7 +39,6 @@ corrected is not in the repository.
 """
 from __future__ import annotations
 
-import json
 import pickle
 from collections.abc import Iterable, Mapping, Sequence as SequenceABC
 from dataclasses import dataclass
@@ -47,17 +46,13 @@ from pathlib import Path
 
 import numpy as np
 
-from .official_layout import Sequence, SequenceFormatError, load_sequence
+from .official_layout import Sequence, SequenceFormatError, _frame_name, _image_index, _lookup, _machines, load_sequence
 
 __all__ = [
     "REAL_DATA_SPLITS",
     "PERSON_SPLITS",
     "MARKER_POSES_FILE",
     "real_split_frames",
-    "detector_file_format",
-    "detections_format",
-    "read_official_openpose",
-    "read_official_alphapose",
     "read_marker_poses",
     "MarkerPoses",
     "load_marker_poses",
@@ -91,19 +86,6 @@ def real_split_frames(split: str | None = None, person: int | None = None) -> ra
     return REAL_DATA_SPLITS[split]
 
 
-# -- detection files ----------------------------------------------------------------------------
-def _frame_name(i: int) -> str:
-    return f"{int(i):06d}"
-
-
-def _lookup(table: Mapping, i: int):
-    """Entry of frame ``i`` keyed ``"000123"``, ``"000123.jpg"`` or ``123``; None if absent."""
-    for key in (_frame_name(i), f"{_frame_name(i)}.jpg", int(i), str(int(i))):
-        if key in table:
-            return table[key]
-    return None
-
-
 def _load_pickle(path: Path):
     try:
         with open(path, "rb") as fh:  # read-only
@@ -112,116 +94,6 @@ def _load_pickle(path: Path):
         raise SequenceFormatError(f"missing file {path}") from None
     except Exception as e:  # noqa: BLE001 - any broken pickle
         raise SequenceFormatError(f"cannot read {path} (truncated or corrupted: {type(e).__name__}: {e})") from None
-
-
-def _load_json(path: Path):
-    try:
-        return json.loads(Path(path).read_text())
-    except FileNotFoundError:
-        raise SequenceFormatError(f"missing file {path}") from None
-    except (json.JSONDecodeError, UnicodeDecodeError) as e:
-        raise SequenceFormatError(f"cannot parse {path}: {e}") from None
-
-
-def detections_format(data, json_file: bool = False) -> str:
-    """``"official"`` (the release's per-frame dicts) or ``"kit"`` (the generator's formats) of a
-    parsed detection file: the release keys both files by frame with a dict per frame; the kit
-    writes frame -> array (OpenPose pickle) and a list of detections (AlphaPose JSON)."""
-    if isinstance(data, Mapping):
-        if json_file:
-            return "official"
-        first = next(iter(data.values()), None)
-        if isinstance(first, Mapping):
-            return "official"
-    return "kit"
-
-
-def detector_file_format(path: Path | str) -> str:
-    """:func:`detections_format` of a file. Raises :class:`SequenceFormatError` if unreadable."""
-    path = Path(path)
-    if path.suffix == ".json":
-        return detections_format(_load_json(path), json_file=True)
-    return detections_format(_load_pickle(path))
-
-
-def _zero_bad(out: np.ndarray) -> int:
-    bad = ~np.isfinite(out).all(-1)
-    out[bad] = 0.0
-    return int(bad.sum())
-
-
-def read_official_openpose(path: Path | str, frames: Iterable[int], data=None) -> tuple[np.ndarray, dict]:
-    """BODY_25 keypoints of person 0 from a release ``openpose_res.pkl``.
-
-    Args:
-        path: the file (dict ``"%06d" -> {"pose": (persons, 25, 3)}``).
-        frames: frame numbers to read.
-        data: the file's parsed content, if already read (``path`` then only names it in errors).
-
-    Returns:
-        ``(F, 25, 3)`` float64 ``[x, y, conf]`` (zeros: not detected) and
-        ``{"missing_frames": n, "nan_keypoints": n}``.
-    """
-    path = Path(path)
-    res = _load_pickle(path) if data is None else data
-    if not isinstance(res, Mapping):
-        raise SequenceFormatError(f"{path}: expected a dict '%06d' -> {{'pose': (persons, 25, 3)}}")
-    frames = [int(i) for i in frames]
-    out = np.zeros((len(frames), 25, 3))
-    missing = 0
-    for n, i in enumerate(frames):
-        e = _lookup(res, i)
-        pose = e.get("pose") if isinstance(e, Mapping) else e
-        if pose is None:
-            missing += 1
-            continue
-        arr = np.asarray(pose, dtype=np.float64)
-        if arr.size == 0:
-            missing += 1
-            continue
-        arr = arr[None] if arr.ndim == 2 else arr
-        if arr.ndim != 3 or arr.shape[1:] != (25, 3):
-            raise SequenceFormatError(f"{path}: frame {_frame_name(i)} has 'pose' of shape {arr.shape}, "
-                                      f"expected (persons, 25, 3)")
-        out[n] = arr[0]
-    return out, {"missing_frames": missing, "nan_keypoints": _zero_bad(out)}
-
-
-def read_official_alphapose(path: Path | str, frames: Iterable[int], data=None) -> tuple[np.ndarray, dict]:
-    """COCO-18 keypoints of person 0 from a release ``alphapose_res.json``.
-
-    Args:
-        path: the file (dict ``"%06d" -> {"people": [{"pose_keypoints_2d": 54 numbers}, ...]}``).
-        frames: frame numbers to read.
-        data: the file's parsed content, if already read.
-
-    Returns:
-        ``(F, 18, 3)`` float64 (zeros: not detected) and the counts as
-        :func:`read_official_openpose`.
-    """
-    path = Path(path)
-    res = _load_json(path) if data is None else data
-    if not isinstance(res, Mapping):
-        raise SequenceFormatError(f"{path}: expected a dict '%06d' -> {{'people': [...]}}")
-    frames = [int(i) for i in frames]
-    out = np.zeros((len(frames), 18, 3))
-    missing = 0
-    for n, i in enumerate(frames):
-        e = _lookup(res, i)
-        people = e.get("people") if isinstance(e, Mapping) else None
-        if not people:
-            missing += 1
-            continue
-        try:
-            kp = np.asarray(people[0]["pose_keypoints_2d"], dtype=np.float64)
-        except (KeyError, TypeError, ValueError):
-            raise SequenceFormatError(f"{path}: frame {_frame_name(i)} has no numeric "
-                                      f"people[0]['pose_keypoints_2d']") from None
-        if kp.size != 18 * 3:
-            raise SequenceFormatError(f"{path}: frame {_frame_name(i)} has {kp.size} keypoint values, "
-                                      f"expected 54 (COCO-18)")
-        out[n] = kp.reshape(18, 3)
-    return out, {"missing_frames": missing, "nan_keypoints": _zero_bad(out)}
 
 
 # -- marker poses -------------------------------------------------------------------------------
@@ -325,8 +197,6 @@ def load_official_real(root: Path | str, person: int | None = None, split: str |
     Raises:
         SequenceFormatError: no frame of the range on disk, or a malformed file (names it).
     """
-    from .official_layout import _image_index, _machines
-
     root = Path(root)
     rng = real_split_frames(split, person)
     wanted = set(int(i) for i in frames) if frames is not None else (set(rng) if rng is not None else None)

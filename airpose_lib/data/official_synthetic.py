@@ -89,9 +89,12 @@ import numpy as np
 import torch
 from torch.utils.data import Dataset
 
+from airpose_lib.body.genders import GENDER_CODES
+from airpose_lib.geometry import body_in_camera, crop_affine_matrix, crop_from_image, crop_vector, project_points
+
 from .dataset import normalize_images, swap_views
 from .manifest import DatasetError
-from .scene import GENDER_CODES, points_in_frame
+from .scene import points_in_frame
 
 __all__ = [
     "OfficialDataError",
@@ -307,25 +310,12 @@ def crop_image(image: np.ndarray, offset: tuple[float, float], bbox: np.ndarray,
         size: crop side S.
 
     Returns:
-        ``(S, S, 3)`` uint8: :func:`airpose_lib.geometry.crop_affine_matrix` applied with bilinear
-        sampling; crop pixels whose centre is outside the box are black.
+        ``(S, S, 3)`` uint8: :func:`airpose_lib.geometry.crop_from_image` of the box (bilinear, black
+        outside the box by the rule the kit's own data use).
     """
-    import cv2
-
-    from airpose_lib.geometry import crop_affine_matrix
-
     A = crop_affine_matrix(torch.as_tensor(bbox, dtype=torch.float64), size).numpy()
     M = A @ np.array([[1.0, 0.0, offset[0]], [0.0, 1.0, offset[1]], [0.0, 0.0, 1.0]])
-    out = cv2.warpAffine(image, M[:2], (size, size), flags=cv2.INTER_LINEAR,
-                         borderMode=cv2.BORDER_CONSTANT, borderValue=0)
-    # Black outside the box itself (the padding), as the kit's renderer does.
-    x0, y0, x1, y1 = (float(v) for v in bbox)
-    u0, v0 = A[0, 0] * x0 + A[0, 2], A[1, 1] * y0 + A[1, 2]
-    u1, v1 = A[0, 0] * x1 + A[0, 2], A[1, 1] * y1 + A[1, 2]
-    idx = np.arange(size)
-    out[:, (idx < u0) | (idx > u1)] = 0
-    out[(idx < v0) | (idx > v1)] = 0
-    return out
+    return crop_from_image(image, M, bbox, size)
 
 
 # -- the dataset --------------------------------------------------------------------------------
@@ -475,7 +465,6 @@ class OfficialSyntheticDataset(Dataset):
         s = read_official_sample(pkl, self.views)
         V, S = self.num_views, self.crop_size
         T = lambda a: torch.as_tensor(np.asarray(a), dtype=torch.float64)  # noqa: E731
-        from airpose_lib.geometry import body_in_camera, crop_vector, project_points
 
         joints_w = s["joints_w"] if self.joints == "pkl" else self.model_joints(s)
         if joints_w is None:

@@ -11,8 +11,9 @@ The camera follows the same pinhole mapping as :mod:`airpose_lib.viz.render` (vi
 centres at integers), so a world point lands on the pixel that ``K (R_cw X + t_cw)`` gives.
 
 Crops are rendered directly at the network input size with the crop's intrinsics
-(:func:`airpose_lib.geometry.crop_intrinsics`); :func:`pad_outside_box` then blacks out what lies
-outside the person box, as the paper's aspect-preserving resize with black padding does.
+(:func:`airpose_lib.geometry.crop_intrinsics`); :func:`airpose_lib.geometry.pad_outside_box` then
+blacks out what lies outside the person box, as the paper's aspect-preserving resize with black
+padding does (the rule every crop of the kit shares).
 """
 from __future__ import annotations
 
@@ -29,7 +30,7 @@ from vtkmodules.vtkRenderingCore import vtkTexture  # noqa: E402
 
 from .scene import EnvironmentSample  # noqa: E402
 
-__all__ = ["ground_textures", "SceneRenderer", "pad_outside_box", "box_in_crop"]
+__all__ = ["ground_textures", "SceneRenderer"]
 
 _GROUND_HALF_SIZE = 150.0  # metres; far enough that the horizon is ground, not void
 _MAX_DISTRACTORS = 8
@@ -89,35 +90,6 @@ def ground_textures(size: int = 256) -> list[tuple[str, np.ndarray]]:
     except ImportError:  # scikit-image is optional: the procedural ones still vary the ground
         pass
     return out + _procedural_textures(size)
-
-
-# -- crop padding ---------------------------------------------------------------------------------
-def box_in_crop(bbox: np.ndarray, size: int) -> tuple[float, float, float, float]:
-    """The box ``[x0, y0, x1, y1]`` (full-frame px) in crop pixels of a ``size`` x ``size`` crop.
-
-    The crop maps ``u -> s (u - ccx) + size / 2`` with ``s = size / max(w, h)``
-    (:func:`airpose_lib.geometry.full_to_crop_pixels`).
-    """
-    x0, y0, x1, y1 = (float(v) for v in bbox)
-    s = size / max(x1 - x0, y1 - y0)
-    ccx, ccy = 0.5 * (x0 + x1), 0.5 * (y0 + y1)
-    return (s * (x0 - ccx) + size / 2, s * (y0 - ccy) + size / 2,
-            s * (x1 - ccx) + size / 2, s * (y1 - ccy) + size / 2)
-
-
-def pad_outside_box(image: np.ndarray, bbox: np.ndarray) -> np.ndarray:
-    """Black out crop pixels whose centre falls outside the person box (in place; returns it).
-
-    Args:
-        image: ``(S, S, 3)`` crop rendered with :func:`airpose_lib.geometry.crop_intrinsics`.
-        bbox: ``(4,)`` the box in full-frame pixels.
-    """
-    S = image.shape[0]
-    u0, v0, u1, v1 = box_in_crop(bbox, S)
-    idx = np.arange(S)
-    image[:, (idx < u0) | (idx > u1)] = 0
-    image[(idx < v0) | (idx > v1)] = 0
-    return image
 
 
 # -- renderer -------------------------------------------------------------------------------------

@@ -21,6 +21,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from airpose_lib.body.genders import GENDER_CODES
+
 __all__ = [
     "SceneConfig",
     "PersonSample",
@@ -36,11 +38,8 @@ __all__ = [
     "tight_bbox",
     "jitter_bbox",
     "sample_environment",
-    "GENDER_CODES",
 ]
 
-#: Gender codes of the sample dict (contract): 0 neutral, 1 male, 2 female.
-GENDER_CODES: dict[str, int] = {"neutral": 0, "male": 1, "female": 2}
 
 
 @dataclass(frozen=True)

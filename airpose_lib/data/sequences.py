@@ -46,14 +46,14 @@ from pathlib import Path
 
 import numpy as np
 
+from airpose_lib.body.genders import GENDER_CODES
 from airpose_lib.body.joint_sets import BODY_25_FROM_SMPLX, COCO18_FROM_SMPLX
+from airpose_lib.profiles import profile_section
 
 from .motions import MotionScript, body_forward, evaluate_motion, sample_script, world_root_pose
-from .scene import GENDER_CODES
 
 #: Bumped whenever the same settings would produce a different recording.
 SEQUENCE_GENERATOR_VERSION = 1
-_PROFILES_DIR = Path(__file__).resolve().parents[1] / "reproduce" / "profiles"
 
 __all__ = [
     "CameraSpec",
@@ -64,7 +64,6 @@ __all__ = [
     "SequenceConfig",
     "SimulatedSequence",
     "GROUND_TRUTH_KEYS",
-    "GENDER_CODES",
     "scale_intrinsics",
     "simulate_sequence",
     "SequenceRenderer",
@@ -792,18 +791,8 @@ def sequence_configs_from_profile(profile_section: Mapping) -> dict[str, Sequenc
 
 
 def profile_sequences(profile: str) -> dict[str, SequenceConfig]:
-    """The recordings of a reproduction profile (its ``sequences:`` section; the YAML file is read
-    as data, the reproduce package is not imported)."""
-    import yaml
-
-    path = _PROFILES_DIR / f"{profile}.yaml"
-    if not path.is_file():
-        known = sorted(p.stem for p in _PROFILES_DIR.glob("*.yaml"))
-        raise ValueError(f"unknown profile {profile!r}; available: {known}")
-    section = (yaml.safe_load(path.read_text()) or {}).get("sequences")
-    if not section:
-        raise ValueError(f"{path} has no `sequences:` section with the recordings' sizes")
-    return sequence_configs_from_profile(section)
+    """The recordings of a reproduction profile (its ``sequences:`` section, :mod:`airpose_lib.profiles`)."""
+    return sequence_configs_from_profile(profile_section(profile, "sequences", required="the recordings' sizes"))
 
 
 def default_sequence_root(profile: str) -> Path:

@@ -8,7 +8,7 @@ compression and with fixed zip timestamps, so the same arrays always give the sa
 same SHA-256. Because nothing is compressed, a reader can memory-map the image bytes instead of
 loading a whole shard (:class:`ShardImages`).
 
-Files are written through :func:`airpose_lib.body.cache.atomic_path`: a shard on disk is either
+Files are written through :func:`airpose_lib.atomic.atomic_path`: a shard on disk is either
 complete or absent, which is what makes interrupted generation resumable shard by shard.
 """
 from __future__ import annotations
@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from airpose_lib.body.cache import atomic_path
+from airpose_lib.atomic import atomic_path
 
 __all__ = [
     "write_shard",

@@ -9,8 +9,11 @@ A checkpoint (``torch.save`` dict, loadable with ``weights_only=True``) holds
 ``format_version``, ``kit_version``
 
 and the task's own entries (:meth:`airpose_lib.engine.TrainingTask.checkpoint_state`): the
-still-frame trainings add ``config`` (the ``TrainConfig`` as a dict) and ``world_size``,
-fine-tuning also ``input_size``, ``camera_K`` and ``finetune``.
+still-frame trainings add ``config`` (the ``TrainConfig`` as a dict), ``world_size`` and
+``network`` (what rebuilds the network and forms its input, :mod:`airpose_lib.model.record`:
+variant, backbone, input size, normalisation, camera rule and camera; not for the backbone
+pretraining, whose network is not a variant); fine-tuning also ``input_size``, ``camera_K`` and
+``finetune``.
 
 ``<out>/checkpoints/last.pt`` is always the newest; ``step_<n>.pt`` copies are kept as configured.
 """
@@ -24,7 +27,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from airpose_lib.body.cache import atomic_path
+from airpose_lib.atomic import atomic_path
 from airpose_lib.errors import reading
 
 __all__ = [

@@ -29,13 +29,13 @@ import numpy as np
 import pandas as pd
 
 from airpose_lib import __version__
-from airpose_lib.body.cache import atomic_path
+from airpose_lib.atomic import atomic_path
 
 from .ablation import PER_SEED_METRICS, table_to_markdown
 
 __all__ = ["REFERENCE_FILES", "RESULTS_ROOT", "reference_dir", "machine_description", "git_commit",
            "train_wall_s", "oracle_summary", "write_reference", "read_reference_table", "side_by_side",
-           "compare_to_reference", "install_reference", "reference_report"]
+           "compare_to_reference", "check_against_reference", "install_reference", "reference_report"]
 
 #: The files of a results bundle.
 REFERENCE_FILES = ("table1.csv", "table1.md", "per_seed.csv", "claims.csv", "claims.md", "oracle.csv",
@@ -237,6 +237,19 @@ def compare_to_reference(new_per_seed: pd.DataFrame, reference: str | Path | pd.
                          "differs": bool(abs(diff) > allowed)})
     cols = ["variant", "metric", "new", "reference", "reference_std", "allowed", "basis", "difference", "differs"]
     return pd.DataFrame(rows, columns=cols)
+
+
+def check_against_reference(new_per_seed: pd.DataFrame, ref_dir: str | Path) -> tuple[pd.DataFrame | None, str]:
+    """:func:`compare_to_reference` against the bundle in ``ref_dir`` if it has one.
+
+    Returns:
+        the comparison (None without a reference) and a line saying how many variant means differ.
+    """
+    ref_dir = Path(ref_dir)
+    if not (ref_dir / "per_seed.csv").is_file():
+        return None, f"no reference in {ref_dir}"
+    comparison = compare_to_reference(new_per_seed, ref_dir)
+    return comparison, f"{int(comparison['differs'].sum())} of {len(comparison)} variant means differ from {ref_dir}"
 
 
 def install_reference(bundle: str | Path, profile: str, command: str | None = None,

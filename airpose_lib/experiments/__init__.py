@@ -3,6 +3,13 @@
 - :mod:`.recordings`: the paper's real-data section on two-drone recordings: networks of Table I,
   fine-tuning on person 1, estimates on both persons, AirPose+, and the error tables against the
   ground truth of the kit's generated recordings (notebooks 03, 04, 05).
+- :mod:`.ablation`: Table I, the variants trained (or the official checkpoints) and evaluated,
+  the oracle, the claims, the results bundle and the qualitative samples (notebook 02).
+- :mod:`.online`: drone fleets over a recording, online = offline, faults, float16 (notebook 06).
+- :mod:`.body_model`: the shape-space sweep of notebook 00.
+- :mod:`.scene`: the 3D scene of a recording (notebook 07).
+
+Notebooks import these modules by name; the package imports only ``.recordings``.
 """
 from .recordings import RecordingExperiment, default_experiment_dir, run_recording_experiment
 

@@ -1,4 +1,13 @@
-"""What notebook 02's qualitative figures show: each variant's estimate on a few test samples.
+"""Notebook 02, Table I: the four variants trained and evaluated, the oracle, the claims, and the
+qualitative figures' inputs.
+
+:func:`run_ablation_experiment` trains and evaluates the variants on the kit's data
+(:func:`airpose_lib.train.ablation.run_ablation`) or, with the official data source, evaluates the
+authors' checkpoints on the official synthetic test split (:func:`airpose_lib.train.official.official_ablation`);
+what differs between the two (the seeds, the test split, no oracle on the official data, the
+caption) is settled here so that the notebook reads the same for both. :func:`ablation_oracle`,
+:func:`ablation_claims` and :func:`write_ablation_bundle` time their step into the experiment's
+``wall``, which the results bundle records.
 
 :func:`ablation_samples` runs the first seed's network of every variant on the first ``n`` test
 samples and returns, ready to plot (:mod:`airpose_lib.viz.ablation`), the crops, the predicted
@@ -8,19 +17,156 @@ subject's own gendered shape first).
 """
 from __future__ import annotations
 
-from collections.abc import Mapping
-from dataclasses import dataclass
+import time
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
+import pandas as pd
 import torch
 
+from airpose_lib.assets import DataSource
 from airpose_lib.body import load_body_model
+from airpose_lib.data import StillFrameDataset, default_root
+from airpose_lib.data.official_synthetic import OfficialSyntheticDataset
+from airpose_lib.eval.ablation import per_seed_table
+from airpose_lib.eval.oracle import oracle_per_view
+from airpose_lib.eval.reference import train_wall_s, write_reference
+from airpose_lib.eval.significance import claims_table
 from airpose_lib.geometry import axis_angle_to_matrix, crop_intrinsics, full_to_crop_pixels, project_points
-from airpose_lib.losses.supervised import GENDER_CODES
+from airpose_lib.body.genders import GENDER_NAMES
 from airpose_lib.model import posed_joints_and_vertices
 from airpose_lib.train import load_trained_model, predict
+from airpose_lib.train.ablation import run_ablation
+from airpose_lib.train.official import official_ablation
 
-__all__ = ["AblationSamples", "ablation_samples"]
+__all__ = ["AblationExperiment", "run_ablation_experiment", "ablation_oracle", "ablation_claims",
+           "write_ablation_bundle", "AblationSamples", "ablation_samples"]
+
+
+@dataclass
+class AblationExperiment:
+    """The trained (or official) networks of Table I, evaluated on a test split.
+
+    Attributes:
+        profile: reproduction profile.
+        source: ``"generated"`` (the kit's networks on its data) or ``"official"`` (the
+            authors' checkpoints on the official synthetic test split).
+        variants: variant names, in table order.
+        seeds: the seeds trained (``[0]`` for the official checkpoints).
+        runs: (variant, seed) -> ``AblationRun`` (checkpoint and evaluation tables).
+        test: the test split (``StillFrameDataset`` or ``OfficialSyntheticDataset``).
+        wall: step name -> wall time in seconds, recorded in the results bundle.
+    """
+
+    profile: str
+    source: str
+    variants: list[str]
+    seeds: list[int]
+    runs: dict
+    test: object
+    wall: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def official(self) -> bool:
+        return self.source == "official"
+
+    @property
+    def per_view(self) -> dict:
+        """(variant, seed) -> per-view evaluation table on the test split."""
+        return {k: r.tables["per_view"] for k, r in self.runs.items()}
+
+    @property
+    def per_view_tight(self) -> dict:
+        """(variant, seed) -> the same on tight-box crops, None where the run has none."""
+        return {k: r.tables.get("per_view_tight") for k, r in self.runs.items()}
+
+    def train_wall(self) -> dict:
+        """(variant, seed) -> training wall time in seconds (None if unknown)."""
+        return train_wall_s(self.runs)
+
+    def runs_table(self) -> pd.DataFrame:
+        """One row per network: variant, seed, checkpoint, test size, tight-box table, training time."""
+        wall = self.train_wall()
+        return pd.DataFrame([{"variant": r.variant, "seed": r.seed, "checkpoint": str(r.checkpoint),
+                              "test images x views": len(r.tables["per_view"]),
+                              "tight-box table": "per_view_tight" in r.tables, "training wall [s]": wall[k]}
+                             for k, r in self.runs.items()])
+
+    def per_seed(self) -> pd.DataFrame:
+        """:func:`~airpose_lib.eval.ablation.per_seed_table` with the training times."""
+        return per_seed_table(self.per_view, self.per_view_tight, wall_s=self.train_wall())
+
+    def caption(self) -> str:
+        """Caption of the kit's Table I: which networks on which data."""
+        what = ("the official checkpoints on the official synthetic test split" if self.official
+                else f"the kit's networks on its own data, profile '{self.profile}', seeds {list(self.seeds)}")
+        return f"Table I reproduced by the kit: {what}; paper columns from Saini et al. (RA-L 2022), Table I."
+
+    def smoke_warning(self) -> str | None:
+        """The warning a smoke run's numbers need (None otherwise)."""
+        if self.profile == "smoke" and not self.official:
+            return "SMOKE NUMBERS: a few dozen training steps; they only show that the pipeline runs."
+        return None
+
+
+def run_ablation_experiment(profile: str, source: DataSource, variants: Sequence[str], seeds: Sequence[int],
+                            eval_max_samples: int | None = None, workers: int = 1,
+                            progress: bool = True) -> AblationExperiment:
+    """Train (resuming finished runs) and evaluate every variant for every seed, or evaluate the
+    official checkpoints when ``source`` is official.
+
+    Args:
+        profile: reproduction profile (its ``train:`` settings and still-frame data).
+        source: the resolved data source (needs ``official_synthetic`` and ``official_checkpoints``).
+        variants, seeds: what to train (the official run has one network per variant, seed 0).
+        eval_max_samples: evaluate on at most this many test samples (None: all).
+        workers: runs trained at once.
+    """
+    t0 = time.perf_counter()
+    if source.source == "official":  # the paper's own networks on the paper's own test split
+        runs = official_ablation(source.roots["official_checkpoints"], source.roots["official_synthetic"],
+                                 variants=variants, max_samples=eval_max_samples, backbone=None)
+        seeds = [0]
+        test = OfficialSyntheticDataset(source.roots["official_synthetic"], "test")
+    else:
+        runs = run_ablation(profile, variants=variants, seeds=seeds, eval_max_samples=eval_max_samples,
+                            workers=workers, progress=progress)
+        test = StillFrameDataset(default_root(profile), "test")
+    wall = {"train and evaluate": time.perf_counter() - t0}
+    return AblationExperiment(profile, source.source, list(variants), list(seeds), runs, test, wall)
+
+
+def ablation_oracle(exp: AblationExperiment, max_samples: int | None = None) -> pd.DataFrame | None:
+    """:func:`~airpose_lib.eval.oracle.oracle_per_view` on the kit's test split (None on the
+    official data, whose arrays the oracle does not read)."""
+    t0 = time.perf_counter()
+    oracle = None if exp.official else oracle_per_view(exp.test.arrays, max_samples=max_samples)
+    exp.wall["oracle"] = time.perf_counter() - t0
+    return oracle
+
+
+def ablation_claims(exp: AblationExperiment, n_resamples: int = 2000) -> pd.DataFrame:
+    """:func:`~airpose_lib.eval.significance.claims_table` of the experiment's per-view errors."""
+    t0 = time.perf_counter()
+    claims = claims_table(exp.per_view, n_resamples=n_resamples)
+    exp.wall["claims"] = time.perf_counter() - t0
+    return claims
+
+
+def write_ablation_bundle(exp: AblationExperiment, folder: str | Path, *, table: pd.DataFrame,
+                          claims: pd.DataFrame, oracle: pd.DataFrame | None,
+                          eval_max_samples: int | None = None) -> Path:
+    """The run's results bundle (:func:`~airpose_lib.eval.reference.write_reference`), with every
+    step's wall time and each network's training time."""
+    steps = {**exp.wall, **{f"train {v} seed {s}": w for (v, s), w in exp.train_wall().items()}}
+    return write_reference(folder, table=table, per_seed=exp.per_seed(), claims=claims, oracle=oracle,
+                           profile=exp.profile,
+                           command=f"airpose reproduce --profile {exp.profile} --only 02_ablation_table",
+                           step_wall_s=steps, extra={"seeds": list(exp.seeds), "variants": list(exp.variants),
+                                                     "data_source": exp.source,
+                                                     "eval_max_samples": eval_max_samples})
 
 
 @dataclass
@@ -92,7 +238,7 @@ def ablation_samples(runs: Mapping, dataset, n: int, official: bool = False) -> 
     V = arr["phi"].shape[1]
     gt_vertices = []
     for i in range(len(idx)):  # ground truth with the sample's own (gendered) body
-        gendered = load_body_model(source, GENDER_CODES[int(arr["gender"][i])], dtype=torch.float64)
+        gendered = load_body_model(source, GENDER_NAMES[int(arr["gender"][i])], dtype=torch.float64)
         p = {"phi": torch.from_numpy(arr["phi"][i]).double(), "tau": torch.from_numpy(arr["tau"][i]).double(),
              "theta": axis_angle_to_matrix(torch.from_numpy(arr["theta"][i]).double()).expand(V, 21, 3, 3),
              "beta": torch.from_numpy(arr["beta"][i]).double().expand(V, 10)}

@@ -35,6 +35,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from airpose_lib.atomic import atomic_path
 from airpose_lib.folder_lock import folder_lock
 
 __all__ = ["METHODS", "RecordingExperiment", "default_experiment_dir", "run_recording_experiment",
@@ -132,7 +133,6 @@ def _cached_npz(path: Path, key: str):
 
 
 def _save_npz(path: Path, key: str, arrays: dict) -> None:
-    from airpose_lib.body.cache import atomic_path
 
     path.parent.mkdir(parents=True, exist_ok=True)
     with atomic_path(path) as tmp:

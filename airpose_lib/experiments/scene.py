@@ -10,7 +10,7 @@ import torch
 from airpose_lib.body import load_body_model
 from airpose_lib.experiments.recordings import body_vertices
 from airpose_lib.geometry import axis_angle_to_matrix
-from airpose_lib.losses.supervised import GENDER_CODES
+from airpose_lib.body.genders import GENDER_NAMES
 from airpose_lib.viz.scene3d import RecordingScene
 
 __all__ = ["recording_scene"]
@@ -44,7 +44,7 @@ def recording_scene(sequence, estimate: Mapping | None = None, method: str | Non
         raise ValueError(f"{sequence.root}: no ground_truth.npz; the 3D view needs the true cameras")
     F = len(sequence.frames)
     idx = np.asarray(frames if frames is not None else np.arange(0, F, max(1, int(stride))), dtype=np.int64)
-    gender = {code: name for name, code in GENDER_CODES.items()}.get(int(gt.get("gender", 0)), "neutral")
+    gender = GENDER_NAMES.get(int(gt.get("gender", 0)), "neutral")
     true_body = load_body_model("open", gender)
     R_cw, t_cw = np.asarray(gt["R_cw"], np.float64)[idx], np.asarray(gt["t_cw"], np.float64)[idx]
     gt_cam = body_vertices(_ground_truth_params(gt), true_body, idx, 0)  # (n, N, 3) camera 1

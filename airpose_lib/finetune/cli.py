@@ -1,20 +1,21 @@
 """``airpose finetune`` and ``airpose predict``: builders registered by :mod:`airpose_lib.cli`.
 
-Only argparse and pathlib are imported at module level (``airpose --help`` stays fast, and this
-module may be imported while ``airpose_lib.cli`` is still initialising); the handlers import the
-kit, ``CLIError`` included, when they run.
+Only argparse, pathlib and :mod:`airpose_lib.profiles` are imported at module level (``airpose
+--help`` stays fast, and this module may be imported while ``airpose_lib.cli`` is still
+initialising); the handlers import the rest of the kit, ``CLIError`` included, when they run.
 """
 from __future__ import annotations
 
 import argparse
 from pathlib import Path
 
+from airpose_lib.profiles import profile_names
+
 __all__ = ["_add_finetune", "_add_predict"]
 
 
 def _profiles() -> tuple[str, ...]:
-    folder = Path(__file__).resolve().parents[1] / "reproduce" / "profiles"
-    return tuple(sorted(p.stem for p in folder.glob("*.yaml"))) or ("smoke", "cpu", "paper")
+    return tuple(profile_names()) or ("smoke", "cpu", "paper")
 
 
 def _frame_range(text: str | None) -> tuple[int | None, int | None] | None:

@@ -48,7 +48,7 @@ import numpy as np
 import torch
 from torch import Tensor, nn
 
-from airpose_lib.body.cache import atomic_path
+from airpose_lib.atomic import atomic_path
 
 __all__ = [
     "PREDICTION_KEYS",

@@ -31,8 +31,8 @@ the agreement threshold ``threshold_px r`` and the 2D residuals divided by ``r``
 as its full-resolution original would be.
 
 Crops and P are formed in the network's virtual camera (``geometry.virtual_crop``; the
-checkpoint's training camera, :func:`~airpose_lib.finetune.network.checkpoint_camera`); the 2D
-loss projects the predicted body with the recording's own intrinsics.
+checkpoint's training camera, ``camera_K`` of its network record, :mod:`airpose_lib.model.record`);
+the 2D loss projects the predicted body with the recording's own intrinsics.
 
 Determinism and resume follow ``airpose_lib.train``: the frame order of epoch e is drawn from
 ``(seed, e)`` only; dropout and the VPoser sample use torch's global RNG, seeded from the seed and
@@ -61,7 +61,7 @@ import numpy as np
 import torch
 from torch import nn
 
-from airpose_lib.body.cache import atomic_path
+from airpose_lib.atomic import atomic_path
 from airpose_lib.engine import (
     FORMAT_VERSION as CHECKPOINT_FORMAT,
     EngineRun,
@@ -75,6 +75,8 @@ from airpose_lib.engine import (
     run_engine,
 )
 from airpose_lib.folder_lock import folder_lock
+from airpose_lib.model.record import network_record
+from airpose_lib.profiles import profile_path, profile_section
 from airpose_lib.train.sampling import epoch_permutation, seed_everything
 
 __all__ = ["FineTuneConfig", "FineTuneResult", "finetune_config", "finetune", "evaluate_finetune_loss",
@@ -176,17 +178,10 @@ class FineTuneConfig:
 def finetune_config(profile: str | Path | None, **overrides: Any) -> FineTuneConfig:
     """:class:`FineTuneConfig` from a profile's ``finetune:`` section (defaults where the profile
     has none), then ``overrides``. Unknown keys raise ``ValueError`` naming the file."""
-    import yaml
-
-    from airpose_lib.train.config import profile_path
-
     values: dict[str, Any] = {}
     if profile is not None:
-        path = profile_path(profile)
-        if not path.is_file():
-            raise ValueError(f"profile file not found: {path}")
-        values.update((yaml.safe_load(path.read_text()) or {}).get("finetune") or {})
-        where = f"{path} `finetune:`"
+        values.update(profile_section(profile, "finetune"))
+        where = f"{profile_path(profile)} `finetune:`"
     else:
         where = "fine-tuning options"
     values.update(overrides)
@@ -466,11 +461,11 @@ class _FineTuneTask(TrainingTask):
     frames; model selection (the held-out 2D loss, ``checkpoints/best.pt``) as its validation."""
 
     def __init__(self, *, model, loss_fn, optimizer, cfg: FineTuneConfig, train_cfg, frames: dict, heldout: dict,
-                 evaluate: Callable, input_size: int, K_net_np: np.ndarray, info: dict, out_dir: Path,
+                 evaluate: Callable, input_size: int, network: dict, info: dict, out_dir: Path,
                  diagnostic: Callable | None) -> None:
         self.model, self.loss_fn, self.optimizer = model, loss_fn, optimizer
         self.cfg, self.train_cfg, self.frames, self.heldout = cfg, train_cfg, frames, heldout
-        self.evaluate, self.input_size, self.K_net_np = evaluate, input_size, K_net_np
+        self.evaluate, self.input_size, self.network = evaluate, input_size, network
         self.info, self.out_dir, self.diagnostic = info, out_dir, diagnostic
         self.selection: dict = info["selection"]
         self.best_path = checkpoint_dir(out_dir) / "best.pt"
@@ -528,8 +523,7 @@ class _FineTuneTask(TrainingTask):
         return None
 
     def checkpoint_state(self) -> dict:
-        return {"config": self.train_cfg.to_dict(), "world_size": 1, "input_size": self.input_size,
-                "camera_K": self.K_net_np.tolist(), "finetune": self.info}
+        return {"config": self.train_cfg.to_dict(), "world_size": 1, "network": self.network, "finetune": self.info}
 
     def config(self) -> dict:
         return self.cfg.to_dict()
@@ -611,9 +605,10 @@ def _finetune(checkpoint: Path, root: Path, out_dir: Path, cfg: FineTuneConfig, 
             "num_heldout": len(held), "keypoints": agreement_summary(masks), "pixels": pixels,
             "camera_K": K_net_np.tolist(), "initial": None,
             "selection": {"rows": [], "best_step": None, "best_heldout_j2d": None}}
+    network = network_record(train_cfg.variant, train_cfg.backbone, train_cfg.model, input_size, K_net_np)
     task = _FineTuneTask(model=model, loss_fn=loss_fn, optimizer=optimizer, cfg=cfg, train_cfg=train_cfg,
                          frames=frames, heldout=heldout, evaluate=evaluate, input_size=input_size,
-                         K_net_np=K_net_np, info=info, out_dir=out_dir, diagnostic=diagnostic)
+                         network=network, info=info, out_dir=out_dir, diagnostic=diagnostic)
     schedule = Schedule(steps=cfg.steps, log_every=cfg.log_every, checkpoint_every=cfg.checkpoint_every,
                         keep_checkpoints=cfg.keep_checkpoints, val_every=cfg.checkpoint_every, stop_at=stop_at,
                         checkpoint_at_end=True, loss_name="fine-tuning loss", what=f"finetune {train_cfg.variant}",

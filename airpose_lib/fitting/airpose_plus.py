@@ -54,7 +54,6 @@ import math
 import time
 from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass, field, fields, replace
-from pathlib import Path
 
 import numpy as np
 import roma
@@ -73,6 +72,7 @@ from airpose_lib.geometry import (
 )
 from airpose_lib.losses.robust import geman_mcclure
 from airpose_lib.prior import VPoser
+from airpose_lib.profiles import profile_path, profile_section
 
 from .kinematics import KeypointBody
 
@@ -88,7 +88,6 @@ __all__ = [
     "fitting_profile",
 ]
 
-_PROFILES_DIR = Path(__file__).resolve().parents[1] / "reproduce" / "profiles"
 
 DETECTOR_JOINTS: dict[str, tuple[int, ...]] = {
     "body25": BODY_25_FROM_SMPLX,
@@ -132,19 +131,13 @@ class AirPosePlusConfig:
 
 
 def fitting_profile(profile: str, **overrides) -> AirPosePlusConfig:
-    """:class:`AirPosePlusConfig` from a profile's ``fitting:`` section (the YAML read as data);
+    """:class:`AirPosePlusConfig` from a profile's ``fitting:`` section (:mod:`airpose_lib.profiles`);
     keys are the config's fields, missing ones keep the defaults; ``overrides`` win."""
-    import yaml
-
-    path = _PROFILES_DIR / f"{profile}.yaml"
-    if not path.is_file():
-        known = sorted(p.stem for p in _PROFILES_DIR.glob("*.yaml"))
-        raise ValueError(f"unknown profile {profile!r}; available: {known}")
-    section = dict((yaml.safe_load(path.read_text()) or {}).get("fitting") or {})
+    section = profile_section(profile, "fitting")
     names = {f.name for f in fields(AirPosePlusConfig)}
     unknown = set(section) - names
     if unknown:
-        raise ValueError(f"{path}: unknown keys in `fitting:`: {sorted(unknown)}")
+        raise ValueError(f"{profile_path(profile)}: unknown keys in `fitting:`: {sorted(unknown)}")
     return AirPosePlusConfig(**{**section, **overrides})
 
 

@@ -1,18 +1,22 @@
 """Geometry core: rotations, pinhole camera, person crop (paper eq. 1-2) and rigid transforms.
 
-Depends only on torch and roma; imports nothing else from the kit.
+Depends only on torch, roma, numpy and OpenCV (the image crop); imports nothing else from the kit.
 """
 
 from .camera import intrinsics_matrix, project_points, split_intrinsics, transform_points
 from .crop import (
+    box_in_crop,
     crop_affine_matrix,
+    crop_from_image,
     crop_intrinsics,
     crop_to_full_pixels,
     crop_to_full_translation,
     crop_vector,
     full_to_crop_pixels,
     full_to_crop_translation,
+    pad_outside_box,
     translation_to_weak_perspective,
+    virtual_box,
     virtual_camera_map,
     virtual_crop,
     weak_perspective_to_translation,
@@ -62,7 +66,11 @@ __all__ = [
     "weak_perspective_to_translation",
     "translation_to_weak_perspective",
     "virtual_camera_map",
+    "virtual_box",
     "virtual_crop",
+    "box_in_crop",
+    "pad_outside_box",
+    "crop_from_image",
     # transforms
     "make_transform",
     "split_transform",

@@ -41,10 +41,20 @@ A network learns P and the crop for the camera of its training data (``K_net``: 
 the same centre and orientation and intrinsics ``K_net``: the real image mapped by
 ``H = K_net K^-1`` (a scale ``f_net / f`` about the principal point, moved to ``K_net``'s).
 See its docstring for why the predicted translation is then the real camera's.
+
+The image: black outside the box (one rule for every crop)
+----------------------------------------------------------
+Data generation renders the crop directly (:func:`crop_intrinsics`), the official loaders and the
+runtime warp a full image (:func:`crop_from_image`); all of them then call :func:`pad_outside_box`,
+which blacks out every crop pixel whose centre ``idx`` lies outside the box's crop-pixel
+rectangle ``[u0, u1] x [v0, v1]`` (:func:`box_in_crop`): column ``idx`` is kept iff
+``u0 <= idx <= u1``. So a training crop and an inference crop of the same box are the same array.
 """
 
 from __future__ import annotations
 
+import cv2
+import numpy as np
 import torch
 from torch import Tensor
 
@@ -61,7 +71,11 @@ __all__ = [
     "weak_perspective_to_translation",
     "translation_to_weak_perspective",
     "virtual_camera_map",
+    "virtual_box",
     "virtual_crop",
+    "box_in_crop",
+    "pad_outside_box",
+    "crop_from_image",
 ]
 
 
@@ -337,6 +351,25 @@ def virtual_camera_map(K: Tensor, K_net: Tensor) -> Tensor:
     return torch.stack(rows, dim=-2)
 
 
+def virtual_box(bbox: Tensor, K: Tensor, K_net: Tensor) -> tuple[Tensor, Tensor]:
+    """The box of camera K as the virtual camera ``K_net`` sees it (:func:`virtual_camera_map`).
+
+    Args:
+        bbox: ``(..., 4)`` ``[x0, y0, x1, y1]`` in pixels of the real image.
+        K: ``(..., 3, 3)`` intrinsics of the real image.
+        K_net: ``(..., 3, 3)`` intrinsics of the virtual camera.
+
+    Returns:
+        ``box_v (..., 4)`` in virtual-camera pixels and ``H (..., 3, 3)``, real -> virtual pixels.
+        With ``K = K_net``, ``H`` is the identity and ``box_v`` equals ``bbox`` bit for bit.
+    """
+    H = virtual_camera_map(K, K_net).to(bbox.dtype)
+    kx, ky, tx, ty = H[..., 0, 0], H[..., 1, 1], H[..., 0, 2], H[..., 1, 2]
+    x0, y0, x1, y1 = bbox.unbind(-1)
+    box_v = torch.stack(torch.broadcast_tensors(kx * x0 + tx, ky * y0 + ty, kx * x1 + tx, ky * y1 + ty), dim=-1)
+    return box_v, H
+
+
 def virtual_crop(bbox: Tensor, K: Tensor, K_net: Tensor, input_size: float = 224) -> tuple[Tensor, Tensor]:
     """The network input of a box seen by any camera: crop map and P formed in the virtual camera.
 
@@ -366,10 +399,65 @@ def virtual_crop(bbox: Tensor, K: Tensor, K_net: Tensor, input_size: float = 224
         ``A (..., 3, 3)`` real-image pixels -> crop pixels (``A[:2]`` for ``cv2.warpAffine``) and
         ``P (..., 3)`` ``[bx, by, s]`` in the virtual camera.
     """
-    H = virtual_camera_map(K, K_net).to(bbox.dtype)
-    kx, ky, tx, ty = H[..., 0, 0], H[..., 1, 1], H[..., 0, 2], H[..., 1, 2]
-    x0, y0, x1, y1 = bbox.unbind(-1)
-    box_v = torch.stack(torch.broadcast_tensors(kx * x0 + tx, ky * y0 + ty, kx * x1 + tx, ky * y1 + ty), dim=-1)
+    box_v, H = virtual_box(bbox, K, K_net)
     A = crop_affine_matrix(box_v, input_size) @ H
     P = crop_vector(box_v, K_net.to(bbox.dtype), input_size)
     return A, P
+
+
+# -- the image: black outside the box -----------------------------------------------------------
+def box_in_crop(bbox: np.ndarray, input_size: int) -> tuple[float, float, float, float]:
+    """The box ``[x0, y0, x1, y1]`` (full-frame px) in crop pixels: ``(u0, v0, u1, v1)``.
+
+    ``u = s (x - ccx) + S / 2`` with ``s = S / max(w, h)``, as :func:`full_to_crop_pixels`, in
+    Python floats. This arithmetic *is* the edge rule's: the long side's first edge lands on 0
+    only up to rounding, and whether pixel 0 is kept follows these exact operations (the ones
+    the still-frame data were generated with), so every crop must compute the edges here.
+
+    Args:
+        bbox: ``(4,)`` the box in full-frame pixels of the camera the crop is formed in.
+        input_size: crop side S.
+    """
+    x0, y0, x1, y1 = (float(v) for v in np.asarray(bbox).reshape(4))
+    s = input_size / max(x1 - x0, y1 - y0)
+    ccx, ccy = 0.5 * (x0 + x1), 0.5 * (y0 + y1)
+    return (s * (x0 - ccx) + input_size / 2, s * (y0 - ccy) + input_size / 2,
+            s * (x1 - ccx) + input_size / 2, s * (y1 - ccy) + input_size / 2)
+
+
+def pad_outside_box(image: np.ndarray, bbox: np.ndarray) -> np.ndarray:
+    """Black out the crop pixels whose centre falls outside the person box (in place; returns it).
+
+    Column ``j`` is kept iff ``u0 <= j <= u1`` and row ``i`` iff ``v0 <= i <= v1``, with the
+    edges from :func:`box_in_crop`: the one rule of every crop in the kit.
+
+    Args:
+        image: ``(S, S, C)`` crop of ``bbox`` (any dtype).
+        bbox: ``(4,)`` the box in full-frame pixels of the camera the crop is formed in.
+    """
+    S = image.shape[0]
+    u0, v0, u1, v1 = box_in_crop(bbox, S)
+    idx = np.arange(S)
+    image[:, (idx < u0) | (idx > u1)] = 0
+    image[(idx < v0) | (idx > v1)] = 0
+    return image
+
+
+def crop_from_image(image: np.ndarray, M: np.ndarray, bbox: np.ndarray, input_size: int) -> np.ndarray:
+    """The network input of a box cut from an image: warped by ``M``, black outside the box.
+
+    Args:
+        image: ``(H, W, C)`` uint8.
+        M: ``(3, 3)`` or ``(2, 3)`` map from ``image``'s pixels to crop pixels (e.g.
+            :func:`crop_affine_matrix`, or :func:`virtual_crop`'s ``A``).
+        bbox: ``(4,)`` the box in the pixels of the camera the crop is formed in (the real
+            camera for :func:`crop_affine_matrix`, :func:`virtual_box`'s for a virtual crop).
+        input_size: crop side S.
+
+    Returns:
+        ``(S, S, C)`` uint8: bilinear ``cv2.warpAffine`` (black beyond the image), then
+        :func:`pad_outside_box`.
+    """
+    out = cv2.warpAffine(image, np.asarray(M, np.float64)[:2], (input_size, input_size), flags=cv2.INTER_LINEAR,
+                         borderMode=cv2.BORDER_CONSTANT, borderValue=0)
+    return pad_outside_box(out, bbox)

@@ -71,6 +71,7 @@ import torch
 from smplx.lbs import batch_rigid_transform
 from torch import Tensor, nn
 
+from airpose_lib.body.genders import GENDER_NAMES
 from airpose_lib.body.joint_sets import NUM_BODY_JOINTS, NUM_POSE_JOINTS
 from airpose_lib.geometry import (
     axis_angle_to_matrix,
@@ -81,7 +82,6 @@ from airpose_lib.geometry import (
 )
 
 __all__ = [
-    "GENDER_CODES",
     "LIMB_JOINTS_X1",
     "LIMB_JOINTS_X2",
     "LossConfig",
@@ -101,8 +101,6 @@ __all__ = [
 
 #: Input side of the official networks: the crop-pixel 2D term is measured in its pixels.
 OFFICIAL_CROP_SIZE = 224
-#: ``sample['gender']`` codes.
-GENDER_CODES: dict[int, str] = {0: "neutral", 1: "male", 2: "female"}
 #: Knees and elbows (indices into the 22 body joints): weighted ``limb_weight``.
 LIMB_JOINTS_X1: tuple[int, ...] = (4, 5, 18, 19)
 #: Ankles and wrists: weighted ``limb_weight ** 2``.
@@ -451,7 +449,7 @@ class SupervisedLoss(nn.Module):
         if body_models is None:
             from airpose_lib.body import load_body_model
 
-            body_models = {g: load_body_model(source, g) for g in GENDER_CODES.values()}
+            body_models = {g: load_body_model(source, g) for g in GENDER_NAMES.values()}
         ids = None
         n_vertices = body_models["neutral"].v_template.shape[0]
         if self.config.vertex_subsample is not None and self.config.vertex_subsample < n_vertices:
@@ -479,7 +477,7 @@ class SupervisedLoss(nn.Module):
         joints = theta.new_empty(B, NUM_BODY_JOINTS, 3)
         verts = theta.new_empty(B, self.bodies["neutral"].num_vertices, 3) if vertices else None
         for code in gender.unique().tolist():
-            name = GENDER_CODES[int(code)]
+            name = GENDER_NAMES[int(code)]
             if name not in self.bodies:
                 raise KeyError(f"no {name} body model given to SupervisedLoss (sample gender {code})")
             m = gender == code

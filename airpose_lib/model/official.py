@@ -55,7 +55,6 @@ in the file is run (:func:`read_official_checkpoint`).
 """
 from __future__ import annotations
 
-import hashlib
 import io
 import pickle
 import types
@@ -67,6 +66,8 @@ from typing import Any
 
 import torch
 from torch import Tensor
+
+from airpose_lib.atomic import atomic_path
 
 from .backbone import BACKBONES
 from .variants import BETA_DIM, TAU_INIT, TAU_SCALE, THETA_DIM, WEAK_CAM_INIT, AirPoseNet, _spec
@@ -86,7 +87,7 @@ __all__ = [
     "load_official_checkpoint",
     "to_official_state_dict",
     "write_official_checkpoint",
-    "save_kit_checkpoint",
+    "backbone_name",
 ]
 
 #: kit variant -> official Lightning module name (README of the official repository).
@@ -400,7 +401,8 @@ def load_official_checkpoint(path: str | Path, variant: str | None = None, backb
 
 
 # -- writing ------------------------------------------------------------------------------------
-def _backbone_name(model: AirPoseNet) -> str:
+def backbone_name(model: AirPoseNet) -> str:
+    """The name (``resnet50`` ...) of a network's backbone, from its block type and layer counts."""
     bb = model.backbone
     try:
         return _LAYOUTS[(bb.block_name, tuple(bb.layers))]
@@ -457,7 +459,6 @@ def write_official_checkpoint(model: AirPoseNet, path: str | Path, *, epoch: int
     ``pytorch-lightning_version`` ("1.2.0", the official pin), ``hparams_name`` and
     ``hyper_parameters`` (``{"model": <official name>}``), plus ``extra`` entries.
     """
-    from airpose_lib.body.cache import atomic_path
 
     path = Path(path)
     ckpt = {"epoch": int(epoch), "global_step": int(global_step), "pytorch-lightning_version": "1.2.0",
@@ -466,33 +467,4 @@ def write_official_checkpoint(model: AirPoseNet, path: str | Path, *, epoch: int
     ckpt.update(dict(extra or {}))
     with atomic_path(path) as tmp:
         torch.save(ckpt, tmp)
-    return path
-
-
-def save_kit_checkpoint(model: AirPoseNet, path: str | Path, *, source: str | Path | None = None,
-                        **config: Any) -> Path:
-    """Write ``model`` as a kit checkpoint (atomically) that ``airpose_lib.train.evaluate.load_trained_model``
-    and ``airpose_lib.train.load_checkpoint`` read.
-
-    It holds ``model``, ``step`` 0 and a ``config`` (``TrainConfig`` with the model's variant and
-    backbone, ``steps=0``, plus ``config`` overrides), an empty optimiser state and no RNG state:
-    weights for evaluation or fine-tuning, not a run to resume. ``source`` (e.g. the official
-    file) is recorded with its SHA-256.
-    """
-    from airpose_lib.body.cache import atomic_path
-    from airpose_lib.engine.checkpoint import FORMAT_VERSION, kit_version
-    from airpose_lib.train.config import TrainConfig
-
-    cfg = TrainConfig(**{"variant": model.variant, "backbone": _backbone_name(model), "steps": 0,
-                         "model": {"num_iterations": model.num_iterations}, **config})
-    state = {"format_version": FORMAT_VERSION, "kit_version": kit_version(),
-             "model": {k: v.detach().cpu().contiguous().clone() for k, v in model.state_dict().items()},
-             "optimizer": {}, "rng": [], "step": 0, "epoch": 0, "batch_in_epoch": 0, "world_size": 1,
-             "config": cfg.to_dict()}
-    if source is not None:
-        src = Path(source)
-        state["source"] = {"file": str(src), "sha256": hashlib.sha256(src.read_bytes()).hexdigest()}
-    path = Path(path)
-    with atomic_path(path) as tmp:
-        torch.save(state, tmp)
     return path

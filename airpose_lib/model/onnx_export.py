@@ -29,7 +29,8 @@ import torch
 from torch import Tensor, nn
 
 from .staged import _to_numpy, _wire_dtype
-from .variants import MESSAGE_DIM, STATE_DIM, AirPoseNet, decode_state, unpack_state
+from .message import MESSAGE_DIM
+from .variants import STATE_DIM, AirPoseNet, decode_state, unpack_state
 
 __all__ = ["Stage1Graph", "IterationGraph", "export_onnx", "OnnxDroneNode", "OPSET"]
 

@@ -31,7 +31,7 @@ import onnxruntime as ort
 from onnxruntime.quantization import CalibrationDataReader, CalibrationMethod, QuantFormat, QuantType, quantize_static
 from onnxruntime.quantization.shape_inference import quant_pre_process
 
-from airpose_lib.body.cache import atomic_path
+from airpose_lib.atomic import atomic_path
 
 __all__ = ["QuantSettings", "CropReader", "quantize_stage1", "calibration_digest", "STAGE1_FILES"]
 

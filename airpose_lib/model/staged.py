@@ -23,7 +23,8 @@ import numpy as np
 import torch
 from torch import Tensor
 
-from .variants import BETA_DIM, MESSAGE_DIM, NUM_BODY_JOINTS, THETA_DIM, AirPoseNet
+from .message import BETA_DIM, MESSAGE_DIM, NUM_BODY_JOINTS, THETA_DIM
+from .variants import AirPoseNet
 
 __all__ = ["encode_message", "decode_message", "message_nbytes", "fuse_message_list", "DroneNode"]
 

@@ -52,6 +52,7 @@ from torch import Tensor, nn
 
 from ..geometry import axis_angle_to_rot6d, weak_perspective_to_translation
 from .backbone import ResNet, build_backbone
+from .message import BETA_DIM, MESSAGE_DIM, NUM_BODY_JOINTS, THETA_DIM
 from .regressor import IterativeRegressor
 
 __all__ = [
@@ -78,10 +79,6 @@ __all__ = [
     "convert_official_state_dict",
 ]
 
-NUM_BODY_JOINTS = 21
-THETA_DIM = NUM_BODY_JOINTS * 6  # 126
-BETA_DIM = 10
-MESSAGE_DIM = THETA_DIM + BETA_DIM  # 136 float32 = 544 bytes per stage
 TAU_SCALE = 20.0  # metres; "maximum depth" the paper normalises by
 TAU_INIT = (0.0, 0.0, 10.0)  # metres
 WEAK_CAM_INIT = (0.9, 0.0, 0.0)

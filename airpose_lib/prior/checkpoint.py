@@ -27,7 +27,8 @@ from typing import Any
 
 import torch
 
-from airpose_lib.body.cache import atomic_path, cache_dir
+from airpose_lib.atomic import atomic_path
+from airpose_lib.body.cache import cache_dir
 from airpose_lib.errors import reading
 
 from .vposer import LATENT_DIM, NUM_NEURONS, VPoser

@@ -22,7 +22,6 @@ import math
 import time
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, fields
-from pathlib import Path
 
 import numpy as np
 import torch
@@ -30,13 +29,13 @@ from torch import Tensor
 
 from airpose_lib.engine import Schedule, TrainingTask, run_engine
 from airpose_lib.geometry import axis_angle_to_matrix, geodesic_angle
+from airpose_lib.profiles import profile_path, profile_section
 
 from .vposer import LATENT_DIM, NUM_JOINTS, NUM_NEURONS, VPoser
 
 __all__ = ["PriorTrainConfig", "CorpusConfig", "prior_profile", "train_prior", "evaluate_prior",
            "rotation_geodesic"]
 
-_PROFILES_DIR = Path(__file__).resolve().parents[1] / "reproduce" / "profiles"
 
 JointsFn = Callable[[Tensor], Tensor]
 """Body rotations ``(B, 21, 3, 3)`` -> joint positions ``(B, J, 3)`` metres (e.g. the open model)."""
@@ -85,23 +84,17 @@ class CorpusConfig:
 
 
 def prior_profile(profile: str) -> tuple[PriorTrainConfig, CorpusConfig]:
-    """Training and corpus settings from a profile's ``prior:`` section (the YAML is read as data).
+    """Training and corpus settings from a profile's ``prior:`` section (:mod:`airpose_lib.profiles`).
 
     Keys of the section are fields of :class:`PriorTrainConfig` or :class:`CorpusConfig`
     (``seed`` sets both); missing keys keep the defaults.
     """
-    import yaml
-
-    path = _PROFILES_DIR / f"{profile}.yaml"
-    if not path.is_file():
-        known = sorted(p.stem for p in _PROFILES_DIR.glob("*.yaml"))
-        raise ValueError(f"unknown profile {profile!r}; available: {known}")
-    section = dict((yaml.safe_load(path.read_text()) or {}).get("prior") or {})
+    section = profile_section(profile, "prior")
     train_keys = {f.name for f in fields(PriorTrainConfig)}
     corpus_keys = {f.name for f in fields(CorpusConfig)}
     unknown = set(section) - train_keys - corpus_keys
     if unknown:
-        raise ValueError(f"{path}: unknown keys in `prior:`: {sorted(unknown)}")
+        raise ValueError(f"{profile_path(profile)}: unknown keys in `prior:`: {sorted(unknown)}")
     train = PriorTrainConfig(**{k: v for k, v in section.items() if k in train_keys})
     corpus = CorpusConfig(**{k: v for k, v in section.items() if k in corpus_keys})
     return train, corpus

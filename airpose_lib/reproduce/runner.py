@@ -1,8 +1,8 @@
 """Run the kit's notebooks with a profile's parameters and collect their figures.
 
 The catalog (``catalog.yaml``) lists the notebooks in order with the figures each must write;
-a profile (``profiles/<name>.yaml``) is the one place where sizes live (render size, dataset
-size, epochs ...). For every catalogued notebook the runner
+a profile (``airpose_lib/profiles/<name>.yaml``, read through :mod:`airpose_lib.profiles`) is the
+one place where sizes live (render size, dataset size, epochs ...). For every catalogued notebook the runner
 
 1. checks that it has a cell tagged ``parameters`` that declares ``output_dir`` and every
    parameter the profile sets for it (so a typo in a profile fails before anything runs);
@@ -36,6 +36,8 @@ import nbformat
 import yaml
 
 from airpose_lib.paths import figures_root, runs_root
+from airpose_lib.profiles import PROFILES_DIR, ProfileError, profile_path, read_profile
+from airpose_lib.profiles import profile_names as list_profiles
 
 __all__ = [
     "CATALOG_PATH",
@@ -57,8 +59,6 @@ __all__ = [
 _HERE = Path(__file__).resolve().parent
 #: Ordered list of notebooks and the figures each must produce.
 CATALOG_PATH = _HERE / "catalog.yaml"
-#: Folder of ``<profile>.yaml`` files.
-PROFILES_DIR = _HERE / "profiles"
 #: The checkout this package lives in (notebooks/, runs/ and figures/ sit at its root).
 REPO_ROOT = _HERE.parents[1]
 NOTEBOOKS_DIR = REPO_ROOT / "notebooks"
@@ -188,23 +188,16 @@ def load_catalog(path: Path = CATALOG_PATH) -> list[CatalogEntry]:
     return entries
 
 
-def list_profiles(profiles_dir: Path = PROFILES_DIR) -> list[str]:
-    """Names of the available profiles."""
-    return sorted(p.stem for p in Path(profiles_dir).glob("*.yaml"))
-
-
 def load_profile(profile: str | Path, profiles_dir: Path = PROFILES_DIR) -> dict:
     """A profile as ``{"name", "description", "cell_timeout_s", "notebooks": {name: params}}``.
 
     ``profile`` is a profile name or a path to a YAML file of the same format.
     """
-    path = Path(profile)
-    if path.suffix not in (".yaml", ".yml"):
-        path = Path(profiles_dir) / f"{profile}.yaml"
-    if not path.is_file():
-        raise ReproductionError(f"unknown profile {str(profile)!r}; available: "
-                                f"{', '.join(list_profiles(profiles_dir))}")
-    raw = yaml.safe_load(path.read_text()) or {}
+    try:
+        path = profile_path(profile, profiles_dir)
+        raw = read_profile(path)
+    except ProfileError as e:  # the runner reports every configuration error as its own
+        raise ReproductionError(str(e)) from None
     notebooks = raw.get("notebooks") or {}
     if not isinstance(notebooks, dict) or not all(isinstance(v, dict) or v is None
                                                   for v in notebooks.values()):

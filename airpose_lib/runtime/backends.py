@@ -27,8 +27,7 @@ from typing import Protocol, runtime_checkable
 import numpy as np
 
 from airpose_lib.errors import reading
-
-from .wire import MESSAGE_VALUES
+from airpose_lib.model.message import MESSAGE_DIM
 
 __all__ = [
     "ONNX_PRECISIONS",
@@ -103,11 +102,11 @@ class FakeStageModel:
         self.num_stages = int(num_stages)
         self.message_dtype = np.dtype(message_dtype)
         self.compute_s = float(compute_s)
-        self._A = g.normal(scale=0.5, size=(MESSAGE_VALUES, 9))
-        self._B = g.normal(scale=0.5 / np.sqrt(MESSAGE_VALUES), size=(MESSAGE_VALUES, MESSAGE_VALUES))
-        self._C = g.normal(scale=0.5 / np.sqrt(MESSAGE_VALUES), size=(MESSAGE_VALUES, MESSAGE_VALUES))
+        self._A = g.normal(scale=0.5, size=(MESSAGE_DIM, 9))
+        self._B = g.normal(scale=0.5 / np.sqrt(MESSAGE_DIM), size=(MESSAGE_DIM, MESSAGE_DIM))
+        self._C = g.normal(scale=0.5 / np.sqrt(MESSAGE_DIM), size=(MESSAGE_DIM, MESSAGE_DIM))
         self._D = g.normal(scale=0.3, size=(9, 9))
-        self._mean = np.tanh(g.normal(size=MESSAGE_VALUES)) * 0.1
+        self._mean = np.tanh(g.normal(size=MESSAGE_DIM)) * 0.1
         self._k = 0
 
     def mean_message(self) -> np.ndarray:
@@ -135,7 +134,7 @@ class FakeStageModel:
             raise ValueError(f"expected stage {self._k + 1} (of {self.num_stages}), got {k}")
         if len(other_messages):
             # float32 first, as the real DroneNode: float16 messages are widened before fusion.
-            other = np.stack([to_numpy(m).astype(np.float32).astype(np.float64).reshape(MESSAGE_VALUES)
+            other = np.stack([to_numpy(m).astype(np.float32).astype(np.float64).reshape(MESSAGE_DIM)
                               for m in other_messages]).mean(0)
         else:
             other = self._mean
@@ -199,23 +198,24 @@ _CKPT_FIX = "give another --checkpoint (e.g. the newest checkpoints/step_*.pt of
 
 
 def checkpoint_settings(path: str | Path) -> dict:
-    """Network settings stored in a training checkpoint (``airpose_lib.train``'s ``config``):
-    ``variant``, ``backbone``, ``model`` (extra ``build_model`` kwargs) and ``input_size`` (the
-    crop size, :func:`airpose_lib.finetune.network.checkpoint_input_size`) when present; empty for
-    a bare ``state_dict``."""
+    """Network settings of a training or fine-tuning checkpoint (its network record,
+    :func:`airpose_lib.model.record.read_network`): ``variant``, ``backbone``, ``model`` (extra
+    ``build_model`` kwargs) and ``input_size`` (the crop size) when known; empty for a bare
+    ``state_dict``."""
     import torch
 
     with reading(path, "a model checkpoint (a state_dict or a checkpoint of `airpose train`)", _CKPT_FIX):
         state = torch.load(path, map_location="cpu", weights_only=True)
-    cfg = state.get("config") if isinstance(state, dict) else None
-    if not isinstance(cfg, dict):
+    if not isinstance(state, dict) or not isinstance(state.get("config"), dict):
         return {}
-    from airpose_lib.finetune.network import checkpoint_input_size
+    # lazy: only a drone with a checkpoint needs the data readers (a drone's start-up stays short)
+    from airpose_lib.data.training_input import training_input
+    from airpose_lib.model.record import read_network
 
-    out = {k: cfg[k] for k in ("variant", "backbone", "model") if cfg.get(k) is not None}
-    size = checkpoint_input_size(state)  # also fine-tuned checkpoints and manifests of the data
-    if size:
-        out["input_size"] = int(size)
+    record = read_network(state, legacy=training_input)  # old checkpoints: from their data
+    out = {"variant": record.variant, "backbone": record.backbone, "model": record.model}
+    if record.input_size:
+        out["input_size"] = int(record.input_size)
     return out
 
 

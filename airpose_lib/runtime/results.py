@@ -17,12 +17,12 @@ and ``eval`` read it like offline predictions; :func:`merge_views` joins the dro
 from __future__ import annotations
 
 import json
-import os
-import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+
+from airpose_lib.atomic import atomic_path
 
 from .source import network_camera
 
@@ -75,18 +75,6 @@ def fallback_flag(stage: int) -> int:
 
 def describe_flags(flags: int) -> list[str]:
     return [name for name, bit in FLAGS.items() if flags & bit]
-
-
-def _atomic_write(path: Path, write) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    os.close(fd)
-    try:
-        write(tmp)
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
 
 
 def _jsonable(x):
@@ -216,7 +204,8 @@ def write_npz(jsonl: str | Path, npz: str | Path) -> Path:
     if summary is not None:
         arrays["summary_json"] = np.array(json.dumps(summary))
     npz = Path(npz)
-    _atomic_write(npz, lambda tmp: np.savez(open(tmp, "wb"), **arrays))
+    with atomic_path(npz) as tmp, open(tmp, "wb") as fh:
+        np.savez(fh, **arrays)
     return npz
 
 

@@ -266,7 +266,7 @@ def person_box(keypoints: np.ndarray | None, image_size: tuple[int, int], min_co
 def network_camera() -> np.ndarray:
     """``(3, 3)`` intrinsics of the camera every kit and official network is trained with: the
     still-frame data's (``data.scene.SceneConfig``: f = 1475 px, 1920x1080, principal point at
-    the image centre). A network trained otherwise records its own (``finetune.network``)."""
+    the image centre). A checkpoint records its own (``model.record``, ``camera_K``)."""
     from airpose_lib.data.scene import SceneConfig
 
     return SceneConfig().K
@@ -287,15 +287,15 @@ def crop_input(image: np.ndarray, bbox: np.ndarray, K: np.ndarray, input_size: i
         ``crop (1, 3, S, S)`` float32 (RGB/255, ImageNet mean/std) and ``P (1, 3)`` float32, both
         formed in the virtual camera ``K_net`` (``geometry.virtual_crop``; convert a weak camera
         to a translation with ``K_net``). The box is resized keeping its aspect ratio into the
-        centre of the S x S square and everything outside the box is black.
+        centre of the S x S square and everything outside the box is black, by the rule of the
+        training crops (``geometry.pad_outside_box``): the same box gives the same array.
 
     Raises:
         ValueError: the box is empty or entirely outside the image (the crop would be black).
     """
-    import cv2
-    import torch
+    import torch  # lazy: a drone's start-up imports this module and must stay free of torch
 
-    from airpose_lib.geometry import virtual_crop
+    from airpose_lib.geometry import crop_from_image, virtual_box, virtual_crop
 
     H, W = image.shape[:2]
     x0, y0, x1, y1 = (float(v) for v in np.asarray(bbox, np.float64).reshape(4))
@@ -303,19 +303,11 @@ def crop_input(image: np.ndarray, bbox: np.ndarray, K: np.ndarray, input_size: i
         raise ValueError(f"person box [{x0:.1f}, {y0:.1f}, {x1:.1f}, {y1:.1f}] does not overlap the "
                          f"{W}x{H} image (or is empty); check the detections or the box margin")
     box_t = torch.as_tensor(np.asarray(bbox, np.float64))
-    K_net = network_camera() if K_net is None else K_net
-    A, P = virtual_crop(box_t, torch.as_tensor(np.asarray(K, np.float64)),
-                        torch.as_tensor(np.asarray(K_net, np.float64)), input_size)
-    A, P = A.numpy(), P.numpy()
-    crop = cv2.warpAffine(image, A[:2], (input_size, input_size), flags=cv2.INTER_LINEAR,
-                          borderMode=cv2.BORDER_CONSTANT, borderValue=0)
-    # Black outside the box itself (the paper pads the resized box; warpAffine would show the
-    # surroundings of a non-square box).
-    x0, y0 = A[:2, :2] @ np.asarray(bbox[:2], np.float64) + A[:2, 2]
-    x1, y1 = A[:2, :2] @ np.asarray(bbox[2:], np.float64) + A[:2, 2]
-    c0, r0 = max(int(np.floor(x0 + 0.5)), 0), max(int(np.floor(y0 + 0.5)), 0)
-    c1, r1 = min(int(np.floor(x1 + 0.5)) + 1, input_size), min(int(np.floor(y1 + 0.5)) + 1, input_size)
-    out = np.zeros_like(crop)
-    out[r0:r1, c0:c1] = crop[r0:r1, c0:c1]
+    K_t = torch.as_tensor(np.asarray(K, np.float64))
+    K_net_t = torch.as_tensor(np.asarray(network_camera() if K_net is None else K_net, np.float64))
+    A, P = virtual_crop(box_t, K_t, K_net_t, input_size)
+    # The box is blacked out where the virtual camera sees it, by the training crops' rule.
+    box_v, _ = virtual_box(box_t, K_t, K_net_t)
+    out = crop_from_image(image, A.numpy(), box_v.numpy(), input_size)
     x = (out.astype(np.float32) / 255.0 - IMAGENET_MEAN) / IMAGENET_STD
-    return np.ascontiguousarray(x.transpose(2, 0, 1)[None]), P.astype(np.float32)[None]
+    return np.ascontiguousarray(x.transpose(2, 0, 1)[None]), P.numpy().astype(np.float32)[None]

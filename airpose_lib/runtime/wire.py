@@ -18,8 +18,8 @@ A packet is a fixed 40-byte little-endian header followed by the payload::
     28      8     send time in the sender's clock (s, float64; for link latency)
     36      4     CRC-32 of bytes 0..35 (with this field zeroed) and of the payload
 
-A DATA payload is the paper's message: 126 body-pose numbers (21 joints x 6D) and 10 betas, 136
-values = 544 bytes as float32 (the paper) or 272 bytes as float16. HELLO, BYE and SKIP have no
+A DATA payload is the paper's message (``model.message.MESSAGE_DIM``): 126 body-pose numbers
+(21 joints x 6D) and 10 betas, 136 values = 544 bytes as float32 (the paper) or 272 bytes as float16. HELLO, BYE and SKIP have no
 payload.
 Anything that does not parse (short, wrong magic, other version, bad CRC, payload size not
 matching kind and dtype, non-finite values) raises :class:`WireError`; the node logs and drops it.
@@ -32,12 +32,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from airpose_lib.model.message import MESSAGE_DIM  # torch-free: sizes the DATA payload
+
 __all__ = [
     "MAGIC",
     "WIRE_VERSION",
     "HEADER",
     "HEADER_BYTES",
-    "MESSAGE_VALUES",
     "DATA",
     "HELLO",
     "BYE",
@@ -54,7 +55,6 @@ MAGIC = b"APZ\x00"
 WIRE_VERSION = 1
 HEADER = struct.Struct("<4sBBBBBBHIIddI")
 HEADER_BYTES = HEADER.size  # 40
-MESSAGE_VALUES = 136  # 126 theta6d + 10 beta
 
 DATA, HELLO, BYE, SKIP = 1, 2, 3, 4
 _KINDS = {DATA: "data", HELLO: "hello", BYE: "bye", SKIP: "skip"}
@@ -101,7 +101,7 @@ def packet_nbytes(kind: int = DATA, dtype="float32") -> int:
     """Bytes of one packet: 40 + 544 (float32 DATA), 40 + 272 (float16 DATA), 40 otherwise."""
     if kind != DATA:
         return HEADER_BYTES
-    return HEADER_BYTES + MESSAGE_VALUES * DTYPES[_dtype_code(dtype)].itemsize
+    return HEADER_BYTES + MESSAGE_DIM * DTYPES[_dtype_code(dtype)].itemsize
 
 
 def encode_packet(kind: int, drone: int, *, stage: int = 0, frame_index: int = 0, slot: int = 0, stamp: float = 0.0,
@@ -126,8 +126,8 @@ def encode_packet(kind: int, drone: int, *, stage: int = 0, frame_index: int = 0
         if payload is None:
             raise ValueError("a DATA packet needs a payload")
         body = np.ascontiguousarray(np.asarray(payload).reshape(-1), dtype=DTYPES[code])
-        if body.size != MESSAGE_VALUES:
-            raise ValueError(f"a message has {MESSAGE_VALUES} values, got {body.size}")
+        if body.size != MESSAGE_DIM:
+            raise ValueError(f"a message has {MESSAGE_DIM} values, got {body.size}")
         body = body.tobytes()
     elif kind in (HELLO, BYE, SKIP):
         body = b""
@@ -161,12 +161,12 @@ def decode_packet(buf: bytes) -> Packet:
     if zlib.crc32(buf[HEADER_BYTES:], zlib.crc32(head0)) != crc:
         raise WireError("crc", "CRC mismatch")
     if kind == DATA:
-        expected = MESSAGE_VALUES * DTYPES[code].itemsize
+        expected = MESSAGE_DIM * DTYPES[code].itemsize
         if n != expected:
             raise WireError("payload_size", f"DATA payload of {n} bytes, expected {expected} for {DTYPES[code].name}")
         if not 1 <= stage <= 255:
             raise WireError("stage", "DATA packet without a stage")
-        payload = np.frombuffer(buf, dtype=DTYPES[code], offset=HEADER_BYTES, count=MESSAGE_VALUES)
+        payload = np.frombuffer(buf, dtype=DTYPES[code], offset=HEADER_BYTES, count=MESSAGE_DIM)
         if not np.isfinite(payload).all():
             raise WireError("non_finite", "non-finite values in the payload")
     else:

@@ -1,6 +1,6 @@
 """Training configuration: defaults, the profile's ``train:`` section, per-variant overrides.
 
-A profile file (``airpose_lib/reproduce/profiles/<name>.yaml``, the one place sizes live) holds
+A profile (``airpose_lib/profiles/<name>.yaml``, the one place sizes live) holds
 
 .. code-block:: yaml
 
@@ -12,7 +12,7 @@ A profile file (``airpose_lib/reproduce/profiles/<name>.yaml``, the one place si
       variants:             # per-variant overrides of the fields above
         baseline: {lr: 1.0e-4}
 
-The file is read as YAML data; ``train`` imports nothing from ``reproduce``.
+The file is read by :mod:`airpose_lib.profiles`; ``train`` imports nothing from ``reproduce``.
 """
 
 from __future__ import annotations
@@ -22,12 +22,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-import yaml
+from airpose_lib.profiles import profile_section
 
-__all__ = ["TrainConfig", "PROFILES_DIR", "profile_path", "load_train_config"]
-
-#: Folder of the profile files (read as data, see the module docstring).
-PROFILES_DIR = Path(__file__).resolve().parents[1] / "reproduce" / "profiles"
+__all__ = ["TrainConfig", "load_train_config"]
 
 
 @dataclass
@@ -131,29 +128,17 @@ class TrainConfig:
                    "task", "pretrained")
 
 
-def profile_path(profile: str | Path) -> Path:
-    """Path of a profile file from its name (``smoke``) or a path to a YAML file."""
-    p = Path(profile)
-    if p.suffix in (".yaml", ".yml"):
-        return p
-    return PROFILES_DIR / f"{profile}.yaml"
-
-
 def load_train_config(profile: str | Path | None, variant: str, seed: int | None = None,
                       section: str = "train", **overrides: Any) -> TrainConfig:
     """The profile's ``train`` section (or ``section``), then its ``variants[variant]`` entry, then
     ``seed`` and ``overrides`` (TrainConfig fields), on top of :class:`TrainConfig`'s defaults.
 
     ``profile=None`` uses the defaults only. Unknown keys raise ``ValueError`` (typos in a
-    profile fail before anything runs).
+    profile fail before anything runs); an unknown profile raises ``ProfileError`` (a ``ValueError``).
     """
     values: dict[str, Any] = {}
     if profile is not None:
-        path = profile_path(profile)
-        if not path.is_file():
-            raise ValueError(f"profile file not found: {path}")
-        raw = yaml.safe_load(path.read_text()) or {}
-        settings = dict(raw.get(section) or {})
+        settings = profile_section(profile, section)
         per_variant = settings.pop("variants", None) or {}
         values.update(settings)
         values.update(per_variant.get(variant) or {})

@@ -19,7 +19,8 @@ import numpy as np
 import torch
 from torch.utils.data import DataLoader, Dataset
 
-from airpose_lib.body.cache import atomic_path, cache_dir, file_lock
+from airpose_lib.atomic import atomic_path
+from airpose_lib.body.cache import cache_dir, file_lock
 from airpose_lib.data.dataset import PER_VIEW_KEYS, StillFrameDataset, swap_views
 from airpose_lib.data.manifest import load_manifest
 from airpose_lib.data.shards import sha256_file

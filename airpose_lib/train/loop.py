@@ -33,13 +33,16 @@ import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import torch
 import torch.distributed as dist
 from torch import nn
 from torch.utils.data import DataLoader
 
+from airpose_lib.data.training_input import training_input
 from airpose_lib.engine import EngineRun, Schedule, TrainingTask, process_rank, run_engine, run_folder
+from airpose_lib.model.record import NETWORK_KEY, network_record
 
 from .config import TrainConfig, load_train_config
 from .sampling import ResumableBatchSampler, SeededDataset, _mix, seed_everything, worker_init_fn
@@ -58,6 +61,7 @@ __all__ = [
     "pretrain_forward_loss",
     "TASK_FORWARD",
     "StillFrameTask",
+    "run_network_entry",
     "validation_loss",
 ]
 
@@ -210,6 +214,25 @@ def pretrain_forward_loss(model: nn.Module, loss_fn: nn.Module, batch: Mapping[s
 #: The step of each task (SPIN's ``train_step`` per task, one engine around them).
 TASK_FORWARD: dict[str, Callable] = {"supervised": forward_loss, "regressor": regressor_forward_loss,
                                      "pretrain": pretrain_forward_loss}
+
+
+def run_network_entry(config: Mapping[str, Any], dataset: Any) -> dict[str, Any]:
+    """``{"network": record}`` for the checkpoints of a run (``{}`` for task ``pretrain``).
+
+    Args:
+        config: the run's ``TrainConfig.to_dict()``, its data resolved (``prepare_data``).
+        dataset: the training split; its ``crop_size`` is the input size (the config's data,
+            manifest or profile when it has none). The camera is the data's
+            (:func:`airpose_lib.data.training_input.training_input`).
+    """
+    if config.get("task") == "pretrain":
+        return {}
+    size, K = training_input(config)
+    size = getattr(dataset, "crop_size", None) or size
+    if size is None:
+        return {}  # a custom dataset nobody can size: readers ask for input_size, as before
+    return {NETWORK_KEY: network_record(config["variant"], config["backbone"], config.get("model") or {},
+                                        int(size), K)}
 
 
 # -- results --------------------------------------------------------------------------------------
@@ -391,9 +414,10 @@ class StillFrameTask(TrainingTask):
     """
 
     def __init__(self, cfg: TrainConfig, model: nn.Module, loss_fn: nn.Module, train_ds, val_ds,
-                 device: torch.device, rank: int, world: int) -> None:
+                 device: torch.device, rank: int, world: int, network: Mapping | None = None) -> None:
         self.cfg, self.model, self.loss_fn, self.device = cfg, model, loss_fn, device
         self.train_ds, self.val_ds, self.rank, self.world = train_ds, val_ds, rank, world
+        self.network = dict(network or {})  # the checkpoints' network record (run_network_entry)
         self.optimizer = torch.optim.Adam([p for p in model.parameters() if p.requires_grad], lr=cfg.lr,
                                           amsgrad=cfg.amsgrad, weight_decay=cfg.weight_decay)
         self.net: nn.Module = model  # the DDP wrapper once begun
@@ -440,7 +464,7 @@ class StillFrameTask(TrainingTask):
         return result
 
     def checkpoint_state(self) -> dict:
-        return {"config": self.cfg.to_dict(), "world_size": self.world}
+        return {"config": self.cfg.to_dict(), "world_size": self.world, **self.network}
 
     def config(self) -> dict:
         return self.cfg.to_dict()
@@ -470,7 +494,8 @@ def _run_training(cfg: TrainConfig, out_dir: Path, resume: bool, model_factory: 
     loss_fn = loss_factory(cfg).to(device)
     train_ds = dataset_factory(cfg, cfg.train_split)
     val_ds = dataset_factory(cfg, cfg.val_split) if cfg.val_every is not None and rank == 0 else None
-    task = StillFrameTask(cfg, model, loss_fn, train_ds, val_ds, device, rank, world)
+    network = run_network_entry(cfg.to_dict(), train_ds) if rank == 0 else {}
+    task = StillFrameTask(cfg, model, loss_fn, train_ds, val_ds, device, rank, world, network)
     schedule = Schedule(steps=cfg.steps, log_every=cfg.log_every, checkpoint_every=cfg.checkpoint_every,
                         keep_checkpoints=cfg.keep_checkpoints, val_every=cfg.val_every, grad_clip=cfg.grad_clip,
                         stop_at=stop_at, what=f"train {cfg.variant}", progress=cfg.progress)

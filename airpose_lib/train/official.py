@@ -7,11 +7,21 @@ release's betas are SMPL-X coefficients); see ``data_manifests/``.
 """
 from __future__ import annotations
 
+import hashlib
 from pathlib import Path
+from typing import Any
+
+import torch
+
+from airpose_lib.atomic import atomic_path
+from airpose_lib.engine.checkpoint import FORMAT_VERSION, kit_version
+from airpose_lib.model import AirPoseNet
+from airpose_lib.model.official import backbone_name
 
 from .ablation import VARIANT_LABELS, AblationRun
+from .config import TrainConfig
 
-__all__ = ["OFFICIAL_CHECKPOINT_FOLDERS", "find_official_checkpoint", "official_ablation"]
+__all__ = ["OFFICIAL_CHECKPOINT_FOLDERS", "find_official_checkpoint", "official_ablation", "save_kit_checkpoint"]
 
 #: Kit variant -> folder of the official synthetic-data checkpoint (data_manifests/official_checkpoints.yaml).
 OFFICIAL_CHECKPOINT_FOLDERS = {
@@ -63,3 +73,29 @@ def official_ablation(checkpoints_root: str | Path, data_root: str | Path, varia
                           body=body)
         runs[variant, 0] = AblationRun(variant, 0, ckpt, tables)
     return runs
+
+
+def save_kit_checkpoint(model: AirPoseNet, path: str | Path, *, source: str | Path | None = None,
+                        **config: Any) -> Path:
+    """Write ``model`` (e.g. converted official weights) as a kit checkpoint (atomically) that
+    :func:`~.evaluate.load_trained_model` and :func:`~.checkpoint.load_checkpoint` read.
+
+    It holds ``model``, ``step`` 0 and a ``config`` (``TrainConfig`` with the model's variant and
+    backbone, ``steps=0``, plus ``config`` overrides), an empty optimiser state and no RNG state:
+    weights for evaluation or fine-tuning, not a run to resume. ``source`` (e.g. the official
+    file) is recorded with its SHA-256. No network record: the crop size and camera come from
+    ``config``'s data, as for checkpoints from before the record (:mod:`airpose_lib.model.record`).
+    """
+    cfg = TrainConfig(**{"variant": model.variant, "backbone": backbone_name(model), "steps": 0,
+                         "model": {"num_iterations": model.num_iterations}, **config})
+    state = {"format_version": FORMAT_VERSION, "kit_version": kit_version(),
+             "model": {k: v.detach().cpu().contiguous().clone() for k, v in model.state_dict().items()},
+             "optimizer": {}, "rng": [], "step": 0, "epoch": 0, "batch_in_epoch": 0, "world_size": 1,
+             "config": cfg.to_dict()}
+    if source is not None:
+        src = Path(source)
+        state["source"] = {"file": str(src), "sha256": hashlib.sha256(src.read_bytes()).hexdigest()}
+    path = Path(path)
+    with atomic_path(path) as tmp:
+        torch.save(state, tmp)
+    return path

@@ -25,7 +25,8 @@ from pathlib import Path
 import torch
 from torch.utils.data import DataLoader
 
-from airpose_lib.body.cache import atomic_path, cache_dir, file_lock
+from airpose_lib.atomic import atomic_path
+from airpose_lib.body.cache import cache_dir, file_lock
 from airpose_lib.data.dataset import StillFrameDataset
 from airpose_lib.data.shards import sha256_file
 from airpose_lib.engine.checkpoint import kit_version, load_checkpoint

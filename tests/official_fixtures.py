@@ -1,4 +1,4 @@
-"""Tiny datasets in the official AirPose formats, made from the kit's own people and cameras.
+"""Test helpers: tiny datasets in the official AirPose formats, made from the kit's own people and cameras.
 
 They let the loaders of :mod:`~airpose_lib.data.official_synthetic` and
 :mod:`~airpose_lib.data.official_real` be tested without the authors' data (the formats are
@@ -31,10 +31,11 @@ from pathlib import Path
 
 import numpy as np
 
-from airpose_lib.body.cache import atomic_path
-
-from .official_synthetic import OFFICIAL_CROP_MARGIN, stored_image_box, subject_of
-from .scene import PersonSample, SceneConfig, body_world_pose, sample_cameras, sample_person
+from airpose_lib.atomic import atomic_path
+from airpose_lib.data.official_layout import OfficialLayoutWriter, write_camera_calib
+from airpose_lib.data.official_synthetic import OFFICIAL_CROP_MARGIN, stored_image_box, subject_of
+from airpose_lib.data.poses import sample_body_pose
+from airpose_lib.data.scene import PersonSample, SceneConfig, body_world_pose, sample_cameras, sample_person
 
 __all__ = [
     "AUTHOR_ROOT",
@@ -147,7 +148,6 @@ def write_official_synthetic_fixture(root: Path | str, n_subjects: int = 3, n_po
 
     from airpose_lib.body import load_body_model
 
-    from .poses import sample_body_pose
 
     root = Path(root)
     W, H = image_size
@@ -242,7 +242,6 @@ def write_official_real_fixture(root: Path | str, n_frames: int = 4, *, frames: 
         ``alphapose (F, 2, 18, 3)`` (zeros where left out), ``rvec``, ``tvec`` ``(F, 2, 3)`` and
         ``marker_valid (F, 2)``.
     """
-    from .official_layout import OfficialLayoutWriter, write_camera_calib
 
     root = Path(root)
     frames = list(range(first_frame, first_frame + n_frames)) if frames is None else [int(i) for i in frames]

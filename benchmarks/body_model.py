@@ -1,4 +1,7 @@
-"""Body-model benchmark: cold/warm build, full forward at batch 1 and 64, joints-only at 2,000.
+"""Body-model benchmark: cold/warm build, smplx's full forward at batch 1 and 64, and the kit's
+``body.forward.BodyForward`` paths: joints only at 2,000 (data, evaluation), full mesh at 64, the
+training loss's subsampled mesh and joints (forward + backward at 64) and fitting's keypoints
+(forward + backward at 1,000 frames, one shared beta).
 
     python benchmarks/body_model.py            # everything (cold build takes ~1-2 min)
     python benchmarks/body_model.py --no-cold  # skip the cold build
@@ -43,8 +46,8 @@ def main() -> None:
     args = parser.parse_args()
     torch.set_num_threads(args.threads)
 
-    from airpose_lib.body import build_open_model, load_body_model
-    from airpose_lib.body.fast import JointsOnly
+    from airpose_lib.body import BODY_25_FROM_SMPLX, COCO18_FROM_SMPLX, BodyForward, build_open_model, load_body_model
+    from airpose_lib.body.forward import axis_angle_rotations
 
     rows = []
     env = dict(os.environ, OMP_NUM_THREADS=str(args.threads))
@@ -70,20 +73,42 @@ def main() -> None:
 
     batch, chunk = 2000, 250
     model = load_body_model(batch_size=chunk)
-    fast = JointsOnly(model)
+    fast = BodyForward(model, range(76), vertices=None)
     kw = dict(betas=torch.randn(batch, 10), body_pose=0.3 * torch.randn(batch, 63),
-              global_orient=torch.randn(batch, 3), transl=torch.randn(batch, 3))
+              global_orient=torch.zeros(batch, 3), transl=torch.zeros(batch, 3))
+    theta = axis_angle_rotations(kw["body_pose"])
     with torch.no_grad():
-        t_fast = _median_time(lambda: fast(**kw), args.repeat)
+        t_fast = _median_time(lambda: fast(theta, kw["betas"]), args.repeat)
 
         def full():  # chunked: a single batch of 2,000 meshes needs several GB
             for s in range(0, batch, chunk):
                 model(**{k: v[s : s + chunk] for k, v in kw.items()})
 
         t_full = _median_time(full, max(1, args.repeat // 2))
+        mesh = BodyForward(model, range(76), "all")
+        t_mesh = _median_time(lambda: mesh(theta[:64], kw["betas"][:64]), args.repeat)
     rows.append(("smplx forward (full mesh, chunks of 250)", str(batch), f"{t_full * 1e3:.0f} ms"))
-    rows.append(("joints-only fast path (76 joints)", str(batch), f"{t_fast * 1e3:.0f} ms"))
-    rows.append(("speed-up of the fast path", str(batch), f"{t_full / t_fast:.0f}x"))
+    rows.append(("BodyForward joints only (76 joints)", str(batch), f"{t_fast * 1e3:.0f} ms"))
+    rows.append(("speed-up of joints only", str(batch), f"{t_full / t_fast:.0f}x"))
+    rows.append(("BodyForward full mesh + 76 joints", "64", f"{t_mesh * 1e3:.1f} ms"))
+
+    def fwd_bwd(body, th, beta, vertices=True):
+        th = th.clone().requires_grad_()
+        j, v = body(th, beta, vertices=vertices)
+        (j.sum() + (v.sum() if v is not None else 0)).backward()
+
+    g = torch.Generator().manual_seed(0)
+    ids = torch.randperm(model.v_template.shape[0], generator=g)[:1000].sort().values
+    loss_sub, loss_full = BodyForward(model, vertices=ids), BodyForward(model)
+    rows.append(("loss: 22 joints + 1,000 vertices, fwd+bwd", "64",
+                 f"{_median_time(lambda: fwd_bwd(loss_sub, theta[:64], kw['betas'][:64]), args.repeat) * 1e3:.1f} ms"))
+    rows.append(("loss: 22 joints + full mesh, fwd+bwd", "64",
+                 f"{_median_time(lambda: fwd_bwd(loss_full, theta[:64], kw['betas'][:64]), args.repeat) * 1e3:.1f} ms"))
+    rows.append(("loss: 22 joints only, fwd+bwd", "64",
+                 f"{_median_time(lambda: fwd_bwd(loss_full, theta[:64], kw['betas'][:64], False), args.repeat) * 1e3:.1f} ms"))
+    kp = BodyForward(model, sorted(i for i in set(BODY_25_FROM_SMPLX) | set(COCO18_FROM_SMPLX) if i >= 0), None)
+    rows.append(("fitting: BODY_25 + COCO-18 keypoints, fwd+bwd", "1000",
+                 f"{_median_time(lambda: fwd_bwd(kp, theta[:1000], kw['betas'][:1]), args.repeat) * 1e3:.0f} ms"))
 
     print(f"\nBody model benchmark ({args.threads} threads, torch {torch.__version__}, "
           f"{os.cpu_count()} cores)\n")

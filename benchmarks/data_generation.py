@@ -23,7 +23,8 @@ import time
 
 def _worker(crop: int, samples: int, seed: int, ready, start, results) -> None:
     os.environ.setdefault("LP_NUM_THREADS", "1")
-    from airpose_lib.data.generate import GenerationConfig, StillFrameGenerator, _limit_threads
+    from airpose_lib.data.still_config import GenerationConfig
+    from airpose_lib.data.still_frames import StillFrameGenerator, _limit_threads
 
     _limit_threads()
     cfg = GenerationConfig(num_samples=samples + 4, shard_size=samples, crop_size=crop, seed=seed)

@@ -67,9 +67,7 @@ def synthetic_sequence(body, F: int, seed: int = 0, noise_px: float = 2.0):
     phi = R_cw @ R_wb[:, None]
     tau = (R_cw @ t_wb[:, None, :, None]).squeeze(-1) + t_cw
     K = torch.tensor([[1475.0, 0, 960], [0, 1475.0, 540], [0, 0, 1]], dtype=torch.float64).expand(2, 3, 3)
-    rot = torch.eye(3, dtype=torch.float64).expand(F, 55, 3, 3).clone()
-    rot[:, 1:22] = theta
-    J0 = torch.cat([body.forward_rotmat(rot[a:a + 500], beta[None]) for a in range(0, F, 500)])
+    J0 = torch.cat([body(theta[a:a + 500], beta[None])[0] for a in range(0, F, 500)])
     uv = project_points(J0[:, None] @ phi.transpose(-1, -2) + tau[:, :, None], K[None])
     g = torch.Generator().manual_seed(seed)
     kps = {}
@@ -93,10 +91,8 @@ def errors(body, theta, beta, phi, tau, gt) -> tuple[float, float]:
     from airpose_lib.geometry import relative_camera_pose
 
     F = theta.shape[0]
-    rot = torch.eye(3, dtype=torch.float64).expand(F, 55, 3, 3).clone()
-    rot[:, 1:22] = theta.double()
     betas = beta.double().reshape(1, -1)
-    J = torch.cat([body.forward_rotmat(rot[a:a + 500], betas) for a in range(0, F, 500)])
+    J = torch.cat([body(theta[a:a + 500].double(), betas)[0] for a in range(0, F, 500)])
     J, Jg = J[:, :22], gt["J0"][:, :22]
     mpjpe = ((J - J[:, :1]) - (Jg - Jg[:, :1])).norm(dim=-1).mean().item() * 1000
     _, t12 = relative_camera_pose(phi[:, 0].double(), tau[:, 0].double(), phi[:, 1].double(), tau[:, 1].double())
@@ -112,8 +108,7 @@ def main() -> None:
     parser.add_argument("--progress", action="store_true", help="tqdm bar per run")
     args = parser.parse_args()
 
-    from airpose_lib.body import load_body_model
-    from airpose_lib.body.fast import JointsOnly
+    from airpose_lib.body import BodyForward, load_body_model
     from airpose_lib.fitting import AirPosePlusConfig, airpose_plus, init_from_views
     from airpose_lib.prior import PriorError, VPoser, load_prior
 
@@ -124,7 +119,8 @@ def main() -> None:
         torch.manual_seed(0)
         prior = VPoser().eval()
         prior_name = "UNTRAINED VPoser (run `airpose prior train`): accuracy columns meaningless"
-    body = JointsOnly(load_body_model("open", dtype=torch.float64))
+    model = load_body_model("open", dtype=torch.float64)
+    body = BodyForward(model, range(76), vertices=None)  # ground truth and errors
     cfg = AirPosePlusConfig(iterations=args.iterations, latent_start=min(100, args.iterations))
     print(f"AirPose+ benchmark: {os.cpu_count()} CPU cores, torch {torch.__version__}; {prior_name}")
     print(f"schedule: {cfg.iterations} iterations, latents from {cfg.latent_start}, Adam lr {cfg.lr}, "
@@ -141,7 +137,7 @@ def main() -> None:
         for threads in args.threads:
             load0 = os.getloadavg()[0]
             t0 = time.perf_counter()
-            res = airpose_plus(kps, K, init, prior=prior, body=body, config=cfg, num_threads=threads,
+            res = airpose_plus(kps, K, init, prior=prior, body=model, config=cfg, num_threads=threads,
                                progress=args.progress)
             wall = time.perf_counter() - t0
             load1 = os.getloadavg()[0]

@@ -32,6 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from airpose_lib.atomic import atomic_path
+from airpose_lib.body.forward import rest_body
 from airpose_lib.data.official_layout import OfficialLayoutWriter, write_camera_calib
 from airpose_lib.data.official_synthetic import OFFICIAL_CROP_MARGIN, stored_image_box, subject_of
 from airpose_lib.data.poses import sample_body_pose
@@ -95,20 +96,6 @@ def draw_discs(image: np.ndarray, uv: np.ndarray, colors: np.ndarray, radius: fl
     return image
 
 
-def _posed_model_frame(model, betas: np.ndarray, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Vertices ``(N, 3)`` and joints ``(J, 3)`` with identity root, zero translation (float64)."""
-    import torch
-
-    dt = model.shapedirs.dtype
-    z = lambda n: torch.zeros(1, n, dtype=dt)  # noqa: E731
-    with torch.no_grad():
-        out = model(betas=torch.as_tensor(betas[None], dtype=dt),
-                    body_pose=torch.as_tensor(theta.reshape(1, 63), dtype=dt),
-                    global_orient=z(3), transl=z(3), jaw_pose=z(3), leye_pose=z(3), reye_pose=z(3),
-                    left_hand_pose=z(45), right_hand_pose=z(45), expression=z(model.num_expression_coeffs))
-    return out.vertices[0].double().numpy(), out.joints[0].double().numpy()
-
-
 def _project(K: np.ndarray, R: np.ndarray, t: np.ndarray, X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Pixels ``(N, 2)`` and depths ``(N,)`` of world points ``X (N, 3)``."""
     xc = X @ R.T + t
@@ -164,7 +151,7 @@ def write_official_synthetic_fixture(root: Path | str, n_subjects: int = 3, n_po
         betas = person.betas.astype(np.float32).astype(np.float64)
         if person.gender not in models:
             models[person.gender] = load_body_model(body_source, person.gender, dtype=torch.float64)
-        v0, j0 = _posed_model_frame(models[person.gender], betas, theta)
+        v0, j0 = (x[0] for x in rest_body(models[person.gender], betas[None], theta[None]))
         for pos in range(n_positions):
             for attempt in range(max_attempts):
                 rng = np.random.default_rng([seed, s, pos, attempt])

@@ -3,9 +3,9 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-import torch
 
 from airpose_lib.body import joint_index
+from airpose_lib.body.forward import rest_body
 from airpose_lib.data.poses import (
     JOINT_LIMITS_DEG,
     POSE_JOINT_NAMES,
@@ -19,15 +19,9 @@ from airpose_lib.data.poses import (
 )
 
 
-@pytest.fixture(scope="module")
-def joints_only(open_model):
-    from airpose_lib.body.fast import JointsOnly
-
-    return JointsOnly(open_model)
-
-
-def _joints(jo, theta: np.ndarray) -> np.ndarray:
-    return jo(body_pose=torch.as_tensor(theta.reshape(-1, 63), dtype=torch.float64)).numpy()
+def _joints(model, theta: np.ndarray) -> np.ndarray:
+    """The 76 joints (B, 76, 3) of the mean body in pose theta."""
+    return rest_body(model, np.zeros((len(theta), 10)), theta, mesh=False)[1]
 
 
 def test_limits_table_is_consistent():
@@ -104,7 +98,7 @@ def _d(J, a, b):
     return J[joint_index(a)] - J[joint_index(b)]
 
 
-def test_parameter_directions(joints_only):
+def test_parameter_directions(open_model):
     """Each parameter moves the limb the anatomical way (model faces +Z, +X = its left, Y up)."""
     deg = np.deg2rad
     cases = compose_pose({
@@ -116,7 +110,7 @@ def test_parameter_directions(joints_only):
         "l_arm_abd": deg(np.array([0, 0, 0, 0, 0, 170, 0])),
         "l_hip_abd": deg(np.array([0, 0, 0, 0, 0, 0, 30])),
     })
-    J = _joints(joints_only, cases)
+    J = _joints(open_model, cases)
     assert _d(J[0], "left_wrist", "left_shoulder")[2] > 0.3  # arm forwards
     assert _d(J[1], "left_wrist", "left_elbow")[2] > 0.15  # forearm forwards
     assert _d(J[2], "right_knee", "right_hip")[2] > 0.3  # thigh forwards
@@ -125,14 +119,14 @@ def test_parameter_directions(joints_only):
     assert _d(J[5], "left_wrist", "left_shoulder")[1] > 0.4  # arm overhead
     assert _d(J[6], "left_knee", "left_hip")[0] > 0.15  # thigh to the subject's left
     # zero parameters: straight legs, hanging arms
-    J0 = _joints(joints_only, compose_pose({}, n=1))[0]
+    J0 = _joints(open_model, compose_pose({}, n=1))[0]
     assert _d(J0, "left_wrist", "left_shoulder")[1] < -0.4
 
 
-def test_wrists_outside_torso(joints_only):
+def test_wrists_outside_torso(open_model):
     """Gross self-penetration check: wrists away from the pelvis-neck axis for >95 % of samples."""
     theta = sample_body_pose(np.random.default_rng(11), 1000)
-    J = _joints(joints_only, theta)
+    J = _joints(open_model, theta)
     a, b = J[:, joint_index("pelvis")], J[:, joint_index("neck")]
     ab = b - a
     for wrist in ("left_wrist", "right_wrist"):

@@ -224,13 +224,13 @@ def test_config_round_trip_and_profiles():
 # -- rendering ------------------------------------------------------------------------------------
 def test_rendered_body_lands_where_K_projects_it(sim2):
     """Non-square pixels and an off-centre principal point (the DJI calibrations) render exactly."""
-    from airpose_lib.data.motions import body_forward
+    from airpose_lib.body.forward import rest_body
     from airpose_lib.data.sequences import SequenceRenderer
 
     gt = sim2.gt
     f = 40
     with SequenceRenderer(sim2, anti_aliasing=False) as r:
-        v0, _ = body_forward(r.model, gt["betas"][None].repeat(2, 0), gt["theta_view"][f])
+        v0, _ = rest_body(r.model, gt["betas"][None].repeat(2, 0), gt["theta_view"][f])
         for v in range(2):
             Vw = v0[v] @ gt["R_wb"][f, v].T + gt["t_wb"][f, v]
             rr = r._renderers[tuple(int(x) for x in gt["image_size"][v])]

@@ -7,10 +7,13 @@ import pytest
 
 from airpose_lib.eval.ablation import ablation_table, per_seed_table
 from airpose_lib.eval.reference import (
+    RECORDING_FILES,
     REFERENCE_FILES,
     compare_to_reference,
+    install_recordings_reference,
     machine_description,
     read_reference_table,
+    recordings_report,
     reference_report,
     side_by_side,
     train_wall_s,
@@ -161,3 +164,26 @@ def test_airpose_reproduce_compares_after_notebook_02_and_writes_only_with_the_f
     assert "wrote" in capsys.readouterr().out and (tmp_path / "results" / "smoke" / "per_seed.csv").is_file()
     assert cli.main(["reproduce", "--only", "02"]) == 0
     assert "0 differ by more than the reference's seed spread" in capsys.readouterr().out
+
+
+def _claims(holds):
+    return pd.DataFrame({"claim": ["pose", "uav2", "uav2"], "sequence": ["person1", "person1", "person1"],
+                         "measure": ["MPJPE m", "t error m", "rot error deg"], "value": [0.05, 1.0, 5.0],
+                         "holds": holds})
+
+
+def test_recordings_reference_installs_and_reports_changed_verdicts(tmp_path):
+    nb = tmp_path / "05_airpose_plus"
+    nb.mkdir()
+    with pytest.raises(FileNotFoundError, match="paper_claims.csv"):
+        install_recordings_reference(nb, "cpu", "cmd", root=tmp_path / "results")
+    _claims([True, True, False]).to_csv(nb / "paper_claims.csv", index=False)
+    for name in RECORDING_FILES:
+        if not (nb / name).exists():
+            (nb / name).write_text("x\n")
+    dst = install_recordings_reference(nb, "cpu", "airpose reproduce --write-reference", root=tmp_path / "results")
+    assert sorted(p.name for p in dst.iterdir()) == sorted([*RECORDING_FILES, "provenance.json"])
+    assert "same verdicts" in recordings_report(nb, "cpu", root=tmp_path / "results")
+    _claims([True, False, False]).to_csv(nb / "paper_claims.csv", index=False)  # one verdict flips
+    msg = recordings_report(nb, "cpu", root=tmp_path / "results")
+    assert msg.startswith("reference: 1 of 3") and "uav2 (person1): True -> False" in msg

@@ -9,11 +9,10 @@ import roma
 import torch
 
 from airpose_lib.body import BODY_25_FROM_SMPLX, COCO18_FROM_SMPLX, load_body_model
-from airpose_lib.body.fast import JointsOnly
+from airpose_lib.body.forward import BodyForward
 from airpose_lib.fitting import (
     AirPosePlusConfig,
     AirPosePlusLoss,
-    KeypointBody,
     airpose_plus,
     fit_sequence,
     fitting_profile,
@@ -38,7 +37,7 @@ def _one_thread():
 
 @pytest.fixture(scope="module")
 def body64(open_model_files):
-    return JointsOnly(load_body_model("open", dtype=torch.float64))
+    return load_body_model("open", dtype=torch.float64)
 
 
 @pytest.fixture(scope="module")
@@ -66,10 +65,7 @@ def _look_at(eye, target):
 
 
 def _world_joints(body, theta, beta):
-    F = theta.shape[0]
-    rot = torch.eye(3, dtype=torch.float64).expand(F, 55, 3, 3).clone()
-    rot[:, 1:22] = theta
-    return body.forward_rotmat(rot, beta.reshape(1, -1))  # (F, 76, 3), identity root
+    return BodyForward(body, range(76), vertices=None)(theta, beta.reshape(1, -1))[0]  # (F, 76, 3), identity root
 
 
 def _project_cv(X, K):
@@ -125,31 +121,6 @@ def _perturbed(gt, seed=1, rot_deg=8.0, theta_deg=10.0):
         theta=gt["theta"][:, None] @ rot(F, 2, 21, deg=theta_deg),
         beta=gt["beta"] + 0.5 * torch.randn(F, 2, 10, generator=g, dtype=torch.float64),
     )
-
-
-# -- kinematics -----------------------------------------------------------------------------------
-@pytest.mark.parametrize("dtype,atol", [(torch.float64, 1e-10), (torch.float32, 2e-6)])
-def test_keypoint_body_equals_joints_only(open_model_files, dtype, atol):
-    model = load_body_model("open", dtype=dtype)
-    g = torch.Generator().manual_seed(0)
-    # Exercise pose correctives and a non-flat rest pose (the licensed model has both).
-    model.posedirs = 1e-3 * torch.randn(model.posedirs.shape, generator=g, dtype=torch.float64).to(dtype)
-    model.pose_mean[66:] = (0.1 * torch.randn(99, generator=g, dtype=torch.float64)).to(dtype)
-    fast = JointsOnly(model)
-    idx = sorted(set(BODY_25_FROM_SMPLX) | set(COCO18_FROM_SMPLX)) + [70, 30]
-    kb = KeypointBody(fast, idx)
-    B = 6
-    theta = roma.rotvec_to_rotmat(0.5 * torch.randn(B, 21, 3, generator=g, dtype=torch.float64)).to(dtype)
-    rest = roma.rotvec_to_rotmat(fast.pose_mean.reshape(55, 3))
-    rot = rest.expand(B, 55, 3, 3).clone()
-    rot[:, 0] = torch.eye(3, dtype=dtype)
-    rot[:, 1:22] = theta
-    for betas in (torch.randn(1, 10, generator=g, dtype=torch.float64).to(dtype),
-                  torch.randn(B, 10, generator=g, dtype=torch.float64).to(dtype)):
-        ref = fast.forward_rotmat(rot, betas)[:, idx]
-        torch.testing.assert_close(kb(theta, betas), ref, atol=atol, rtol=0)
-    with pytest.raises(ValueError):
-        KeypointBody(fast, [-1, 3])
 
 
 # -- loss terms -----------------------------------------------------------------------------------

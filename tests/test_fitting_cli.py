@@ -39,22 +39,20 @@ def test_fit_a_sequence_in_the_official_layout(tmp_path, capsys, open_model_file
     import roma
 
     from airpose_lib.body import BODY_25_FROM_SMPLX, COCO18_FROM_SMPLX, load_body_model
-    from airpose_lib.body.fast import JointsOnly
+    from airpose_lib.body.forward import BodyForward
     from airpose_lib.data.official_layout import OfficialLayoutWriter
     from airpose_lib.geometry import project_points
     from airpose_lib.prior import VPoser, save_prior
 
     F = 6
-    body = JointsOnly(load_body_model("open", dtype=torch.float64))
+    body = BodyForward(load_body_model("open", dtype=torch.float64), range(76), vertices=None)
     g = torch.Generator().manual_seed(0)
     theta = roma.rotvec_to_rotmat(0.2 * torch.randn(F, 21, 3, generator=g, dtype=torch.float64))
     phi = roma.rotvec_to_rotmat(torch.tensor([[[3.0, 0.0, 0.0], [2.6, 1.0, 0.0]]], dtype=torch.float64))
     phi = phi.expand(F, 2, 3, 3)
     tau = torch.tensor([[0.0, 0.5, 10.0], [0.2, 0.4, 9.0]], dtype=torch.float64).expand(F, 2, 3)
     K = np.array([[[1475.0, 0, 960], [0, 1475.0, 540], [0, 0, 1]]] * 2)
-    rot = torch.eye(3, dtype=torch.float64).expand(F, 55, 3, 3).clone()
-    rot[:, 1:22] = theta
-    J0 = body.forward_rotmat(rot, torch.zeros(1, 10, dtype=torch.float64))
+    J0, _ = body(theta, torch.zeros(1, 10, dtype=torch.float64))
     uv = project_points(J0[:, None] @ phi.transpose(-1, -2) + tau[:, :, None], torch.as_tensor(K)[None])
     kps = {}
     for name, idx in (("openpose", BODY_25_FROM_SMPLX), ("alphapose", COCO18_FROM_SMPLX)):

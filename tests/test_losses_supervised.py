@@ -8,11 +8,11 @@ import numpy as np
 import pytest
 import torch
 
+from airpose_lib.body.forward import BodyForward
 from airpose_lib.geometry import axis_angle_to_matrix, matrix_to_rot6d
 from airpose_lib.losses import (
     AirPoseLossConfig,
     BaselineLossConfig,
-    PaperBody,
     SupervisedLoss,
     cross_view_mse,
     limb_weights,
@@ -49,7 +49,7 @@ def make_batch(bodies, B=2, V=2, gender=0, seed=0):
     names = {0: "neutral", 1: "male", 2: "female"}
     j3d = torch.empty(B, V, 22, 3, dtype=F64)
     for b in range(B):
-        body = PaperBody(bodies[names[int(genders[b])]])
+        body = BodyForward(bodies[names[int(genders[b])]])
         j3d[b], _ = body(axis_angle_to_matrix(theta[b]), beta[b], phi[b], tau[b], vertices=False)
     p = j3d @ K.transpose(-1, -2)
     j2d = p[..., :2] / p[..., 2:]
@@ -62,49 +62,6 @@ def perfect_pred(batch):
     theta = axis_angle_to_matrix(batch["theta"]).unsqueeze(1).expand(-1, V, -1, -1, -1)
     beta = batch["beta"].unsqueeze(1).expand(-1, V, -1)
     return dict(phi=batch["phi"].clone(), theta=theta.clone(), beta=beta.clone(), tau=batch["tau"].clone())
-
-
-# -- body evaluation ------------------------------------------------------------------------------
-def test_paper_body_matches_smplx(bodies64):
-    m = bodies64["female"]
-    g = torch.Generator().manual_seed(1)
-    B = 3
-    theta = torch.randn(B, 21, 3, generator=g, dtype=F64) * 0.5
-    beta = torch.randn(B, 10, generator=g, dtype=F64)
-    phi_aa = torch.randn(B, 3, generator=g, dtype=F64)
-    tau = torch.randn(B, 3, generator=g, dtype=F64)
-    z = lambda n: torch.zeros(B, n, dtype=F64)  # noqa: E731
-    out = m(betas=beta, body_pose=theta.reshape(B, 63), global_orient=z(3), transl=z(3), jaw_pose=z(3),
-            leye_pose=z(3), reye_pose=z(3), left_hand_pose=z(45), right_hand_pose=z(45), expression=z(10))
-    R = _rot(phi_aa)
-    # V = phi V0 + tau about the model origin, computed independently with numpy
-    v_ref = np.einsum("bij,bvj->bvi", R.numpy(), out.vertices.numpy()) + tau.numpy()[:, None]
-    j_ref = np.einsum("bij,bvj->bvi", R.numpy(), out.joints[:, :22].numpy()) + tau.numpy()[:, None]
-    body = PaperBody(m)
-    j, v = body(axis_angle_to_matrix(theta), beta, R, tau)
-    # smplx's Rodrigues adds 1e-8 to the angle, hence not 1e-12
-    np.testing.assert_allclose(j.numpy(), j_ref, atol=1e-7)
-    np.testing.assert_allclose(v.numpy(), v_ref, atol=1e-7)
-    ids = torch.tensor([5, 17, 400, 9000, 13000])
-    sub = PaperBody(m, vertex_ids=ids)
-    js, vs = sub(axis_angle_to_matrix(theta), beta, R, tau)
-    torch.testing.assert_close(vs, v[:, ids])
-    torch.testing.assert_close(js, j)
-    jn, vn = body(axis_angle_to_matrix(theta), beta, vertices=False)
-    assert vn is None and jn.shape == (B, 22, 3)
-
-
-def test_paper_body_leading_dims_and_float32(open_model_files):
-    from airpose_lib.body import load_body_model
-
-    body = PaperBody(load_body_model("open", "neutral"))
-    theta = axis_angle_to_matrix(torch.randn(2, 3, 21, 3) * 0.2)
-    beta = torch.randn(2, 3, 10)
-    j, v = body(theta, beta)
-    assert j.shape == (2, 3, 22, 3) and v.shape == (2, 3, body.num_vertices, 3) and j.dtype == torch.float32
-    j1, v1 = body(theta[1, 2], beta[1, 2])
-    torch.testing.assert_close(j[1, 2], j1)
-    torch.testing.assert_close(v[1, 2], v1)
 
 
 # -- term helpers on tiny tensors -----------------------------------------------------------------
@@ -249,10 +206,10 @@ def test_theta_beta_cross_terms_and_limb_weights(bodies64):
     assert t["theta"].item() == pytest.approx(2 * se.item())
     t3 = SupervisedLoss(dataclasses.replace(cfg, limb_weight_theta=3.0), bodies64)(pred, batch)
     assert t3["theta"].item() == pytest.approx(3 * 2 * se.item())  # knees x3
-    # weighted 3D joints: recompute by hand from PaperBody
+    # weighted 3D joints: recompute by hand from BodyForward
     cfgj = dataclasses.replace(cfg, limb_weight_j3d=3.0)
     tj = SupervisedLoss(cfgj, bodies64)(pred, batch)
-    body = PaperBody(bodies64["neutral"])
+    body = BodyForward(bodies64["neutral"])
     Jp, _ = body(pred["theta"][:, 1], pred["beta"][:, 1], vertices=False)
     Jg, _ = body(axis_angle_to_matrix(batch["theta"]), batch["beta"], vertices=False)
     w = limb_weights(3.0, dtype=F64)[:, None]
@@ -282,10 +239,10 @@ def test_ground_truth_uses_gendered_model(bodies64):
     batch = make_batch(bodies64, B=3, V=2, gender=[1, 2, 0], seed=2)
     pred = perfect_pred(batch)  # same parameters, but predictions use the neutral model
     t = SupervisedLoss(AirPoseLossConfig(), bodies64)(pred, batch)
-    body_n = PaperBody(bodies64["neutral"])
+    body_n = BodyForward(bodies64["neutral"])
     theta = axis_angle_to_matrix(batch["theta"])
     jn, _ = body_n(theta, batch["beta"], vertices=False)
-    jg = torch.stack([PaperBody(bodies64[n])(theta[i], batch["beta"][i], vertices=False)[0]
+    jg = torch.stack([BodyForward(bodies64[n])(theta[i], batch["beta"][i], vertices=False)[0]
                       for i, n in enumerate(("male", "female", "neutral"))])
     assert t["j3d"].item() == pytest.approx(2 * (jn - jg).square().mean().item())
     assert t["j3d"].item() > 0 and t["j2d"].item() > 0 and t["V"].item() > 0
@@ -323,7 +280,7 @@ def test_float32_gradients(bodies64):
     with torch.no_grad():
         pred["tau"] += 0.2
     loss = SupervisedLoss(AirPoseLossConfig(vertex_subsample=500), bodies64).float()
-    assert loss.bodies["male"].posedirs.dtype == torch.float32
+    assert loss.bodies["male"].mesh_posedirs.dtype == torch.float32
     t = loss(pred, batch)
     assert t["total"].dtype == torch.float32
     t64 = SupervisedLoss(AirPoseLossConfig(vertex_subsample=500), bodies64)(perfect_pred(batch64) | {

@@ -45,7 +45,7 @@ def make_samples(n: int, seed: int = 0, views: int = 2, genders: int = 3) -> dic
     """Ground truth of n two-view samples, consistent with the open body model (genders: 1 =
     neutral only, 3 = neutral, male and female at random)."""
     from airpose_lib.geometry import axis_angle_to_matrix, crop_vector, project_points
-    from airpose_lib.losses import PaperBody
+    from airpose_lib.body.forward import BodyForward
 
     g = torch.Generator().manual_seed(seed)
     theta = torch.randn(n, 21, 3, generator=g) * 0.2
@@ -63,7 +63,7 @@ def make_samples(n: int, seed: int = 0, views: int = 2, genders: int = 3) -> dic
     for code, name in enumerate(("neutral", "male", "female")):
         m = gender == code
         if m.any():
-            body = PaperBody(body_model(name))
+            body = BodyForward(body_model(name))
             j3d[m], _ = body(axis_angle_to_matrix(theta[m]).unsqueeze(1), beta[m].unsqueeze(1), phi[m], tau[m],
                              vertices=False)
     j2d = project_points(j3d, K)

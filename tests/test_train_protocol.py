@@ -10,9 +10,10 @@ import pytest
 import torch
 from torch import nn
 
+from airpose_lib.body.forward import BodyForward
 from airpose_lib.eval.tables import per_view_table
 from airpose_lib.geometry import axis_angle_to_matrix, matrix_to_rot6d, project_points
-from airpose_lib.losses import BaselineLossConfig, PaperBody, SupervisedLoss
+from airpose_lib.losses import BaselineLossConfig, SupervisedLoss
 from airpose_lib.losses.pretrain import PretrainLoss
 from airpose_lib.model.pretrain import PretrainNet, heading_bin, heading_of
 from airpose_lib.train.evaluate import predict
@@ -39,7 +40,7 @@ def _batch(bodies, B=4, V=2, seed=0):
     tau = torch.stack([torch.randn(B, V, generator=g) * 0.5, torch.randn(B, V, generator=g) * 0.5,
                        9.0 + 2 * torch.rand(B, V, generator=g)], -1)
     K = torch.tensor([[1475.0, 0, 959.5], [0, 1475, 539.5], [0, 0, 1]]).expand(B, V, 3, 3)
-    body = PaperBody(bodies["neutral"])
+    body = BodyForward(bodies["neutral"])
     j3d, _ = body(axis_angle_to_matrix(theta).unsqueeze(1).expand(B, V, 21, 3, 3), beta.unsqueeze(1), phi, tau,
                   vertices=False)
     j2d = project_points(j3d, K)
@@ -99,7 +100,7 @@ def test_official_mpjpe_ignores_shape_and_translation_but_scores_the_root(bodies
                       batch["tau"] + torch.tensor([0.0, 0.0, 1.0])], -1)
     items = [{**{k: v[i] for k, v in batch.items()}, "features": feat[i], "crop_size": torch.tensor(224)}
              for i in range(B)]
-    body = PaperBody(bodies["neutral"])
+    body = BodyForward(bodies["neutral"])
     pred, gt = predict(_ReturnsInput(), items, batch_size=B, body=body)
     table = per_view_table(pred, gt)
     assert table["mpjpe_m"].max() < 1e-5  # shape and depth are not scored
@@ -135,7 +136,7 @@ def test_pretrain_loss_is_zero_for_the_ground_truth(bodies):
     batch["images"] = torch.zeros(B, V, 3, S, S)
     loss = PretrainLoss(body_models=bodies)
     theta = axis_angle_to_matrix(batch["theta"])
-    J0, _ = PaperBody(bodies["neutral"])(theta, batch["beta"], vertices=False)
+    J0, _ = BodyForward(bodies["neutral"])(theta, batch["beta"], vertices=False)
     from airpose_lib.geometry import full_to_crop_pixels
 
     uv = full_to_crop_pixels(batch["j2d"], batch["bbox"], S) / (S / 2) - 1

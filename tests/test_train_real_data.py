@@ -30,13 +30,13 @@ def test_ground_truth_matches_loss_convention(tiny_root):
     from airpose_lib.body import load_body_model
     from airpose_lib.data.dataset import StillFrameDataset
     from airpose_lib.geometry import axis_angle_to_matrix, project_points
-    from airpose_lib.losses import PaperBody
+    from airpose_lib.body.forward import BodyForward
     from airpose_lib.body.genders import GENDER_NAMES
 
     ds = StillFrameDataset(tiny_root, "all", augment=False)
     for i in range(len(ds)):
         s = ds[i]
-        body = PaperBody(load_body_model("open", GENDER_NAMES[int(s["gender"])], dtype=torch.float64))
+        body = BodyForward(load_body_model("open", GENDER_NAMES[int(s["gender"])], dtype=torch.float64))
         j, _ = body(axis_angle_to_matrix(s["theta"].double()), s["beta"].double(), s["phi"].double(),
                     s["tau"].double(), vertices=False)
         torch.testing.assert_close(j, s["j3d_cam"].double(), atol=2e-5, rtol=0)

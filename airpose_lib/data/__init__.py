@@ -5,8 +5,9 @@ Modules: ``scene`` (people, drone cameras, crop boxes, environment), ``poses`` (
 poses), ``motions`` and ``sequences`` (simulated recordings), ``detections`` (simulated keypoint
 detectors), ``official_layout`` (the official real-data folder layout, ``load_sequence``),
 ``appearance`` (skin / hair / clothing colours), ``render`` (textured scenes, pyvista),
-``shards`` and ``manifest`` (files on disk), ``generate`` (the still-frame generator and
-``airpose data generate``), ``dataset`` (``StillFrameDataset``).
+``shards`` and ``manifest`` (files on disk), ``still_config`` (still-frame dataset settings),
+``still_frames`` (sampling and rendering one shard's still frames), ``generate`` (shards on disk,
+resumption, workers: ``airpose data generate``), ``dataset`` (``StillFrameDataset``).
 
 Names are imported lazily, so ``import airpose_lib.data`` stays cheap and pulls in neither VTK
 nor torch until they are used.
@@ -28,9 +29,10 @@ _EXPORTS = {
     # files
     "DatasetError": "manifest", "ShardIntegrityError": "manifest", "load_manifest": "manifest",
     # generation
-    "GENERATOR_VERSION": "generate", "GenerationConfig": "generate",
-    "StillFrameGenerator": "generate", "generate_still_dataset": "generate",
-    "ensure_still_dataset": "generate", "profile_config": "generate", "default_root": "generate",
+    "GENERATOR_VERSION": "still_config", "GenerationConfig": "still_config",
+    "profile_config": "still_config", "default_root": "still_config",
+    "StillFrameGenerator": "still_frames", "generate_still_dataset": "generate",
+    "ensure_still_dataset": "generate",
     # datasets
     "StillFrameDataset": "dataset", "IMAGENET_MEAN": "dataset", "IMAGENET_STD": "dataset",
     "denormalize_images": "dataset",
@@ -39,7 +41,8 @@ _EXPORTS = {
 # Other modules' public names (their ``__all__``) are found on first use, in this order; the
 # renderer comes last because importing it starts VTK.
 _SEARCHED = ("official_synthetic", "official_real", "official_layout", "sequences",
-             "motions", "detections", "poses", "scene", "appearance", "manifest", "shards", "generate",
+             "motions", "detections", "poses", "scene", "appearance", "manifest", "shards", "still_config",
+             "still_frames", "generate",
              "dataset", "render")
 
 __all__ = sorted(_EXPORTS)

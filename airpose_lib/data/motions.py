@@ -30,6 +30,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from airpose_lib.body.forward import rest_body
+
 from .poses import PARAM_NAMES, compose_pose, walking_params
 
 __all__ = [
@@ -41,7 +43,6 @@ __all__ = [
     "sample_script",
     "evaluate_motion",
     "world_root_pose",
-    "body_forward",
 ]
 
 ACTIVITIES: tuple[str, ...] = (
@@ -432,29 +433,6 @@ def evaluate_motion(script: MotionScript, times: np.ndarray | Sequence[float],
     return MotionState(t, theta, heading, tilt, xz, speed, W)
 
 
-def body_forward(body_model, betas: np.ndarray, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Rest-root body: vertices (B, V, 3) and joints (B, J, 3), float64, of ``V0``.
-
-    Identity global orientation, zero translation, flat hands, neutral face.
-
-    Args:
-        body_model: ``smplx.SMPLX``. betas: (B, 10). theta: (B, 21, 3) axis-angle.
-    """
-    import torch
-
-    B = len(theta)
-    dt = body_model.shapedirs.dtype
-    z = lambda n: torch.zeros(B, n, dtype=dt)  # noqa: E731
-    hand = body_model.left_hand_pose.shape[-1]
-    with torch.no_grad():
-        out = body_model(betas=torch.as_tensor(np.array(betas), dtype=dt),
-                         body_pose=torch.as_tensor(np.asarray(theta), dtype=dt).reshape(B, 63),
-                         global_orient=z(3), transl=z(3), jaw_pose=z(3), leye_pose=z(3),
-                         reye_pose=z(3), left_hand_pose=z(hand), right_hand_pose=z(hand),
-                         expression=z(body_model.num_expression_coeffs))
-    return out.vertices.double().numpy(), out.joints.double().numpy()
-
-
 def world_root_pose(state: MotionState, body_model, betas: np.ndarray, chunk: int = 64
                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """World root pose in the paper's convention with the feet on the ground.
@@ -478,8 +456,7 @@ def world_root_pose(state: MotionState, body_model, betas: np.ndarray, chunk: in
     for a in range(0, T, chunk):
         b = min(T, a + chunk)
         n = b - a
-        v0, j0 = body_forward(body_model, np.broadcast_to(betas, (n, len(betas))),
-                              state.theta[a:b])
+        v0, j0 = rest_body(body_model, np.broadcast_to(betas, (n, len(betas))), state.theta[a:b])
         j0 = j0[:, 0]  # pelvis in V0 (depends on betas only)
         Rn = R[a:b]
         # horizontal placement: the pelvis at the path position

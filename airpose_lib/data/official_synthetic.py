@@ -89,6 +89,7 @@ import numpy as np
 import torch
 from torch.utils.data import Dataset
 
+from airpose_lib.body.forward import rest_body
 from airpose_lib.body.genders import GENDER_CODES
 from airpose_lib.geometry import body_in_camera, crop_affine_matrix, crop_from_image, crop_vector, project_points
 
@@ -429,22 +430,15 @@ class OfficialSyntheticDataset(Dataset):
         return np.clip(box, np.r_[lo, lo], np.r_[hi, hi])
 
     def model_joints(self, sample: dict) -> np.ndarray:
-        """World joints ``(J, 3)`` from the body model (``joints="model"``): ``R_wb J0 + t_wb``."""
+        """World joints ``(76, 3)`` from the body model (``joints="model"``): ``R_wb J0 + t_wb``."""
         from airpose_lib.body import load_body_model
 
         g = sample["gender"].lower()
         g = g if g in ("male", "female") else "neutral"
         if g not in self._models:
             self._models[g] = load_body_model(self.body_source, g, dtype=torch.float64)
-        m = self._models[g]
-        z = lambda n: torch.zeros(1, n, dtype=torch.float64)  # noqa: E731
-        with torch.no_grad():
-            out = m(betas=torch.as_tensor(sample["beta"][None]),
-                    body_pose=torch.as_tensor(sample["theta"].reshape(1, 63)),
-                    global_orient=z(3), transl=z(3), jaw_pose=z(3), leye_pose=z(3), reye_pose=z(3),
-                    left_hand_pose=z(45), right_hand_pose=z(45), expression=z(m.num_expression_coeffs))
-        j0 = out.joints[0].numpy()
-        return j0 @ sample["R_wb"].T + sample["t_wb"]
+        _, j0 = rest_body(self._models[g], sample["beta"][None], sample["theta"][None], mesh=False)
+        return j0[0] @ sample["R_wb"].T + sample["t_wb"]
 
     # -- the item ---------------------------------------------------------------------------
     def _index(self, i: int) -> int:

@@ -46,11 +46,12 @@ from pathlib import Path
 
 import numpy as np
 
+from airpose_lib.body.forward import rest_body
 from airpose_lib.body.genders import GENDER_CODES
 from airpose_lib.body.joint_sets import BODY_25_FROM_SMPLX, COCO18_FROM_SMPLX
 from airpose_lib.profiles import profile_section
 
-from .motions import MotionScript, body_forward, evaluate_motion, sample_script, world_root_pose
+from .motions import MotionScript, evaluate_motion, sample_script, world_root_pose
 
 #: Bumped whenever the same settings would produce a different recording.
 SEQUENCE_GENERATOR_VERSION = 1
@@ -463,9 +464,6 @@ def simulate_sequence(config: SequenceConfig, body_model=None) -> SimulatedSeque
         person_size_px       (F, V)         larger side of the tight (margin-free) joint box
         ==================== ============== =====================================================
     """
-    from airpose_lib.body.fast import JointsOnly
-    import torch
-
     person = config.person_spec
     model = body_model if body_model is not None else _body_model(person.gender)
     ss = np.random.SeedSequence([config.seed, 7919])
@@ -478,11 +476,7 @@ def simulate_sequence(config: SequenceConfig, body_model=None) -> SimulatedSeque
     betas = np.asarray(person.betas, dtype=np.float64)
     R_wb, t_wb, pelvis = world_root_pose(state, model, betas)
 
-    jo = JointsOnly(model)
-    with torch.no_grad():
-        dt = jo.J_template.dtype
-        J0 = jo(betas=torch.as_tensor(np.broadcast_to(betas, (F * V, 10)).copy(), dtype=dt),
-                body_pose=torch.as_tensor(state.theta.reshape(-1, 63), dtype=dt)).double().numpy()
+    _, J0 = rest_body(model, np.broadcast_to(betas, (F * V, 10)), state.theta, mesh=False)
     Jw = np.einsum("tij,tkj->tki", R_wb, J0) + t_wb[:, None]  # (FV, 76, 3)
 
     flights = _Flights(rng_flight, config.flight, np.asarray(script.start_xz))
@@ -660,7 +654,7 @@ class SequenceRenderer:
         for a in range(0, len(frames), chunk):
             idx = frames[a:a + chunk]
             theta = gt["theta_view"][idx].reshape(-1, 21, 3)
-            v0, _ = body_forward(self.model, np.broadcast_to(betas, (len(theta), 10)), theta)
+            v0, _ = rest_body(self.model, np.broadcast_to(betas, (len(theta), 10)), theta)
             v0 = v0.reshape(len(idx), V, -1, 3)
             for k, i in enumerate(idx):
                 images = []

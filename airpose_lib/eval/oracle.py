@@ -21,7 +21,7 @@ import pandas as pd
 import torch
 
 from airpose_lib.body import load_body_model
-from airpose_lib.body.fast import JointsOnly
+from airpose_lib.body.forward import BodyForward, axis_angle_rotations
 
 __all__ = ["ORACLE_LABEL", "solve_translation", "mean_body_joints", "oracle_per_view"]
 
@@ -88,11 +88,11 @@ def mean_body_joints(theta: np.ndarray, body_model=None, body_source: str = "ope
     """
     if body_model is None:
         body_model = load_body_model(body_source, "neutral", dtype=torch.float64)
-    joints_fn = JointsOnly(body_model).double()
+    body = BodyForward(body_model, vertices=None).double()  # float64 whatever the model's dtype
     theta = torch.as_tensor(np.asarray(theta), dtype=torch.float64)
     with torch.no_grad():
-        joints = joints_fn(body_pose=theta.reshape(len(theta), 63))  # betas, root, translation: zero
-    return joints[:, :22].numpy()
+        joints, _ = body(axis_angle_rotations(theta), torch.zeros(1, body.num_betas, dtype=torch.float64))
+    return joints.numpy()
 
 
 def oracle_per_view(arrays: Mapping[str, np.ndarray], body_model=None, body_source: str = "open",

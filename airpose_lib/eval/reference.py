@@ -35,7 +35,8 @@ from .ablation import PER_SEED_METRICS, table_to_markdown
 
 __all__ = ["REFERENCE_FILES", "RESULTS_ROOT", "reference_dir", "machine_description", "git_commit",
            "train_wall_s", "oracle_summary", "write_reference", "read_reference_table", "side_by_side",
-           "compare_to_reference", "check_against_reference", "install_reference", "reference_report"]
+           "compare_to_reference", "check_against_reference", "install_reference", "reference_report",
+           "RECORDING_FILES", "install_recordings_reference", "recordings_report"]
 
 #: The files of a results bundle.
 REFERENCE_FILES = ("table1.csv", "table1.md", "per_seed.csv", "claims.csv", "claims.md", "oracle.csv",
@@ -309,3 +310,53 @@ def reference_report(bundle: str | Path, profile: str, write: bool = False, comm
     if moved.empty:
         return head
     return head + "\n" + moved.drop(columns=["reference_std"]).to_string(index=False, float_format="%.4f")
+
+
+# -- the recordings (notebooks 03-05) -------------------------------------------------------------
+#: The files notebook 05 writes into its output folder that make the recordings' reference.
+RECORDING_FILES = ("recording_errors.csv", "recording_errors.md", "paper_claims.csv", "paper_claims.md")
+
+
+def install_recordings_reference(notebook_dir: str | Path, profile: str, command: str,
+                                 root: str | Path | None = None) -> Path:
+    """Copy notebook 05's tables into ``results/<profile>/recordings/`` with a provenance file.
+
+    Args:
+        notebook_dir: notebook 05's output folder (``<run>/<profile>/05_airpose_plus``).
+        command: the command that made them (recorded in ``provenance.json``).
+    Raises:
+        FileNotFoundError: a file of :data:`RECORDING_FILES` is missing (notebook 05 did not finish).
+    """
+    src, dst = Path(notebook_dir), reference_dir(profile, root) / "recordings"
+    missing = [n for n in RECORDING_FILES if not (src / n).is_file()]
+    if missing:
+        raise FileNotFoundError(f"{src}: no {', '.join(missing)}; run notebook 05_airpose_plus first")
+    for name in RECORDING_FILES:
+        with atomic_path(dst / name) as tmp:
+            shutil.copyfile(src / name, tmp)
+    provenance = {"profile": profile, "kit_version": __version__, "git": git_commit(),
+                  "created_at": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
+                  "machine": machine_description(), "command": command}
+    _write_text(dst / "provenance.json", json.dumps(provenance, indent=2, default=str) + "\n")
+    return dst
+
+
+def recordings_report(notebook_dir: str | Path, profile: str, write: bool = False, command: str | None = None,
+                      root: str | Path | None = None) -> str:
+    """What ``airpose reproduce`` prints after notebook 05: the claims' verdicts that differ from
+    the committed ``results/<profile>/recordings/paper_claims.csv`` (or the install, with ``write``)."""
+    src, ref = Path(notebook_dir), reference_dir(profile, root) / "recordings"
+    if write:
+        return f"reference: wrote {install_recordings_reference(src, profile, command or '', root)}"
+    new_path, old_path = src / "paper_claims.csv", ref / "paper_claims.csv"
+    if not (new_path.is_file() and old_path.is_file()):
+        return ""
+    key = ["claim", "sequence", "measure"]  # a claim has one row per measure and sequence
+    new, old = pd.read_csv(new_path), pd.read_csv(old_path)
+    both = new.merge(old, on=key, how="outer", suffixes=("", "_reference"))
+    changed = both[both["holds"].astype(str) != both["holds_reference"].astype(str)]
+    if changed.empty:
+        return f"reference: the {len(new)} recording claims have the same verdicts as {old_path}"
+    lines = [f"reference: {len(changed)} of {len(new)} recording claims differ from {old_path}:"]
+    lines += [f"  {r.claim} ({r.sequence}): {r.holds_reference} -> {r.holds}" for r in changed.itertuples()]
+    return "\n".join(lines)

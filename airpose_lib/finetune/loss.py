@@ -6,7 +6,7 @@ of one view, reduced over the views like the supervised loss: summed for the mul
 (paper eq. 4, ``sum_c``), averaged for the monocular ones):
 
 ``j2d``     ``w (u - u_hat)^2``: the BODY_25 keypoints of the predicted body (55 SMPL-X joints +
-            keypoint vertices via :class:`~airpose_lib.body.fast.JointsOnly`, selected by
+            keypoint vertices via :class:`~airpose_lib.body.forward.BodyForward`, selected by
             ``BODY_25_FROM_SMPLX``) projected with each view's full-image ``K``, against the
             targets of :func:`~airpose_lib.finetune.keypoints.agreement_targets`; ``w`` =
             OpenPose confidence, 0 for dropped joints (they still count in the mean, as the

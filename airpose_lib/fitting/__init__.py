@@ -12,9 +12,8 @@ from .airpose_plus import (
     frame_confidence,
     init_from_views,
 )
-from .kinematics import KeypointBody
 
 __all__ = [
     "AirPosePlusConfig", "AirPosePlusLoss", "AirPosePlusResult", "DETECTOR_JOINTS", "airpose_plus", "fit_sequence",
-    "fitting_profile", "frame_confidence", "init_from_views", "KeypointBody",
+    "fitting_profile", "frame_confidence", "init_from_views",
 ]

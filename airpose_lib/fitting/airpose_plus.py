@@ -61,7 +61,7 @@ import torch
 from torch import Tensor
 
 from airpose_lib.body import BODY_25_FROM_SMPLX, COCO18_FROM_SMPLX
-from airpose_lib.body.fast import JointsOnly
+from airpose_lib.body.forward import BodyForward
 from airpose_lib.geometry import (
     axis_angle_to_matrix,
     matrix_to_axis_angle,
@@ -73,8 +73,6 @@ from airpose_lib.geometry import (
 from airpose_lib.losses.robust import geman_mcclure
 from airpose_lib.prior import VPoser
 from airpose_lib.profiles import profile_path, profile_section
-
-from .kinematics import KeypointBody
 
 __all__ = [
     "AirPosePlusConfig",
@@ -317,12 +315,14 @@ def init_from_views(phi, tau, theta, beta, num_frames: int | None = None,
 
 
 # -- the fit --------------------------------------------------------------------------------------
-def _body_module(body) -> JointsOnly:
+def _keypoint_body(body, outputs: Sequence[int]) -> BodyForward:
+    """Joints-only body of the requested outputs, in float32 (own copies: ``body``, an
+    ``smplx.SMPLX``, default the open neutral model, keeps its dtype)."""
     if body is None:
         from airpose_lib.body import load_body_model
 
         body = load_body_model("open", "neutral")
-    return body if isinstance(body, JointsOnly) else JointsOnly(body)
+    return BodyForward(body, outputs, vertices=None).float()
 
 
 class AirPosePlusLoss:
@@ -335,7 +335,7 @@ class AirPosePlusLoss:
         keypoints: detector name -> ``(F, V, J, 3)`` ``[x, y, confidence]``.
         K: ``(V, 3, 3)``.
         prior: the pose prior (its decoder maps ``v`` to ``theta``).
-        body: ``smplx.SMPLX`` / ``JointsOnly`` (default: the open neutral model).
+        body: an ``smplx.SMPLX`` (default: the open neutral model).
         config: the weights (:class:`AirPosePlusConfig`).
         joint_maps: extra detector maps.
     """
@@ -349,8 +349,7 @@ class AirPosePlusLoss:
             raise ValueError(f"K must be (V, 3, 3) = {(xy.shape[1], 3, 3)} for the {xy.shape[1]} views of "
                              f"the keypoints, got {tuple(K.shape)}")
         uniq, gather = torch.unique(idx, return_inverse=True)
-        # Own copies in float32: the caller's model keeps its dtype.
-        kbody = KeypointBody(_body_module(body), uniq.tolist()).float()
+        kbody = _keypoint_body(body, uniq.tolist())
         self._setup(config or AirPosePlusConfig(), prior, kbody, xy, w, gather, K)
 
     @classmethod
@@ -370,7 +369,7 @@ class AirPosePlusLoss:
     def project(self, theta: Tensor, phi: Tensor, tau: Tensor, beta: Tensor) -> Tensor:
         """Model keypoints in the image: ``theta (F, 21, 3, 3)``, ``phi (F, V, 3, 3)``,
         ``tau (F, V, 3)``, ``beta (10,)`` -> ``(F, V, J, 2)`` pixels (J = all detectors' keypoints)."""
-        J0 = self.body(theta, beta)[:, self.gather]  # (F, J, 3)
+        J0 = self.body(theta, beta)[0][:, self.gather]  # (F, J, 3)
         X = J0[:, None] @ phi.transpose(-1, -2) + tau[:, :, None]  # (F, V, J, 3)
         return project_points(X, self.K[None], min_depth=self.config.min_depth)
 
@@ -434,8 +433,7 @@ def airpose_plus(
             :func:`init_from_views` takes (AirPose's per-view outputs, e.g.
             ``model.to_smplx_params`` over the sequence).
         prior: the pose prior (default ``load_prior("kit")``).
-        body: an ``smplx.SMPLX`` or :class:`~airpose_lib.body.fast.JointsOnly` (default: the open
-            neutral model, as the network predicts).
+        body: an ``smplx.SMPLX`` (default: the open neutral model, as the network predicts).
         config: weights and schedule; keyword ``overrides`` replace single fields.
         joint_maps: extra or replacement detector maps (index into the 76 SMPL-X outputs).
         progress: tqdm bar over the iterations.
@@ -472,10 +470,9 @@ def airpose_plus(
     prior.eval()  # dropout off, batch-norm running statistics
     prior.requires_grad_(False)
     uniq, gather = torch.unique(idx, return_inverse=True)
-    # Own float32 copies: the caller's model keeps its dtype.
-    kbody = KeypointBody(_body_module(body), uniq.tolist()).float()
-    if start["beta"].shape[0] > kbody.num_shape:
-        raise ValueError(f"beta has {start['beta'].shape[0]} entries, the body model {kbody.num_shape}")
+    kbody = _keypoint_body(body, uniq.tolist())
+    if start["beta"].shape[0] > kbody.num_betas:
+        raise ValueError(f"beta has {start['beta'].shape[0]} entries, the body model {kbody.num_betas}")
 
     threads = torch.get_num_threads()
     if cfg.num_threads:

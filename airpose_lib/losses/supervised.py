@@ -11,7 +11,8 @@ camera": the views of a sample are independent examples and their terms are aver
 (``view_reduction="mean"``), so the loss does not depend on how many views a sample holds.
 
 The terms (pred = neutral body model, ground truth = the sample's gendered model, both evaluated
-through :class:`PaperBody`, ``V = phi V0(theta, beta) + tau`` about the model origin):
+through :class:`airpose_lib.body.forward.BodyForward`, ``V = phi V0(theta, beta) + tau`` about the
+model origin):
 
 ``j2d``    the 22 body joints ``phi J0 + tau`` projected with the full-frame ``K`` versus the
            sample's ``j2d``: in full-image pixels (``j2d_frame="full"``, the official two-view
@@ -68,9 +69,9 @@ from dataclasses import dataclass
 from typing import Literal
 
 import torch
-from smplx.lbs import batch_rigid_transform
 from torch import Tensor, nn
 
+from airpose_lib.body.forward import BodyForward
 from airpose_lib.body.genders import GENDER_NAMES
 from airpose_lib.body.joint_sets import NUM_BODY_JOINTS, NUM_POSE_JOINTS
 from airpose_lib.geometry import (
@@ -92,7 +93,6 @@ __all__ = [
     "VARIANT_LOSS_CONFIGS",
     "loss_config",
     "official_variations",
-    "PaperBody",
     "SupervisedLoss",
     "limb_weights",
     "view_mse",
@@ -259,104 +259,6 @@ def loss_config(variant: str, official: bool = False, **overrides) -> LossConfig
     return dataclasses.replace(cfg, **overrides) if overrides else cfg
 
 
-# -- body model in the paper's convention ---------------------------------------------------------
-class PaperBody(nn.Module):
-    """SMPL-X body joints and vertices in the paper's convention, from rotation matrices.
-
-    ``V0(theta, beta)`` is the SMPL-X output with the 21 body rotations, identity global
-    orientation, zero translation and flat hands/face; then ``V = phi V0 + tau`` (rotation about
-    the model origin). Only what the body needs is kept: the 22 body joints, the first
-    21 x 9 pose correctives and the skinning weights folded onto the 22 body joints (hand, jaw and
-    eye joints carry the identity rotation, so a vertex bound to them moves exactly like one bound
-    to their nearest body ancestor). The result equals ``smplx``'s forward (tested).
-
-    Args:
-        model: a loaded ``smplx.SMPLX`` (open or licensed); its buffers are copied.
-        vertex_ids: ``(N,)`` vertex indices to evaluate (None: all vertices).
-    """
-
-    def __init__(self, model, vertex_ids: Tensor | None = None) -> None:
-        super().__init__()
-        if hasattr(model, "pose_mean") and model.pose_mean[3 * NUM_BODY_JOINTS:].abs().max() > 0:
-            # the folding of hand/face skinning weights below needs identity hand/face rotations
-            raise ValueError("PaperBody needs a flat-hand model (load_body_model's default flat_hand_mean=True)")
-        n_betas = model.num_betas
-        nv = model.v_template.shape[0]
-        reg = model.J_regressor[:NUM_BODY_JOINTS]  # (22, Nv)
-        shapedirs = model.shapedirs[..., :n_betas]  # (Nv, 3, 10)
-        # Buffers are not persistent: they are the body model's data, not trained state.
-        buf = lambda name, value: self.register_buffer(name, value, persistent=False)  # noqa: E731
-        buf("J_template", reg @ model.v_template)
-        buf("J_dirs", torch.einsum("jv,vcs->jcs", reg, shapedirs))
-        # the first 21 x 9 pose correctives belong to the body joints 1..21
-        posedirs = model.posedirs[: NUM_POSE_JOINTS * 9]
-        W = torch.zeros(nv, NUM_BODY_JOINTS, dtype=model.lbs_weights.dtype, device=model.lbs_weights.device)
-        parents = model.parents.tolist()
-        body_of = []  # nearest body-joint ancestor of every joint
-        for j in range(len(parents)):
-            a = j
-            while a >= NUM_BODY_JOINTS:
-                a = parents[a]
-            body_of.append(a)
-        W.index_add_(1, torch.tensor(body_of, device=W.device), model.lbs_weights)
-        if vertex_ids is None:  # views, no copies of the large arrays
-            ids = torch.arange(nv)
-            buf("v_template", model.v_template)
-            buf("v_dirs", shapedirs)
-            buf("posedirs", posedirs)
-        else:
-            ids = torch.as_tensor(vertex_ids).long()
-            buf("v_template", model.v_template[ids])
-            buf("v_dirs", shapedirs[ids])
-            buf("posedirs", posedirs.reshape(NUM_POSE_JOINTS * 9, nv, 3)[:, ids].reshape(NUM_POSE_JOINTS * 9, -1))
-        buf("vertex_ids", ids)
-        buf("weights", W[ids] if vertex_ids is not None else W)
-        buf("parents", model.parents[:NUM_BODY_JOINTS].clone())
-        self.num_betas = n_betas
-
-    @property
-    def num_vertices(self) -> int:
-        return self.v_template.shape[0]
-
-    def forward(self, theta: Tensor, beta: Tensor, phi: Tensor | None = None, tau: Tensor | None = None,
-                vertices: bool = True) -> tuple[Tensor, Tensor | None]:
-        """Joints and vertices of ``V = phi V0(theta, beta) + tau``.
-
-        Args:
-            theta: ``(..., 21, 3, 3)`` body rotations.
-            beta: ``(..., 10)`` (broadcast over theta's leading dims).
-            phi: ``(..., 3, 3)`` root rotation, or None (identity).
-            tau: ``(..., 3)`` translation of the model origin, or None (zero).
-            vertices: also return the (selected) vertices.
-
-        Returns:
-            ``joints (..., 22, 3)`` and ``vertices (..., N, 3)`` (None unless ``vertices``).
-        """
-        lead = torch.broadcast_shapes(theta.shape[:-3], beta.shape[:-1])
-        theta = theta.expand(*lead, NUM_POSE_JOINTS, 3, 3).reshape(-1, NUM_POSE_JOINTS, 3, 3)
-        beta = beta.expand(*lead, beta.shape[-1]).reshape(-1, beta.shape[-1])
-        n = theta.shape[0]
-        eye = torch.eye(3, dtype=theta.dtype, device=theta.device)
-        rot = torch.cat((eye.expand(n, 1, 3, 3), theta), dim=1)
-        J_rest = self.J_template + torch.einsum("jcs,bs->bjc", self.J_dirs, beta)
-        joints, A = batch_rigid_transform(rot, J_rest, self.parents, dtype=theta.dtype)
-        joints = joints.reshape(*lead, NUM_BODY_JOINTS, 3)
-        verts = None
-        if vertices:
-            v = self.v_template + torch.einsum("vcs,bs->bvc", self.v_dirs, beta)
-            v = v + ((theta - eye).reshape(n, -1) @ self.posedirs).reshape(n, -1, 3)
-            T = torch.einsum("vj,bjxy->bvxy", self.weights, A[:, :, :3, :])  # (n, N, 3, 4)
-            v = (T[..., :3] @ v.unsqueeze(-1)).squeeze(-1) + T[..., 3]
-            verts = v.reshape(*lead, -1, 3)
-        if phi is not None:
-            joints = joints @ phi.transpose(-1, -2)
-            verts = verts @ phi.transpose(-1, -2) if verts is not None else None
-        if tau is not None:
-            joints = joints + tau.unsqueeze(-2)
-            verts = verts + tau.unsqueeze(-2) if verts is not None else None
-        return joints, verts
-
-
 # -- term helpers ---------------------------------------------------------------------------------
 def limb_weights(limb_weight: float, n_joints: int = NUM_BODY_JOINTS, offset: int = 0,
                  dtype: torch.dtype = torch.float32, device=None) -> Tensor:
@@ -455,7 +357,8 @@ class SupervisedLoss(nn.Module):
         if self.config.vertex_subsample is not None and self.config.vertex_subsample < n_vertices:
             g = torch.Generator().manual_seed(self.config.vertex_subsample_seed)
             ids = torch.randperm(n_vertices, generator=g)[: self.config.vertex_subsample].sort().values
-        self.bodies = nn.ModuleDict({g: PaperBody(m, ids) for g, m in body_models.items()})
+        self.bodies = nn.ModuleDict({g: BodyForward(m, vertices="all" if ids is None else ids)
+                                     for g, m in body_models.items()})
         c = self.config
         self.register_buffer("w_joints", limb_weights(c.limb_weight_j3d).unsqueeze(-1), persistent=False)
         self.register_buffer("w_rot", limb_weights(c.limb_weight_theta, NUM_POSE_JOINTS, offset=1)[:, None, None],

@@ -11,14 +11,11 @@ which differs from smplx's own ``global_orient``/``transl`` (that rotates about 
 """
 from __future__ import annotations
 
-import weakref
 from collections.abc import Mapping
 
-import torch
-from smplx.lbs import batch_rodrigues, lbs
 from torch import Tensor
 
-from ..body.fast import JointsOnly
+from ..body.forward import cached_body
 from ..geometry import rot6d_to_matrix, weak_perspective_to_translation
 
 __all__ = ["to_smplx_params", "posed_joints_and_vertices"]
@@ -50,68 +47,35 @@ def to_smplx_params(out: Mapping, P: Tensor, K: Tensor, input_size: int | None =
     return {"phi": phi, "theta": theta, "beta": out["beta"], "tau": tau}
 
 
-# One JointsOnly per body model (it precomputes regressed joints and keypoint-vertex data).
-_JOINTS_ONLY: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
-
-
-def _joints_only(body_model) -> JointsOnly:
-    cached = _JOINTS_ONLY.get(body_model)
-    ref = body_model.v_template
-    if cached is None or cached.J_template.dtype != ref.dtype or cached.J_template.device != ref.device:
-        cached = JointsOnly(body_model)
-        _JOINTS_ONLY[body_model] = cached
-    return cached
-
-
-def _full_rotmats(body_model, theta: Tensor) -> Tensor:
-    """(N, 21, 3, 3) body rotations -> (N, 55, 3, 3): identity root, theta, then jaw, eyes and
-    hands at the model's mean pose (identity for the flat-hand models the kit loads)."""
-    N = theta.shape[0]
-    eye = torch.eye(3, dtype=theta.dtype, device=theta.device).expand(N, 1, 3, 3)
-    rest_aa = body_model.pose_mean[66:].to(theta.dtype).reshape(-1, 3)  # jaw, eyes, 2 x 15 hand
-    rest = batch_rodrigues(rest_aa).expand(N, -1, 3, 3)
-    return torch.cat((eye, theta, rest), dim=1)
-
-
 def posed_joints_and_vertices(body_model, params: Mapping[str, Tensor],
                               joints_only: bool = False) -> dict[str, Tensor]:
     """Evaluate the body model with the paper's convention ``X = phi X0 + tau``.
+
+    An adapter of :class:`airpose_lib.body.forward.BodyForward` for the parameter dicts of
+    :func:`to_smplx_params` (any leading dims, any float dtype: evaluation code passes network
+    outputs straight in).
 
     Args:
         body_model: ``smplx.SMPLX`` from ``airpose_lib.body.load_body_model`` (its dtype is used).
         params: phi (..., 3, 3), theta (..., 21, 3, 3), beta (..., 10), tau (..., 3)
             (:func:`to_smplx_params`). phi and tau may be omitted (identity, zero), giving the
             root-relative body used by the 3D joint and vertex losses.
-        joints_only: skip the mesh (``body.fast.JointsOnly``; much faster).
+        joints_only: skip the mesh (much faster).
 
     Returns:
         dict with joints (..., 76, 3) (55 skeleton joints, then the 21 keypoint vertices; no face
         landmarks) and, unless joints_only, vertices (..., V, 3). Metres, camera frame.
     """
+    body = cached_body(body_model, mesh=not joints_only)
+    dtype = body.J_template.dtype
     theta = params["theta"]
     batch = theta.shape[:-3]
-    dtype = body_model.v_template.dtype
-    theta = theta.reshape(-1, 21, 3, 3).to(dtype)
-    N = theta.shape[0]
-    betas = params["beta"].reshape(N, -1).to(dtype)
-    rotmats = _full_rotmats(body_model, theta)
-    if joints_only:
-        joints = _joints_only(body_model).forward_rotmat(rotmats, betas)
-        result = {"joints": joints}
-    else:
-        n_expr = body_model.expr_dirs.shape[-1]
-        shape = torch.cat((betas, betas.new_zeros(N, n_expr)), dim=-1)
-        shapedirs = torch.cat((body_model.shapedirs, body_model.expr_dirs), dim=-1)
-        verts, joints = lbs(shape, rotmats, body_model.v_template, shapedirs, body_model.posedirs,
-                            body_model.J_regressor, body_model.parents, body_model.lbs_weights,
-                            pose2rot=False)
-        joints = body_model.vertex_joint_selector(verts, joints)  # + the 21 keypoint vertices
-        result = {"joints": joints, "vertices": verts}
-    phi, tau = params.get("phi"), params.get("tau")
-    for key, X in result.items():
-        if phi is not None:
-            X = X @ phi.reshape(N, 3, 3).to(dtype).transpose(-1, -2)
-        if tau is not None:
-            X = X + tau.reshape(N, 1, 3).to(dtype)
-        result[key] = X.reshape(*batch, *X.shape[-2:])
+    N = batch.numel()
+    cast = lambda key, *shape: (params[key].reshape(N, *shape).to(dtype)  # noqa: E731
+                                if params.get(key) is not None else None)
+    joints, verts = body(cast("theta", 21, 3, 3), cast("beta", -1), cast("phi", 3, 3), cast("tau", 3),
+                         vertices=not joints_only)
+    result = {"joints": joints.reshape(*batch, *joints.shape[-2:])}
+    if verts is not None:
+        result["vertices"] = verts.reshape(*batch, *verts.shape[-2:])
     return result

@@ -56,10 +56,8 @@ def train_and_save_prior(profile: str, out: str | Path | None = None, *, steps: 
 
 def _train_and_save_prior(profile: str, path: Path, steps: int | None, seed: int | None,
                           progress: bool) -> tuple[Path, dict]:
-    from airpose_lib.body import load_body_model
-    from airpose_lib.body.fast import JointsOnly
+    from airpose_lib.body import BodyForward, load_body_model
     from airpose_lib.data.poses import within_limits
-    from airpose_lib.fitting import KeypointBody
 
     cfg, corpus = prior_profile(profile)
     if steps is not None:
@@ -72,9 +70,9 @@ def _train_and_save_prior(profile: str, path: Path, steps: int | None, seed: int
     val_poses = prior_corpus(corpus, 1, val_still, corpus.n_val - val_still)
     joints_fn = None
     if cfg.w_joints > 0:
-        body = KeypointBody(JointsOnly(load_body_model("open", "neutral")), range(22))
+        body = BodyForward(load_body_model("open", "neutral"), range(22), vertices=None)
         zero_beta = torch.zeros(1, body.num_betas)
-        joints_fn = lambda R: body(R, zero_beta)  # noqa: E731 - 22 body joints of the mean shape
+        joints_fn = lambda R: body(R, zero_beta)[0]  # noqa: E731 - 22 body joints of the mean shape
     model, hist = train_prior(train_poses, cfg, joints_fn=joints_fn, progress=progress)
     val = evaluate_prior(model, val_poses, joints_fn=joints_fn, n_samples=1000, seed=cfg.seed)
     samples = val.pop("samples")

@@ -19,10 +19,10 @@ import torch
 from torch import nn
 from torch.utils.data import DataLoader
 
+from airpose_lib.body.forward import BodyForward
 from airpose_lib.engine.checkpoint import load_checkpoint
 from airpose_lib.eval import per_joint_table, per_view_table, relative_camera_table
 from airpose_lib.geometry import axis_angle_to_matrix
-from airpose_lib.losses import PaperBody
 
 from .config import TrainConfig
 
@@ -31,12 +31,13 @@ __all__ = ["predict", "evaluate", "load_trained_model", "evaluate_checkpoint"]
 
 @torch.no_grad()
 def predict(model: nn.Module, dataset, batch_size: int = 8, device: str | torch.device = "cpu",
-            body: PaperBody | str = "open", num_workers: int = 0, max_samples: int | None = None
+            body: BodyForward | str = "open", num_workers: int = 0, max_samples: int | None = None
             ) -> tuple[dict[str, torch.Tensor], dict[str, torch.Tensor]]:
     """Predictions and matching ground truth for a dataset, in order.
 
     Args:
-        body: the neutral body of the predictions: a :class:`PaperBody` or a body-model source
+        body: the neutral body of the predictions: a :class:`~airpose_lib.body.forward.BodyForward`
+            (22 body joints) or a body-model source
             (``"open"``, ``"smplx"``).
 
     The dataset may serve crops (``images``) or cached backbone ``features`` (a
@@ -52,7 +53,7 @@ def predict(model: nn.Module, dataset, batch_size: int = 8, device: str | torch.
 
     device = torch.device(device)
     if isinstance(body, str):
-        body = PaperBody(load_body_model(body, "neutral"))
+        body = BodyForward(load_body_model(body, "neutral"), vertices=None)
     body = body.to(device)
     model = model.to(device).eval()
     loader = DataLoader(dataset, batch_size=batch_size, shuffle=False, num_workers=num_workers)

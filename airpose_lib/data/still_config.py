@@ -1,0 +1,164 @@
+"""Settings of the synthetic still-frame dataset: :class:`GenerationConfig` (everything a dataset
+depends on, with its fingerprint), the profile's ``data: still:`` section, the default folder."""
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from airpose_lib.body.cache import cache_dir
+from airpose_lib.profiles import ProfileError, profile_path, profile_section
+
+from .appearance import AppearanceConfig
+from .manifest import DatasetError
+from .scene import SceneConfig
+
+__all__ = ["GENERATOR_VERSION", "GenerationConfig", "profile_config", "default_root"]
+
+#: Bumped whenever the same configuration would produce different shards.
+#: 2: test crops are jittered like training crops; test shards also hold the tight-box crops.
+GENERATOR_VERSION = 2
+
+# -- configuration --------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class GenerationConfig:
+    """Everything that determines a still-frame dataset.
+
+    Attributes:
+        num_samples: accepted multi-view samples (pairs for two views).
+        shard_size: samples per shard file (the unit of resumption and verification).
+        seed: master seed.
+        crop_size: side S of the rendered crops (the network input; 224 in the paper).
+        test_fraction: share of shards (the last ones, hence distinct subjects) in the test split;
+            at least one test shard.
+        image_format: ``"jpg"`` or ``"png"`` (lossless, ~3x larger).
+        jpeg_quality: JPEG quality 1-100.
+        anti_aliasing: MSAA on the rendered crops (slow in software rendering).
+        blur_sigma: Gaussian blur (pixels) of the rendered crop before padding: softens
+            aliased edges and textures like a real lens and downscaling do (0 = none).
+        test_crops: how the test split's crops are drawn. ``"jittered"`` (default, the official
+            code: ``copenet/dsets/aerialpeople.py`` enlarges every box, test split included, by a
+            random 0-200 px, so test crops come from the training distribution; deterministic per
+            sample, since each sample has its own generator) or ``"tight"`` (the box + 20 px of
+            the paper's text, outside the training range of the crop scale s).
+        tight_test_crops: test shards also store the tight-box crops (``images_tight``,
+            ``P_tight``) so that both protocols are evaluated on the same samples.
+        body_source: ``"open"`` or ``"smplx"`` (:func:`airpose_lib.body.load_body_model`).
+        max_attempts_per_sample: a shard gives up (error) after this many attempts per sample.
+        scene: person / camera / crop / environment sampling.
+        appearance: skin, hair and clothing sampling.
+    """
+
+    num_samples: int = 300
+    shard_size: int = 50
+    seed: int = 0
+    crop_size: int = 224
+    test_fraction: float = 0.1
+    image_format: str = "jpg"
+    jpeg_quality: int = 95
+    anti_aliasing: bool = False
+    blur_sigma: float = 0.5
+    test_crops: str = "jittered"
+    tight_test_crops: bool = True
+    body_source: str = "open"
+    max_attempts_per_sample: int = 20
+    scene: SceneConfig = field(default_factory=SceneConfig)
+    appearance: AppearanceConfig = field(default_factory=AppearanceConfig)
+
+    def __post_init__(self) -> None:
+        if self.num_samples < 1 or self.shard_size < 1:
+            raise ValueError("num_samples and shard_size must be positive")
+        if self.test_crops not in ("jittered", "tight"):
+            raise ValueError(f"test_crops must be 'jittered' or 'tight', got {self.test_crops!r}")
+        if self.image_format not in ("jpg", "png"):
+            raise ValueError(f"image_format must be 'jpg' or 'png', got {self.image_format!r}")
+        if not 0.0 <= self.test_fraction < 1.0:
+            raise ValueError(f"test_fraction must be in [0, 1), got {self.test_fraction}")
+        if self.crop_size < 8:
+            raise ValueError(f"crop_size too small: {self.crop_size}")
+
+    # -- shards -----------------------------------------------------------------------------------
+    @property
+    def num_shards(self) -> int:
+        return math.ceil(self.num_samples / self.shard_size)
+
+    @property
+    def num_test_shards(self) -> int:
+        if self.num_shards < 2:
+            return 0  # a one-shard dataset is all training data
+        return min(self.num_shards - 1, max(1, round(self.test_fraction * self.num_shards)))
+
+    def shard_samples(self, k: int) -> int:
+        """Samples in shard ``k`` (the last one may be smaller)."""
+        return min(self.shard_size, self.num_samples - k * self.shard_size)
+
+    def shard_split(self, k: int) -> str:
+        """``"train"`` or ``"test"``: the last shards (new subjects) are the test split."""
+        return "test" if k >= self.num_shards - self.num_test_shards else "train"
+
+    # -- (de)serialisation ------------------------------------------------------------------------
+    def to_dict(self) -> dict:
+        """Plain dict (lists for tuples) for YAML/JSON."""
+        return _plain(dataclasses.asdict(self))
+
+    @classmethod
+    def from_dict(cls, d: dict) -> GenerationConfig:
+        """Inverse of :meth:`to_dict`; missing keys take the defaults, unknown keys raise."""
+        d = dict(d or {})
+        scene = _build(SceneConfig, d.pop("scene", None) or {}, "scene")
+        appearance = _build(AppearanceConfig, d.pop("appearance", None) or {}, "appearance")
+        return _build(cls, d, "data", scene=scene, appearance=appearance)
+
+    def replace(self, **changes) -> GenerationConfig:
+        return dataclasses.replace(self, **changes)
+
+    def fingerprint(self) -> str:
+        """SHA-256 of the configuration and generator version (what a dataset must match)."""
+        blob = json.dumps({"generator_version": GENERATOR_VERSION, "config": self.to_dict()},
+                          sort_keys=True)
+        return hashlib.sha256(blob.encode()).hexdigest()
+
+
+def _plain(x):
+    if isinstance(x, dict):
+        return {k: _plain(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_plain(v) for v in x]
+    return x
+
+
+def _build(cls, d: dict, where: str, **extra):
+    names = {f.name for f in dataclasses.fields(cls)}
+    unknown = sorted(set(d) - names)
+    if unknown:
+        raise ValueError(f"unknown {where} setting(s) {unknown}; known: {sorted(names)}")
+    return cls(**{k: _tuplify(v) for k, v in d.items()}, **extra)
+
+
+def _tuplify(x):
+    """YAML lists -> tuples (every sequence setting is a tuple), recursively."""
+    return tuple(_tuplify(v) for v in x) if isinstance(x, list) else x
+
+
+def profile_config(profile: str) -> GenerationConfig:
+    """The still-frame dataset settings of a reproduction profile.
+
+    Reads the ``data: still:`` section of the profile (:mod:`airpose_lib.profiles`; keys are
+    :class:`GenerationConfig` fields, ``scene:`` / ``appearance:`` sub-dicts allowed).
+    """
+    try:  # the data commands report every unusable input as a DatasetError
+        path = profile_path(profile)
+        return GenerationConfig.from_dict(profile_section(path, "data.still",
+                                                          required="the still-frame dataset sizes"))
+    except ProfileError as e:  # before ValueError: it is one
+        raise DatasetError(str(e)) from None
+    except (TypeError, ValueError) as e:
+        raise DatasetError(f"{path}, `data: still:` section: {e}") from None
+
+
+def default_root(profile: str) -> Path:
+    """Where a profile's dataset lives by default: ``<kit cache>/data/still_<profile>``."""
+    return cache_dir() / "data" / f"still_{profile}"

@@ -147,9 +147,10 @@ def build_node_parser(p: argparse.ArgumentParser | None = None) -> argparse.Argu
 def config_from_args(args: argparse.Namespace, drone_id: int, port: int, peers: dict[int, str],
                      t0: float | None, clock_offset_ms: float = 0.0, host: str = "127.0.0.1",
                      view: int | None = None):
-    """A :class:`~.node.NodeConfig` from parsed options."""
+    """A :class:`~.config.NodeConfig` from parsed options."""
+    # Imported on use: building the parser (`airpose --help`) must not import ZeroMQ.
     from .backends import BackendSpec
-    from .node import NodeConfig
+    from .config import NodeConfig
     from .transport import LinkConfig
 
     backend = BackendSpec(kind=args.backend, variant=args.variant, backbone=args.backbone,
@@ -174,7 +175,7 @@ def run_node(args: argparse.Namespace) -> int:
     """Handler of ``airpose node``."""
     from airpose_lib.process_guard import die_with_parent
 
-    from .node import DroneProcess
+    from .drone import DroneProcess
 
     check_inputs(args)
     if args.t0 == "stdin":  # started by a launcher: never outlive it

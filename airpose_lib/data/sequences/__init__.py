@@ -1,0 +1,85 @@
+"""Simulated two-drone recordings: a moving person, a hovering and a circling UAV, full frames.
+
+Stands in for the paper's real data (Sec. IV-A "Real Data"): two DJI drones, one hovering, one
+flown around a person who walks, turns, twists and moves the arms; about 7,000 frames per person
+per drone at 1920x1080; person 1 for fine-tuning, person 2 (many twisting poses) for testing.
+Unlike the real data, every frame here has complete ground truth (body pose and shape, world
+root pose, per-camera extrinsics, per-view ``phi``/``tau``, 2D and 3D joints), so the kit can
+*measure* what the paper could only plot.
+
+Model of one recording (all numbers configurable in :class:`SequenceConfig`):
+
+* **Time.** Camera ``v`` takes frame ``i`` at ``t = i / fps + time_offsets[v]`` (default 30 fps,
+  offsets ``(0, 7 ms)``: a constant offset between the two devices, as the paper found when
+  synchronising its recordings). Everything of a view, the person's pose included, is evaluated
+  at that view's own time, so the two views of "frame i" see the person 7 ms apart.
+* **Person.** A :class:`~airpose_lib.data.motions.MotionScript` drawn for the person's style
+  (``varied`` for person 1, ``twisting`` for person 2), feet on the ground ``y = 0``.
+* **UAV 1 hovers**: fixed position ``distance_m`` (camera to person) from the activity area,
+  on a line of sight ``pitch_deg`` downwards, slow drift of a few centimetres, its gimbal partly follows the person
+  (the person moves across the frame).
+* **UAV 2 circles** the person: the orbit radius, the pitch and the orbit's angular position vary
+  smoothly (radius in ``distance_m``, pitch in ``pitch_deg``), its camera keeps the person near
+  the image centre with a small aiming wobble.
+* **Cameras**: each view has its own intrinsics; by default the paper's two calibrated DJI
+  cameras (``cam0`` f = (1537.83, 1517.66), c = (1018.55, 577.52); ``cam1`` f = (1361.11,
+  1378.80), c = (978.02, 667.23); 1920x1080).
+* **Rendering** scale: frames are rendered at ``render_scale`` times the full size (0.5 ->
+  960x540) directly with the scaled intrinsics ``fx' = s fx``, ``cx' = s (cx + 0.5) - 0.5``
+  (OpenCV pixel centres at integers; exactly what resizing a full frame by ``s`` does). The
+  stored ``K``, image sizes and all 2D ground truth refer to the stored images. The scene (ground
+  texture, sky, sun, background objects beyond the orbit, per-vertex clothing colours) reuses the
+  still-frame renderer :class:`airpose_lib.data.render.SceneRenderer` and appearance model.
+
+Ground-truth arrays (:data:`GROUND_TRUTH_KEYS`; F frames, V views; the paper's root convention
+``V_world = R_wb V0 + t_wb`` about the model origin, cameras OpenCV ``x_cam = R_cw x_world +
+t_cw``) are documented in :func:`simulate_sequence`.
+
+Modules: ``config`` (cameras, persons, flights, :class:`SequenceConfig`, a profile's recordings),
+``flight`` (the drones' paths and camera poses), ``simulate`` (ground truth without pixels),
+``renderer`` (the frames), ``recording`` (one recording on disk, detector files),
+``cache`` (a profile's recordings, made only when missing or outdated).
+"""
+from __future__ import annotations
+
+from .cache import default_sequence_root, ensure_sequences
+from .config import (
+    PAPER_CAMERAS,
+    PERSONS,
+    SEQUENCE_GENERATOR_VERSION,
+    CameraSpec,
+    FlightConfig,
+    PersonSpec,
+    SequenceConfig,
+    profile_sequences,
+    scale_intrinsics,
+    sequence_configs_from_profile,
+)
+from .flight import look_at_rotation
+from .recording import generate_sequence, recording_detections, refresh_detections
+from .renderer import SequenceRenderer, render_sequence
+from .simulate import GROUND_TRUTH_KEYS, SimulatedSequence, simulate_sequence
+
+__all__ = [
+    "CameraSpec",
+    "PAPER_CAMERAS",
+    "PersonSpec",
+    "PERSONS",
+    "FlightConfig",
+    "SequenceConfig",
+    "SimulatedSequence",
+    "GROUND_TRUTH_KEYS",
+    "scale_intrinsics",
+    "simulate_sequence",
+    "SequenceRenderer",
+    "render_sequence",
+    "generate_sequence",
+    "recording_detections",
+    "refresh_detections",
+    "sequence_configs_from_profile",
+    "profile_sequences",
+    "default_sequence_root",
+    "ensure_sequences",
+    "SEQUENCE_GENERATOR_VERSION",
+    "look_at_rotation",
+]

@@ -1,0 +1,147 @@
+"""Rendering of a simulated recording, frame by frame: the person's posed mesh in a fixed outdoor
+scene, seen by each drone's calibrated camera (non-square pixels, off-centre principal point)."""
+from __future__ import annotations
+
+from collections.abc import Iterator
+
+import numpy as np
+
+from airpose_lib.body.forward import rest_body
+
+from ..appearance import BodyPaint, sample_appearance
+from ..scene import Distractor, EnvironmentSample
+from .simulate import SimulatedSequence, person_body_model
+
+__all__ = ["SequenceRenderer", "render_sequence"]
+
+
+def _scene_renderer_class():
+    # Imported lazily: VTK/pyvista start-up is only paid when frames are rendered.
+    from ..render import SceneRenderer
+
+    class _Renderer(SceneRenderer):
+        """SceneRenderer whose camera takes any pinhole K (fx != fy, off-centre principal point).
+
+        The drones' calibrated cameras have non-square pixels, which a VTK view angle cannot
+        express; the projection matrix is set explicitly instead (OpenGL clip space from K,
+        the OpenCV pixel-centre convention and the near/far planes).
+        """
+
+        def _set_camera(self, K, R_cw, t_cw) -> None:
+            W, H = self.image_size
+            K = np.asarray(K, dtype=np.float64)
+            if abs(K[0, 1]) > 1e-9:
+                raise ValueError("skewed intrinsics (K[0, 1] != 0) are not supported")
+            fx, fy, cx, cy = K[0, 0], K[1, 1], K[0, 2], K[1, 2]
+            R = np.asarray(R_cw, dtype=np.float64)
+            centre = -R.T @ np.asarray(t_cw, dtype=np.float64)
+            cam = self._cam
+            cam.SetPosition(*centre)
+            cam.SetFocalPoint(*(centre + R[2]))
+            cam.SetViewUp(*(-R[1]))
+            n, f = self.near, self.far
+            # View coordinates: x right, y up, camera looking down -z (VTK / OpenGL).
+            # u = fx x/z + cx with OpenCV's x = x_v, y = -y_v, z = -z_v and NDC x = 2 (u + .5) / W - 1.
+            P = np.array([
+                [2 * fx / W, 0.0, 1.0 - 2.0 * (cx + 0.5) / W, 0.0],
+                [0.0, 2 * fy / H, 2.0 * (cy + 0.5) / H - 1.0, 0.0],
+                [0.0, 0.0, -(f + n) / (f - n), -2.0 * f * n / (f - n)],
+                [0.0, 0.0, -1.0, 0.0],
+            ])
+            import vtk  # (lazily, as above)
+
+            m = vtk.vtkMatrix4x4()
+            for i in range(4):
+                for j in range(4):
+                    m.SetElement(i, j, float(P[i, j]))
+            cam.SetExplicitProjectionTransformMatrix(m)
+            cam.SetUseExplicitProjectionTransformMatrix(True)
+            cam.SetClippingRange(n, f)
+            self._pl.renderer.camera_set = True
+
+    return _Renderer
+
+
+class SequenceRenderer:
+    """Renders a :class:`SimulatedSequence` frame by frame, one renderer per view size.
+
+    Args:
+        sim: the simulated sequence.
+        body_model: the person's model (default: the open model of the person's gender).
+        anti_aliasing: MSAA on edges (default: the sequence config's setting).
+    """
+
+    def __init__(self, sim: SimulatedSequence, body_model=None, anti_aliasing: bool | None = None) -> None:
+        self.sim = sim
+        person = sim.config.person_spec
+        self.model = body_model if body_model is not None else person_body_model(person.gender)
+        self.faces = np.asarray(self.model.faces, dtype=np.int64)
+        self.colors = BodyPaint.from_model(self.model).colors(
+            sample_appearance(np.random.default_rng(person.appearance_seed)))
+        cls = _scene_renderer_class()
+        if anti_aliasing is None:
+            anti_aliasing = sim.config.anti_aliasing
+        sizes = [tuple(int(x) for x in s) for s in sim.gt["image_size"]]
+        self._renderers = {s: cls(s, anti_aliasing=anti_aliasing) for s in dict.fromkeys(sizes)}
+        self._size_of_view = sizes
+        # One fixed environment for the whole recording: a grass field, a clear sky, the sun,
+        # and a few objects beyond the orbit (they never come between a drone and the person).
+        rng = np.random.default_rng([sim.config.seed, 31337])
+        first = next(iter(self._renderers.values()))
+        tex = first.texture_names.index("grass") if "grass" in first.texture_names else 0
+        centre = np.asarray(sim.script.start_xz)
+        dist = []
+        for _ in range(8):
+            a, r = rng.uniform(-np.pi, np.pi), rng.uniform(16.0, 35.0)
+            kind = "box" if rng.random() < 0.5 else "cylinder"
+            size = np.array([rng.uniform(0.5, 3.0), rng.uniform(0.5, 3.0), rng.uniform(0.5, 3.0)])
+            if kind == "cylinder":
+                size[2] = size[0]
+            dist.append(Distractor(kind, centre + r * np.array([np.sin(a), np.cos(a)]), size,
+                                   float(rng.uniform(0, np.pi)), rng.uniform(0.2, 0.8, 3)))
+        elev, az = np.deg2rad(rng.uniform(35, 65)), rng.uniform(-np.pi, np.pi)
+        self.environment = EnvironmentSample(
+            ground_texture=tex, ground_tile=3.0, ground_rotation=float(rng.uniform(0, np.pi)),
+            ground_offset=rng.uniform(0, 1, 2), ground_tint=np.array([0.55, 0.72, 0.40]),
+            sky_color=np.array([0.68, 0.80, 0.92]),
+            light_dir=-np.array([np.cos(elev) * np.sin(az), np.sin(elev), np.cos(elev) * np.cos(az)]),
+            light_intensity=0.9, ambient=0.35, distractors=dist)
+        for r in self._renderers.values():
+            r.set_environment(self.environment)
+
+    def render_frames(self, frames=None, chunk: int = 32) -> Iterator[tuple[int, list[np.ndarray]]]:
+        """Yield ``(frame_index, [image (H, W, 3) uint8 RGB per view])`` in order."""
+        gt = self.sim.gt
+        F, V = self.sim.num_frames, self.sim.num_views
+        frames = np.arange(F) if frames is None else np.asarray(list(frames), dtype=np.int64)
+        betas = gt["betas"]
+        for a in range(0, len(frames), chunk):
+            idx = frames[a:a + chunk]
+            theta = gt["theta_view"][idx].reshape(-1, 21, 3)
+            v0, _ = rest_body(self.model, np.broadcast_to(betas, (len(theta), 10)), theta)
+            v0 = v0.reshape(len(idx), V, -1, 3)
+            for k, i in enumerate(idx):
+                images = []
+                for v in range(V):
+                    R_wb, t_wb = gt["R_wb"][i, v], gt["t_wb"][i, v]
+                    r = self._renderers[self._size_of_view[v]]
+                    r.set_body(v0[k, v] @ R_wb.T + t_wb, self.faces, self.colors)
+                    images.append(r.render(gt["K"][v], gt["R_cw"][i, v], gt["t_cw"][i, v]))
+                yield int(i), images
+
+    def close(self) -> None:
+        for r in self._renderers.values():
+            r.close()
+
+    def __enter__(self) -> SequenceRenderer:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+def render_sequence(sim: SimulatedSequence, frames=None, body_model=None) -> list[list[np.ndarray]]:
+    """All (or the given) frames in memory: ``[[image per view] per frame]``; for previews."""
+    with SequenceRenderer(sim, body_model) as r:
+        return [imgs for _, imgs in r.render_frames(frames)]
+

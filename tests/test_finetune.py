@@ -51,7 +51,7 @@ def smoke_root():
 def _save_tiny(folder, variant: str):
     from airpose_lib.model import build_model
     from airpose_lib.train import TrainConfig
-    from airpose_lib.train.checkpoint import save_checkpoint
+    from airpose_lib.engine.checkpoint import save_checkpoint
 
     torch.manual_seed(0)
     model = build_model(variant, "resnet18")

@@ -100,7 +100,7 @@ def test_commands_refuse_a_folder_in_use(argv, holder, tmp_path, capsys):
 
 
 def test_run_logger_is_a_writer(holder):
-    from airpose_lib.train.logger import RunLogger
+    from airpose_lib.engine.logger import RunLogger
 
     folder, proc = holder
     with pytest.raises(FolderBusyError, match=f"PID {proc.pid}"):

@@ -8,7 +8,7 @@ from airpose_lib.data.training_input import training_input
 from airpose_lib.model.record import NETWORK_KEY, network_record, read_network
 from airpose_lib.runtime.backends import checkpoint_settings
 from airpose_lib.train import TrainConfig
-from airpose_lib.train.checkpoint import run_network_entry
+from airpose_lib.train.loop import run_network_entry
 
 # The paper's training camera, by hand: f = 1475 px, principal point at the centre of 1920x1080.
 PAPER_K = np.array([[1475.0, 0.0, 959.5], [0.0, 1475.0, 539.5], [0.0, 0.0, 1.0]])

@@ -48,7 +48,7 @@ def _cmd_train(args: argparse.Namespace) -> int:
 def _train_locked(args: argparse.Namespace, cfg, out: Path) -> int:
     from airpose_lib.data.manifest import DatasetError
     from airpose_lib.train import train
-    from airpose_lib.train.checkpoint import last_checkpoint, load_checkpoint
+    from airpose_lib.engine.checkpoint import last_checkpoint, load_checkpoint
 
     last = last_checkpoint(out) if args.resume else None
     if last is not None:

@@ -42,6 +42,7 @@ from airpose_lib.body.joint_sets import BODY_25_FROM_SMPLX
 from airpose_lib.data.official_layout import load_sequence
 from airpose_lib.data.official_real import load_official_real
 from airpose_lib.data.sequences import ensure_sequences
+from airpose_lib.engine.checkpoint import last_checkpoint, load_checkpoint
 from airpose_lib.eval import metrics as M
 from airpose_lib.eval.recordings import body_joints, paper_claims, per_view_params, recording_table
 from airpose_lib.finetune.keypoints import resolution_scales
@@ -57,7 +58,6 @@ from airpose_lib.paths import run_path
 from airpose_lib.prior import load_prior
 from airpose_lib.prior.build import ensure_prior
 from airpose_lib.train.ablation import trained_checkpoint
-from airpose_lib.train.checkpoint import last_checkpoint, load_checkpoint
 from airpose_lib.train.config import load_train_config
 from airpose_lib.train.official import find_official_checkpoint
 

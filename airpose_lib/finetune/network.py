@@ -15,7 +15,7 @@ from torch import nn
 
 from airpose_lib.data.training_input import training_input
 from airpose_lib.model.record import read_network
-from airpose_lib.train.checkpoint import load_checkpoint
+from airpose_lib.engine.checkpoint import load_checkpoint
 from airpose_lib.train.evaluate import load_trained_model
 
 __all__ = ["load_network"]

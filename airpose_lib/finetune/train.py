@@ -51,7 +51,6 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import json
-import math
 import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
@@ -63,9 +62,22 @@ import torch
 from torch import nn
 
 from airpose_lib.atomic import atomic_path
+from airpose_lib.engine import (
+    FORMAT_VERSION as CHECKPOINT_FORMAT,
+    EngineRun,
+    Schedule,
+    TrainingTask,
+    capture_rng_state,
+    checkpoint_dir,
+    kit_version,
+    read_log,
+    restore_rng_state,
+    run_engine,
+)
 from airpose_lib.folder_lock import folder_lock
 from airpose_lib.model.record import network_record
 from airpose_lib.profiles import profile_path, profile_section
+from airpose_lib.train.sampling import epoch_permutation, seed_everything
 
 __all__ = ["FineTuneConfig", "FineTuneResult", "finetune_config", "finetune", "evaluate_finetune_loss",
            "heldout_split"]
@@ -359,8 +371,6 @@ def heldout_split(num_frames: int, fraction: float) -> tuple[np.ndarray, np.ndar
 def _isolated(diagnostic: Callable, model: nn.Module) -> dict[str, float]:
     """Run a diagnostic so that it cannot change the run: eval mode, no gradients, the RNG
     state and the model's mode restored afterwards; its values are only logged."""
-    from airpose_lib.train.checkpoint import capture_rng_state, restore_rng_state
-
     rng = capture_rng_state()
     was_training = model.training
     model.eval()
@@ -391,8 +401,6 @@ def _check_resume(saved: Mapping, cfg: FineTuneConfig, base_fp: str) -> None:
 
 
 def _history(log_path: Path) -> dict[str, list]:
-    from airpose_lib.train.logger import read_log
-
     hist: dict[str, list] = {}
     for row in read_log(log_path):
         if row.get("split") != "train":
@@ -434,8 +442,6 @@ def finetune(checkpoint: str | Path, sequence_root: str | Path, out_dir: str | P
     Returns:
         :class:`FineTuneResult`.
     """
-    from airpose_lib.train.checkpoint import capture_rng_state, restore_rng_state
-
     cfg = config if config is not None else FineTuneConfig()
     caller_rng = capture_rng_state()
     threads = torch.get_num_threads()
@@ -450,22 +456,81 @@ def finetune(checkpoint: str | Path, sequence_root: str | Path, out_dir: str | P
         restore_rng_state(caller_rng)
 
 
+class _FineTuneTask(TrainingTask):
+    """The engine's task for fine-tuning: regressor steps on the cached features of the training
+    frames; model selection (the held-out 2D loss, ``checkpoints/best.pt``) as its validation."""
+
+    def __init__(self, *, model, loss_fn, optimizer, cfg: FineTuneConfig, train_cfg, frames: dict, heldout: dict,
+                 evaluate: Callable, input_size: int, network: dict, info: dict, out_dir: Path,
+                 diagnostic: Callable | None) -> None:
+        self.model, self.loss_fn, self.optimizer = model, loss_fn, optimizer
+        self.cfg, self.train_cfg, self.frames, self.heldout = cfg, train_cfg, frames, heldout
+        self.evaluate, self.input_size, self.network = evaluate, input_size, network
+        self.info, self.out_dir, self.diagnostic = info, out_dir, diagnostic
+        self.selection: dict = info["selection"]
+        self.best_path = checkpoint_dir(out_dir) / "best.pt"
+        self.n = int(frames["features"].shape[0])
+
+    def batches(self, epoch: int, start: int):
+        B = self.cfg.batch_size
+        order = epoch_permutation(self.n, self.cfg.seed, epoch)
+        for b in range(start, self.n // B):
+            yield order[b * B:(b + 1) * B].to(self.frames["features"].device)
+
+    def train_step(self, idx: torch.Tensor, step: int) -> dict[str, torch.Tensor]:
+        f = self.frames
+        return _step_terms(self.model, self.loss_fn, f["features"][idx], f["P"][idx], f["targets"][idx], f["K"],
+                           self.input_size, f["K_net"], f["r_px"])
+
+    def train_mode(self) -> None:
+        _set_train_mode(self.model)
+        self.loss_fn.train()
+
+    def start(self, run: EngineRun) -> None:
+        self.info["initial"] = self.evaluate(self.frames["features"], self.frames["P"], self.frames["targets"])
+        self.validate(run)  # the network before fine-tuning is a candidate too
+        seed_everything(_stream_seed(self.cfg.seed))  # the dropout / VPoser-sample stream
+
+    def resume(self, state: Mapping) -> None:
+        if "finetune" not in state:
+            raise ValueError(f"{checkpoint_dir(self.out_dir) / 'last.pt'} is not a fine-tuning checkpoint; use "
+                             "another out_dir or resume=False")
+        _check_resume(state["finetune"], self.cfg, self.info["base_fingerprint"])
+        self.info["initial"] = state["finetune"]["initial"]
+        self.selection = dict(state["finetune"].get("selection") or self.selection)
+        self.info["selection"] = self.selection
+
+    def validate(self, run: EngineRun) -> None:
+        """Held-out 2D loss of the current weights (the only input of the choice), then the
+        diagnostic (logged only); the best weights so far go to best.pt. Not at an interruption:
+        a resumed run selects where a straight one does."""
+        h = self.heldout
+        if not len(h["features"]):
+            return None
+        terms = self.evaluate(h["features"], h["P"], h["targets"])
+        row = {"step": run.step, "heldout_j2d": terms["j2d"], "heldout_total": terms["total"]}
+        best = self.selection["best_heldout_j2d"]
+        if best is None or terms["j2d"] < best:
+            self.selection["best_step"], self.selection["best_heldout_j2d"] = run.step, terms["j2d"]
+            with atomic_path(self.best_path) as tmp:
+                torch.save({"format_version": CHECKPOINT_FORMAT, "kit_version": kit_version(),
+                            **run.checkpoint_state()}, tmp)
+        if self.diagnostic is not None:
+            row.update(_isolated(self.diagnostic, self.model))
+        row["selected"] = self.selection["best_step"]
+        self.selection["rows"] = [r for r in self.selection["rows"] if r["step"] != run.step] + [row]
+        _write_selection(self.out_dir, self.selection["rows"])
+        return None
+
+    def checkpoint_state(self) -> dict:
+        return {"config": self.train_cfg.to_dict(), "world_size": 1, "network": self.network, "finetune": self.info}
+
+    def config(self) -> dict:
+        return self.cfg.to_dict()
+
+
 def _finetune(checkpoint: Path, root: Path, out_dir: Path, cfg: FineTuneConfig, resume: bool, progress: bool,
               prior, body_model, stop_at, diagnostic) -> FineTuneResult:
-    from airpose_lib.train.checkpoint import (
-        capture_rng_state,
-        checkpoint_dir,
-        last_checkpoint,
-        load_checkpoint,
-        restore_rng_state,
-        save_checkpoint,
-    )
-    from airpose_lib.train.logger import RunLogger
-    from airpose_lib.train.sampling import epoch_permutation, seed_everything
-
-    from airpose_lib.train.checkpoint import FORMAT_VERSION as CHECKPOINT_FORMAT
-    from airpose_lib.train.checkpoint import kit_version
-
     from .keypoints import agreement_masks, agreement_summary, agreement_targets, pixel_settings, resolution_scales
     from .loss import FineTuneLoss, finetune_loss_config
     from .network import load_network
@@ -502,12 +567,13 @@ def _finetune(checkpoint: Path, root: Path, out_dir: Path, cfg: FineTuneConfig, 
 
     dtype = model.init_beta.dtype
     as_t = lambda a: torch.as_tensor(np.asarray(a)).to(device=device, dtype=dtype)  # noqa: E731
-    feats, P = as_t(cache["features"][usable]), as_t(cache["P"][usable])
-    targets = as_t(targets_np[usable])
-    h_feats, h_P, h_targets = as_t(cache["features"][held]), as_t(cache["P"][held]), as_t(targets_np[held])
     K = as_t(seq.K)
     K_net = as_t(np.broadcast_to(K_net_np, K.shape).copy())
     r_px = as_t(scales)
+    frames = {"features": as_t(cache["features"][usable]), "P": as_t(cache["P"][usable]),
+              "targets": as_t(targets_np[usable]), "K": K, "K_net": K_net, "r_px": r_px}
+    heldout = {"features": as_t(cache["features"][held]), "P": as_t(cache["P"][held]),
+               "targets": as_t(targets_np[held])}
     pixels = {**pixel_settings(scales, cfg.threshold_px, finetune_loss_config(train_cfg.variant, cfg.official_loss,
                                                                               **cfg.loss).w_j2d),
               "reference_width": cfg.reference_width}
@@ -532,119 +598,31 @@ def _finetune(checkpoint: Path, root: Path, out_dir: Path, cfg: FineTuneConfig, 
     def evaluate(f, p_, t):
         return evaluate_finetune_loss(model, loss_fn, f, p_, t, K, input_size, cfg.eval_batch_size, K_net, r_px)
 
-    step = epoch = batch_in_epoch = 0
-    ckpt_path = last_checkpoint(out_dir) if resume else None
-    selection: dict = {"rows": [], "best_step": None, "best_heldout_j2d": None}
-    best_path = checkpoint_dir(out_dir) / "best.pt"
-    if ckpt_path is not None:
-        state = load_checkpoint(ckpt_path)
-        if "finetune" not in state:
-            raise ValueError(f"{ckpt_path} is not a fine-tuning checkpoint; use another out_dir or resume=False")
-        _check_resume(state["finetune"], cfg, base_fp)
-        model.load_state_dict(state["model"])
-        optimizer.load_state_dict(state["optimizer"])
-        step, epoch, batch_in_epoch = state["step"], state["epoch"], state["batch_in_epoch"]
-        initial = state["finetune"]["initial"]
-        selection = dict(state["finetune"].get("selection") or selection)
-        restore_rng_state(state["rng"][0])
-    else:
-        for old in checkpoint_dir(out_dir).glob("*.pt"):
-            old.unlink()
-        initial = evaluate(feats, P, targets)
-    (out_dir / "config.json").write_text(json.dumps(cfg.to_dict(), indent=2, sort_keys=True))
-    logger = RunLogger(out_dir, resume_step=step if ckpt_path is not None else None, tensorboard=False)
     info = {"config": cfg.to_dict(), "loss": loss_cfg.to_dict(), "base_checkpoint": str(checkpoint),
             "base_fingerprint": base_fp, "sequence": str(root),
             "frames": [int(seq.frames[0]), int(seq.frames[-1])], "num_frames": n,
             "heldout_frames": [int(seq.frames[held_pos[0]]), int(seq.frames[held_pos[-1]])] if len(held_pos) else [],
             "num_heldout": len(held), "keypoints": agreement_summary(masks), "pixels": pixels,
-            "camera_K": K_net_np.tolist(), "initial": initial, "selection": selection}
-
+            "camera_K": K_net_np.tolist(), "initial": None,
+            "selection": {"rows": [], "best_step": None, "best_heldout_j2d": None}}
     network = network_record(train_cfg.variant, train_cfg.backbone, train_cfg.model, input_size, K_net_np)
+    task = _FineTuneTask(model=model, loss_fn=loss_fn, optimizer=optimizer, cfg=cfg, train_cfg=train_cfg,
+                         frames=frames, heldout=heldout, evaluate=evaluate, input_size=input_size,
+                         network=network, info=info, out_dir=out_dir, diagnostic=diagnostic)
+    schedule = Schedule(steps=cfg.steps, log_every=cfg.log_every, checkpoint_every=cfg.checkpoint_every,
+                        keep_checkpoints=cfg.keep_checkpoints, val_every=cfg.checkpoint_every, stop_at=stop_at,
+                        checkpoint_at_end=True, loss_name="fine-tuning loss", what=f"finetune {train_cfg.variant}",
+                        progress=progress, tensorboard=False)
+    run = run_engine(task, schedule, out_dir, resume, started=t0)
 
-    def state_dict() -> dict:
-        return {"model": model.state_dict(), "optimizer": optimizer.state_dict(), "rng": [capture_rng_state()],
-                "step": step, "epoch": epoch, "batch_in_epoch": batch_in_epoch, "config": train_cfg.to_dict(),
-                "world_size": 1, "network": network, "finetune": info}
-
-    def save() -> Path:
-        return save_checkpoint(out_dir, state_dict(), keep=cfg.keep_checkpoints)
-
-    def select() -> None:
-        """Held-out 2D loss of the current weights (the only input of the choice), then the
-        diagnostic (logged only); the best weights so far go to best.pt."""
-        if not len(held):
-            return
-        terms = evaluate(h_feats, h_P, h_targets)
-        row = {"step": step, "heldout_j2d": terms["j2d"], "heldout_total": terms["total"]}
-        best = selection["best_heldout_j2d"]
-        if best is None or terms["j2d"] < best:
-            selection["best_step"], selection["best_heldout_j2d"] = step, terms["j2d"]
-            with atomic_path(best_path) as tmp:
-                torch.save({"format_version": CHECKPOINT_FORMAT, "kit_version": kit_version(), **state_dict()}, tmp)
-        if diagnostic is not None:
-            row.update(_isolated(diagnostic, model))
-        row["selected"] = selection["best_step"]
-        selection["rows"] = [r for r in selection["rows"] if r["step"] != step] + [row]
-        _write_selection(out_dir, selection["rows"])
-
-    if ckpt_path is None:
-        select()  # the network before fine-tuning is a candidate too
-        seed_everything(_stream_seed(cfg.seed))  # the dropout / VPoser-sample stream
-    bar = None
-    if progress:
-        from airpose_lib.progress import progress_bar
-
-        bar = progress_bar(total=cfg.steps, initial=step, desc=f"finetune {train_cfg.variant}")
-    checkpoint_out: Path | None = ckpt_path
-    stopped = False
-    B = cfg.batch_size
-    _set_train_mode(model)
-    loss_fn.train()
-    try:
-        while step < cfg.steps and not stopped:
-            order = epoch_permutation(n, cfg.seed, epoch)
-            for b in range(batch_in_epoch, n // B):
-                idx = order[b * B:(b + 1) * B].to(device)
-                terms = _step_terms(model, loss_fn, feats[idx], P[idx], targets[idx], K, input_size, K_net, r_px)
-                optimizer.zero_grad(set_to_none=True)
-                terms["total"].backward()
-                optimizer.step()
-                step += 1
-                batch_in_epoch += 1
-                values = {k: float(v.detach()) for k, v in terms.items()}
-                if not math.isfinite(values["total"]):
-                    raise FloatingPointError(f"non-finite fine-tuning loss at step {step}: {values}")
-                if step % cfg.log_every == 0 or step == cfg.steps:
-                    logger.log(step, epoch, "train", time.time() - t0, cfg.lr, values)
-                if bar is not None:
-                    bar.update(1)
-                    bar.set_postfix(loss=f"{values['total']:.4g}")
-                done = step >= cfg.steps
-                stopped = stop_at is not None and step >= stop_at and not done
-                if step % cfg.checkpoint_every == 0 or done:
-                    select()  # not at an interruption: a resumed run selects where a straight one does
-                if step % cfg.checkpoint_every == 0 or done or stopped:
-                    checkpoint_out = save()
-                if done or stopped:
-                    break
-            else:  # the epoch ran out
-                epoch += 1
-                batch_in_epoch = 0
-        if checkpoint_out is None:  # steps == 0: still leave a loadable checkpoint
-            checkpoint_out = save()
-    finally:
-        if bar is not None:
-            bar.close()
-        logger.close()
-
-    final = None if stopped else evaluate(feats, P, targets)
+    final = None if run.stopped_early else evaluate(frames["features"], frames["P"], frames["targets"])
+    selection = task.selection
     rows = selection["rows"]
-    result = FineTuneResult(out_dir=out_dir, checkpoint=checkpoint_out, step=step, num_frames=n, initial=initial,
-                            final=final, history=_history(out_dir / "log.csv"), keypoints=info["keypoints"],
-                            config=cfg.to_dict(), loss=loss_cfg.to_dict(), stopped_early=stopped,
-                            seconds=time.time() - t0,
-                            best_checkpoint=best_path if selection["best_step"] is not None else None,
+    result = FineTuneResult(out_dir=out_dir, checkpoint=run.checkpoint, step=run.step, num_frames=n,
+                            initial=info["initial"], final=final, history=_history(out_dir / "log.csv"),
+                            keypoints=info["keypoints"], config=cfg.to_dict(), loss=loss_cfg.to_dict(),
+                            stopped_early=run.stopped_early, seconds=time.time() - t0,
+                            best_checkpoint=task.best_path if selection["best_step"] is not None else None,
                             best_step=selection["best_step"], best_heldout_j2d=selection["best_heldout_j2d"],
                             selection={k: [r.get(k) for r in rows] for k in dict.fromkeys(k for r in rows for k in r)},
                             pixels=pixels, heldout_frames=len(held))

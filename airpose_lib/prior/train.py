@@ -27,6 +27,7 @@ import numpy as np
 import torch
 from torch import Tensor
 
+from airpose_lib.engine import Schedule, TrainingTask, run_engine
 from airpose_lib.geometry import axis_angle_to_matrix, geodesic_angle
 from airpose_lib.profiles import profile_path, profile_section
 
@@ -149,71 +150,88 @@ def train_prior(
         ``loss``/``rot_deg``/``kl``, ``seconds``, and ``val`` metrics if ``val_poses`` was given.
     """
     cfg = config or PriorTrainConfig()
-    data = _as_poses(poses)
+    data = _as_poses(poses)  # (N, 21, 3)
     if data.shape[0] < 2:
         raise ValueError("need at least 2 training poses (batch norm)")
     torch.manual_seed(cfg.seed)  # weight initialisation
     model = VPoser(cfg.num_neurons, cfg.latent_dim)
     model.train()
     opt = torch.optim.Adam(model.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
-    final = cfg.lr_final_fraction
-
-    def lr_at(step: int) -> float:
-        frac = step / max(cfg.steps - 1, 1)
-        return cfg.lr * (final + (1 - final) * 0.5 * (1 + math.cos(math.pi * frac)))
-
-    gen = torch.Generator().manual_seed(cfg.seed + 1)
-    batch = min(cfg.batch_size, data.shape[0])
-    order, pos = torch.randperm(data.shape[0], generator=gen), 0
+    gen = torch.Generator().manual_seed(cfg.seed + 1)  # the batch order
     R_all = axis_angle_to_matrix(data)  # (N, 21, 3, 3), computed once
     J_all = None
     if joints_fn is not None and cfg.w_joints > 0:
         with torch.no_grad():
             J_all = torch.cat([joints_fn(R_all[i:i + 4096]) for i in range(0, len(R_all), 4096)])
     hist: dict = {"config": cfg.to_dict(), "step": [], "loss": [], "rot_deg": [], "kl": []}
-    bar = None
-    if progress:
-        from airpose_lib.progress import progress_bar
-
-        bar = progress_bar(total=cfg.steps, desc="prior", unit="step")
+    task = _PriorTask(model, opt, cfg, data, R_all, J_all, joints_fn, gen, hist, log)
+    # In memory (the result is one saved model): no run folder, so no checkpoints or CSV; rows at
+    # the 0-based steps 0, log_every, ... as the history always had them.
+    schedule = Schedule(steps=cfg.steps, log_every=cfg.log_every, log_offset=1, check_finite=False, what="prior",
+                        progress=progress, progress_kwargs={"unit": "step"})
     t0 = time.perf_counter()
-    for step in range(cfg.steps):
-        if pos + batch > data.shape[0]:
-            order, pos = torch.randperm(data.shape[0], generator=gen), 0
-        idx = order[pos:pos + batch]
-        pos += batch
-        for g in opt.param_groups:
-            g["lr"] = lr_at(step)
-        out = model(data[idx])
-        R_rec = out["pose_body_matrot"]
-        rot = rotation_geodesic(R_rec, R_all[idx]).mean()
-        q_z = out["q_z"]
-        kl = torch.distributions.kl_divergence(q_z, torch.distributions.Normal(0.0, 1.0)).sum(-1).mean()
-        w_kl = cfg.w_kl * min(1.0, (step + 1) / max(cfg.kl_anneal_steps, 1))
-        loss = cfg.w_rot * rot + w_kl * kl
-        if J_all is not None:
-            loss = loss + cfg.w_joints * (joints_fn(R_rec) - J_all[idx]).abs().mean()
-        opt.zero_grad(set_to_none=True)
-        loss.backward()
-        opt.step()
-        if step % cfg.log_every == 0 or step == cfg.steps - 1:
-            rot_deg = math.degrees(rot.item())
-            hist["step"].append(step)
-            hist["loss"].append(loss.item())
-            hist["rot_deg"].append(rot_deg)
-            hist["kl"].append(kl.item())
-            if log is not None:
-                log(f"step {step:6d}  loss {loss.item():.4f}  rot {rot_deg:.2f} deg  kl {kl.item():.1f}")
-        if bar is not None:
-            bar.update(1)
-    if bar is not None:
-        bar.close()
+    run_engine(task, schedule)
     hist["seconds"] = time.perf_counter() - t0
     hist["steps"] = cfg.steps
     model.eval()
     if val_poses is not None:
         hist["val"] = evaluate_prior(model, val_poses, joints_fn=joints_fn)
     return model, hist
+
+
+def _cosine_lr(cfg: PriorTrainConfig, step: int) -> float:
+    """Learning rate of 0-based ``step``: cosine decay from ``lr`` to ``lr * lr_final_fraction``."""
+    final = cfg.lr_final_fraction
+    frac = step / max(cfg.steps - 1, 1)
+    return cfg.lr * (final + (1 - final) * 0.5 * (1 + math.cos(math.pi * frac)))
+
+
+class _PriorTask(TrainingTask):
+    """The engine's task for the prior: VAE steps on random batches of the corpus.
+
+    Each epoch is a permutation of the corpus drawn from the seeded generator ``gen``, cut into
+    ``N // B`` batches (``B = min(batch_size, N)``); dropout and the posterior sample use torch's
+    global RNG, seeded with the weights.
+    """
+
+    def __init__(self, model: VPoser, optimizer, cfg: PriorTrainConfig, data: Tensor, R_all: Tensor,
+                 J_all: Tensor | None, joints_fn: JointsFn | None, gen: torch.Generator, hist: dict,
+                 log: Callable[[str], None] | None) -> None:
+        self.model, self.optimizer, self.cfg = model, optimizer, cfg
+        self.data, self.R_all, self.J_all, self.joints_fn = data, R_all, J_all, joints_fn
+        self.gen, self.hist, self.log = gen, hist, log
+        self.batch = min(cfg.batch_size, data.shape[0])
+
+    def batches(self, epoch: int, start: int):
+        # The generator is consumed epoch after epoch (no resume: the prior trains in memory).
+        n, B = self.data.shape[0], self.batch
+        order = torch.randperm(n, generator=self.gen)
+        for b in range(start, n // B):
+            yield order[b * B:(b + 1) * B]
+
+    def train_step(self, idx: Tensor, step: int) -> dict[str, Tensor]:
+        """Loss of the batch ``idx (B,)``: ``total``, ``rot`` (mean geodesic, radians), ``kl``."""
+        cfg = self.cfg
+        for g in self.optimizer.param_groups:
+            g["lr"] = _cosine_lr(cfg, step)
+        out = self.model(self.data[idx])
+        R_rec = out["pose_body_matrot"]
+        rot = rotation_geodesic(R_rec, self.R_all[idx]).mean()
+        kl = torch.distributions.kl_divergence(out["q_z"], torch.distributions.Normal(0.0, 1.0)).sum(-1).mean()
+        w_kl = cfg.w_kl * min(1.0, (step + 1) / max(cfg.kl_anneal_steps, 1))  # KL annealing
+        loss = cfg.w_rot * rot + w_kl * kl
+        if self.J_all is not None:
+            loss = loss + cfg.w_joints * (self.joints_fn(R_rec) - self.J_all[idx]).abs().mean()
+        return {"total": loss, "rot": rot, "kl": kl}
+
+    def on_log(self, step: int, values) -> None:
+        rot_deg = math.degrees(values["rot"])
+        self.hist["step"].append(step - 1)  # the history counts steps from 0
+        self.hist["loss"].append(values["total"])
+        self.hist["rot_deg"].append(rot_deg)
+        self.hist["kl"].append(values["kl"])
+        if self.log is not None:
+            self.log(f"step {step - 1:6d}  loss {values['total']:.4f}  rot {rot_deg:.2f} deg  kl {values['kl']:.1f}")
 
 
 @torch.no_grad()

@@ -1,11 +1,13 @@
-"""Training: one deterministic, resumable loop (single process or DDP) for every variant, the
-profile's ``train:`` section as configuration, atomic checkpoints, CSV (+ TensorBoard) logs, and
-evaluation of trained networks."""
+"""Training: the still-frame trainings of every variant as tasks of the kit's engine
+(:mod:`airpose_lib.engine`: deterministic, resumable, single process or DDP; atomic checkpoints,
+CSV (+ TensorBoard) logs), the profile's ``train:`` section as configuration, and evaluation of
+trained networks. The checkpoint and log functions are re-exported here from the engine."""
 
-from .checkpoint import kit_version, last_checkpoint, load_checkpoint, save_checkpoint
+from airpose_lib.engine import RunLogger, kit_version, last_checkpoint, load_checkpoint, read_log, save_checkpoint
+
+
 from .config import TrainConfig, load_train_config
 from .evaluate import evaluate, evaluate_checkpoint, load_trained_model, predict
-from .logger import RunLogger, read_log
 from .loop import (
     TrainResult,
     default_dataset_factory,

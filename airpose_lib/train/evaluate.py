@@ -19,12 +19,15 @@ import torch
 from torch import nn
 from torch.utils.data import DataLoader
 
+from airpose_lib.body import load_body_model
 from airpose_lib.body.forward import BodyForward
+from airpose_lib.engine.checkpoint import load_checkpoint
 from airpose_lib.eval import per_joint_table, per_view_table, relative_camera_table
 from airpose_lib.geometry import axis_angle_to_matrix
+from airpose_lib.model import build_model, to_smplx_params
 
-from .checkpoint import load_checkpoint
 from .config import TrainConfig
+from .loop import default_dataset_factory, prepare_data
 
 __all__ = ["predict", "evaluate", "load_trained_model", "evaluate_checkpoint"]
 
@@ -48,9 +51,6 @@ def predict(model: nn.Module, dataset, batch_size: int = 8, device: str | torch.
         joints (N, V, 22, 3), joints_zero_beta (N, V, 22, 3); ``gt``: phi, tau, j3d_cam
         (N, V, 22, 3), joints_zero_beta, index (N,). CPU tensors.
     """
-    from airpose_lib.body import load_body_model
-    from airpose_lib.model import to_smplx_params
-
     device = torch.device(device)
     if isinstance(body, str):
         body = BodyForward(load_body_model(body, "neutral"), vertices=None)
@@ -100,8 +100,6 @@ def evaluate(model: nn.Module, dataset, method: str = "", **predict_kwargs) -> d
 
 def load_trained_model(checkpoint: str | Path, device: str | torch.device = "cpu") -> tuple[nn.Module, TrainConfig]:
     """The network of a training checkpoint (built with ``airpose_lib.model.build_model``)."""
-    from airpose_lib.model import build_model
-
     state = load_checkpoint(checkpoint)
     cfg = TrainConfig(**state["config"])
     model = build_model(cfg.variant, backbone=cfg.backbone, **cfg.model)
@@ -117,8 +115,6 @@ def evaluate_checkpoint(checkpoint: str | Path, split: str = "test", method: str
     ``crops="tight"`` evaluates on the test split's tight-box crops instead of the jittered ones.
     A checkpoint of the ``regressor`` task is evaluated on the cached features of its backbone.
     """
-    from .loop import default_dataset_factory, prepare_data
-
     model, cfg = load_trained_model(checkpoint, device)
     if data is not None:
         cfg = cfg.replace(data=dict(data))

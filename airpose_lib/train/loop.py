@@ -1,8 +1,10 @@
-"""One training loop for every variant: deterministic, resumable, single process or DDP.
+"""The still-frame trainings of every variant: deterministic, resumable, single process or DDP.
 
 ``train(variant, profile, seed, out_dir, resume=True)`` builds the model
 (``airpose_lib.model.build_model``), the still-frame datasets (``airpose_lib.data``) and the
-supervised loss of the variant (``airpose_lib.losses``), and optimises with Adam (AMSGrad).
+supervised loss of the variant (``airpose_lib.losses``), and optimises with Adam (AMSGrad) in the
+kit's one training loop (:func:`airpose_lib.engine.run_engine`); :class:`StillFrameTask` is its
+task, one ``train_step`` per ``cfg.task`` (:data:`TASK_FORWARD`).
 
 Determinism and resume. Python, numpy and torch are seeded from the config's seed; the data order
 and every sample's augmentation depend only on ``(seed, epoch, index)``
@@ -25,34 +27,24 @@ dropout masks (per-process RNG streams).
 from __future__ import annotations
 
 import json
-import math
 import os
 import socket
 import time
-import warnings
-from contextlib import nullcontext
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import torch
 import torch.distributed as dist
 from torch import nn
 from torch.utils.data import DataLoader
 
-from airpose_lib.folder_lock import folder_lock
+from airpose_lib.data.training_input import training_input
+from airpose_lib.engine import EngineRun, Schedule, TrainingTask, process_rank, run_engine, run_folder
+from airpose_lib.model.record import NETWORK_KEY, network_record
 
-from .checkpoint import (
-    capture_rng_state,
-    checkpoint_dir,
-    last_checkpoint,
-    load_checkpoint,
-    restore_rng_state,
-    run_network_entry,
-    save_checkpoint,
-)
 from .config import TrainConfig, load_train_config
-from .logger import RunLogger
 from .sampling import ResumableBatchSampler, SeededDataset, _mix, seed_everything, worker_init_fn
 
 __all__ = [
@@ -68,6 +60,8 @@ __all__ = [
     "regressor_forward_loss",
     "pretrain_forward_loss",
     "TASK_FORWARD",
+    "StillFrameTask",
+    "run_network_entry",
     "validation_loss",
 ]
 
@@ -220,6 +214,25 @@ def pretrain_forward_loss(model: nn.Module, loss_fn: nn.Module, batch: Mapping[s
 #: The step of each task (SPIN's ``train_step`` per task, one engine around them).
 TASK_FORWARD: dict[str, Callable] = {"supervised": forward_loss, "regressor": regressor_forward_loss,
                                      "pretrain": pretrain_forward_loss}
+
+
+def run_network_entry(config: Mapping[str, Any], dataset: Any) -> dict[str, Any]:
+    """``{"network": record}`` for the checkpoints of a run (``{}`` for task ``pretrain``).
+
+    Args:
+        config: the run's ``TrainConfig.to_dict()``, its data resolved (``prepare_data``).
+        dataset: the training split; its ``crop_size`` is the input size (the config's data,
+            manifest or profile when it has none). The camera is the data's
+            (:func:`airpose_lib.data.training_input.training_input`).
+    """
+    if config.get("task") == "pretrain":
+        return {}
+    size, K = training_input(config)
+    size = getattr(dataset, "crop_size", None) or size
+    if size is None:
+        return {}  # a custom dataset nobody can size: readers ask for input_size, as before
+    return {NETWORK_KEY: network_record(config["variant"], config["backbone"], config.get("model") or {},
+                                        int(size), K)}
 
 
 # -- results --------------------------------------------------------------------------------------
@@ -384,20 +397,82 @@ def run_training(cfg: TrainConfig, out_dir: Path, resume: bool, model_factory: C
     saved = (torch.get_num_threads(), torch.are_deterministic_algorithms_enabled(),
              torch.is_deterministic_algorithms_warn_only_enabled())
     try:  # rank 0 is the run folder's one writer
-        with folder_lock(out_dir) if not dist.is_initialized() or dist.get_rank() == 0 else nullcontext():
+        with run_folder(out_dir):
             return _run_training(cfg, out_dir, resume, model_factory, dataset_factory, loss_factory, stop_at)
     finally:
         torch.set_num_threads(saved[0])
         torch.use_deterministic_algorithms(saved[1], warn_only=saved[2])
 
 
+class StillFrameTask(TrainingTask):
+    """The engine's task for the still-frame trainings (``supervised``, ``regressor``,
+    ``pretrain``: the step of :data:`TASK_FORWARD`), one process of a DDP group or alone.
+
+    Batches follow :class:`~airpose_lib.train.sampling.ResumableBatchSampler` (this process's
+    share of each global batch); after the shared weight initialisation every process draws
+    from its own stream (dropout).
+    """
+
+    def __init__(self, cfg: TrainConfig, model: nn.Module, loss_fn: nn.Module, train_ds, val_ds,
+                 device: torch.device, rank: int, world: int, network: Mapping | None = None) -> None:
+        self.cfg, self.model, self.loss_fn, self.device = cfg, model, loss_fn, device
+        self.train_ds, self.val_ds, self.rank, self.world = train_ds, val_ds, rank, world
+        self.network = dict(network or {})  # the checkpoints' network record (run_network_entry)
+        self.optimizer = torch.optim.Adam([p for p in model.parameters() if p.requires_grad], lr=cfg.lr,
+                                          amsgrad=cfg.amsgrad, weight_decay=cfg.weight_decay)
+        self.net: nn.Module = model  # the DDP wrapper once begun
+        self.step_fn = TASK_FORWARD[cfg.task]
+
+    def batches(self, epoch: int, start: int):
+        cfg = self.cfg
+        sampler = ResumableBatchSampler(len(self.train_ds), cfg.batch_size, cfg.seed, epoch, start, self.rank,
+                                        self.world)
+        loader = DataLoader(SeededDataset(self.train_ds), batch_sampler=sampler, num_workers=cfg.num_workers,
+                            worker_init_fn=worker_init_fn, pin_memory=self.device.type == "cuda",
+                            generator=torch.Generator().manual_seed(_mix(cfg.seed, 3, epoch, self.rank)))
+        for batch in loader:
+            yield _to_device(batch, self.device)
+
+    def train_step(self, batch: Mapping[str, torch.Tensor], step: int) -> dict[str, torch.Tensor]:
+        return self.step_fn(self.net, self.loss_fn, batch)
+
+    def train_mode(self) -> None:
+        _set_train_mode(self.model, self.cfg)
+
+    def start(self, run: EngineRun) -> None:
+        seed_everything(_mix(self.cfg.seed, 2, self.rank))  # per-process stream (dropout) after the shared init
+
+    def resume(self, state: Mapping) -> None:
+        _check_resume(state["config"], self.cfg)
+
+    def reseed(self, rank: int, step: int) -> None:
+        seed_everything(_mix(self.cfg.seed, 2, rank, step))
+
+    def begin(self, run: EngineRun) -> None:
+        if run.distributed:
+            self.net = nn.parallel.DistributedDataParallel(
+                self.model, device_ids=[self.device] if self.device.type == "cuda" else None)
+        n_train, cfg = len(self.train_ds), self.cfg
+        if ResumableBatchSampler(n_train, cfg.batch_size, cfg.seed, 0).num_batches() == 0 and run.step < cfg.steps:
+            raise ValueError(f"training split has {n_train} samples, fewer than one batch of {cfg.batch_size}")
+
+    def validate(self, run: EngineRun) -> dict[str, float] | None:
+        if self.rank != 0 or self.val_ds is None or len(self.val_ds) == 0:
+            return None
+        result = validation_loss(self.model, self.loss_fn, self.val_ds, self.cfg, self.device)
+        _set_train_mode(self.model, self.cfg)
+        return result
+
+    def checkpoint_state(self) -> dict:
+        return {"config": self.cfg.to_dict(), "world_size": self.world, **self.network}
+
+    def config(self) -> dict:
+        return self.cfg.to_dict()
+
+
 def _run_training(cfg: TrainConfig, out_dir: Path, resume: bool, model_factory: Callable,
                   dataset_factory: Callable, loss_factory: Callable, stop_at: int | None) -> TrainResult:
-    from airpose_lib.progress import progress_bar
-
-    distributed = dist.is_available() and dist.is_initialized()
-    rank = dist.get_rank() if distributed else 0
-    world = dist.get_world_size() if distributed else 1
+    rank, world = process_rank()
     if world != cfg.world_size:
         cfg = cfg.replace(world_size=world)
     local_rank = int(os.environ.get("LOCAL_RANK", rank))
@@ -420,127 +495,15 @@ def _run_training(cfg: TrainConfig, out_dir: Path, resume: bool, model_factory: 
     train_ds = dataset_factory(cfg, cfg.train_split)
     val_ds = dataset_factory(cfg, cfg.val_split) if cfg.val_every is not None and rank == 0 else None
     network = run_network_entry(cfg.to_dict(), train_ds) if rank == 0 else {}
-    optimizer = torch.optim.Adam([p for p in model.parameters() if p.requires_grad], lr=cfg.lr,
-                                 amsgrad=cfg.amsgrad, weight_decay=cfg.weight_decay)
-
-    step = epoch = batch_in_epoch = 0
-    ckpt_path = last_checkpoint(out_dir) if resume else None
-    if ckpt_path is not None:
-        state = load_checkpoint(ckpt_path, map_location="cpu")
-        _check_resume(state["config"], cfg)
-        model.load_state_dict(state["model"])
-        optimizer.load_state_dict(state["optimizer"])
-        step, epoch, batch_in_epoch = state["step"], state["epoch"], state["batch_in_epoch"]
-        if len(state["rng"]) == world:
-            restore_rng_state(state["rng"][rank])
-        else:
-            warnings.warn(f"checkpoint written by {len(state['rng'])} process(es), resuming with {world}: "
-                          "RNG streams are re-seeded, the run will not match an uninterrupted one")
-            seed_everything(_mix(cfg.seed, 2, rank, step))
-    else:
-        seed_everything(_mix(cfg.seed, 2, rank))  # per-process stream (dropout) after the shared init
-        if rank == 0:
-            for old in checkpoint_dir(out_dir).glob("*.pt"):
-                old.unlink()
-    if distributed:
-        dist.barrier()
-
-    net: nn.Module = model
-    if distributed:
-        net = nn.parallel.DistributedDataParallel(model, device_ids=[device] if device.type == "cuda" else None)
-
-    logger = None
-    if rank == 0:
-        out_dir.mkdir(parents=True, exist_ok=True)
-        (out_dir / "config.json").write_text(json.dumps(cfg.to_dict(), indent=2, sort_keys=True))
-        logger = RunLogger(out_dir, resume_step=step if ckpt_path is not None else None)
-
-    def save() -> Path | None:
-        rng = capture_rng_state()
-        if distributed:
-            all_rng: list = [None] * world
-            dist.all_gather_object(all_rng, rng)
-        else:
-            all_rng = [rng]
-        path = None
-        if rank == 0:
-            path = save_checkpoint(out_dir, {
-                "model": model.state_dict(), "optimizer": optimizer.state_dict(), "rng": all_rng,
-                "step": step, "epoch": epoch, "batch_in_epoch": batch_in_epoch, "config": cfg.to_dict(),
-                "world_size": world, **network}, keep=cfg.keep_checkpoints)
-        if distributed:
-            dist.barrier()
-        return path
-
-    def validate() -> dict[str, float] | None:
-        result = None
-        if rank == 0 and val_ds is not None and len(val_ds) > 0:
-            result = validation_loss(model, loss_fn, val_ds, cfg, device)
-            logger.log(step, epoch, "val", time.time() - t_start, cfg.lr, result)
-            _set_train_mode(model, cfg)
-        if distributed:
-            dist.barrier()
-        return result
-
-    step_fn = TASK_FORWARD[cfg.task]
-    bar = progress_bar(total=cfg.steps, initial=step, enabled=cfg.progress and rank == 0, desc=f"train {cfg.variant}")
+    task = StillFrameTask(cfg, model, loss_fn, train_ds, val_ds, device, rank, world, network)
+    schedule = Schedule(steps=cfg.steps, log_every=cfg.log_every, checkpoint_every=cfg.checkpoint_every,
+                        keep_checkpoints=cfg.keep_checkpoints, val_every=cfg.val_every, grad_clip=cfg.grad_clip,
+                        stop_at=stop_at, what=f"train {cfg.variant}", progress=cfg.progress)
     t_start = time.time()
-    last_values: dict[str, float] | None = None
-    val_losses: dict[str, float] | None = None
-    checkpoint: Path | None = ckpt_path
-    stopped = False
-    _set_train_mode(model, cfg)
-    n_train = len(train_ds)
-    if ResumableBatchSampler(n_train, cfg.batch_size, cfg.seed, 0).num_batches() == 0 and step < cfg.steps:
-        raise ValueError(f"training split has {n_train} samples, fewer than one batch of {cfg.batch_size}")
-    try:
-        while step < cfg.steps and not stopped:
-            sampler = ResumableBatchSampler(n_train, cfg.batch_size, cfg.seed, epoch, batch_in_epoch, rank, world)
-            loader = DataLoader(SeededDataset(train_ds), batch_sampler=sampler, num_workers=cfg.num_workers,
-                                worker_init_fn=worker_init_fn, pin_memory=device.type == "cuda",
-                                generator=torch.Generator().manual_seed(_mix(cfg.seed, 3, epoch, rank)))
-            for batch in loader:
-                batch = _to_device(batch, device)
-                terms = step_fn(net, loss_fn, batch)
-                optimizer.zero_grad(set_to_none=True)
-                terms["total"].backward()
-                if cfg.grad_clip is not None:
-                    nn.utils.clip_grad_norm_(model.parameters(), cfg.grad_clip)
-                optimizer.step()
-                step += 1
-                batch_in_epoch += 1
-
-                values = torch.stack([v.detach().float() for v in terms.values()])
-                if distributed:
-                    dist.all_reduce(values)
-                    values /= world
-                last_values = dict(zip(terms.keys(), values.tolist()))
-                if not math.isfinite(last_values["total"]):
-                    raise FloatingPointError(f"non-finite loss at step {step}: {last_values}")
-                if rank == 0:
-                    if step % cfg.log_every == 0 or step == cfg.steps:
-                        logger.log(step, epoch, "train", time.time() - t_start, cfg.lr, last_values)
-                    bar.update(1)
-                    bar.set_postfix(loss=f"{last_values['total']:.4g}")
-                done = step >= cfg.steps
-                stopped = stop_at is not None and step >= stop_at and not done
-                if step % cfg.checkpoint_every == 0 or done or stopped:
-                    checkpoint = save() or checkpoint
-                if cfg.val_every is not None and ((cfg.val_every and step % cfg.val_every == 0) or done):
-                    val_losses = validate() or val_losses
-                if done or stopped:
-                    break
-            else:  # the epoch ran out
-                epoch += 1
-                batch_in_epoch = 0
-    finally:
-        bar.close()
-        if logger is not None:
-            logger.close()
-
-    result = TrainResult(out_dir=out_dir, step=step, checkpoint=checkpoint,
-                         train_loss=last_values["total"] if last_values else None, val_losses=val_losses,
-                         tensorboard=bool(logger and logger.tensorboard), stopped_early=stopped,
+    run = run_engine(task, schedule, out_dir, resume)
+    result = TrainResult(out_dir=out_dir, step=run.step, checkpoint=run.checkpoint,
+                         train_loss=run.values["total"] if run.values else None, val_losses=run.val,
+                         tensorboard=run.tensorboard, stopped_early=run.stopped_early,
                          config=cfg.to_dict(), wall_s=round(time.time() - t_start, 1))
     if rank == 0:
         (out_dir / "result.json").write_text(json.dumps(result.to_json(), indent=2))

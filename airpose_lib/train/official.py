@@ -15,11 +15,11 @@ import torch
 
 from airpose_lib.atomic import atomic_path
 from airpose_lib.data.official_synthetic import OfficialSyntheticDataset
+from airpose_lib.engine.checkpoint import FORMAT_VERSION, kit_version
 from airpose_lib.model import AirPoseNet
 from airpose_lib.model.official import backbone_name, load_official_checkpoint
 
 from .ablation import VARIANT_LABELS, AblationRun
-from .checkpoint import FORMAT_VERSION, kit_version
 from .config import TrainConfig
 from .evaluate import evaluate
 

@@ -28,13 +28,13 @@ from torch.utils.data import DataLoader
 from airpose_lib.atomic import atomic_path
 from airpose_lib.data.dataset import StillFrameDataset
 from airpose_lib.data.shards import sha256_file
+from airpose_lib.engine.checkpoint import kit_version, load_checkpoint
 from airpose_lib.eval.metrics import rotation_error
 from airpose_lib.folder_lock import file_lock
 from airpose_lib.geometry import rot6d_to_matrix
 from airpose_lib.losses.pretrain import heading_bin
 from airpose_lib.paths import cache_dir, run_path
 
-from .checkpoint import kit_version, load_checkpoint
 from .config import TrainConfig, load_train_config
 
 __all__ = ["PRETRAIN_VERSION", "pretrain_config", "backbone_key", "ensure_backbone", "profile_backbone", "profile_backbone_key",
@@ -159,7 +159,7 @@ def ensure_backbone(profile: str, data_root: str | Path, data_fingerprint: str, 
 
 
 def _load_pretrain_model(checkpoint: str | Path, cfg: TrainConfig) -> torch.nn.Module:
-    from .loop import default_model_factory
+    from .loop import default_model_factory  # lazy: a real circle, see train() above
 
     model = default_model_factory(cfg)
     model.load_state_dict(load_checkpoint(checkpoint)["model"])

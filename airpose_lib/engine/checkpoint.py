@@ -6,10 +6,14 @@ A checkpoint (``torch.save`` dict, loadable with ``weights_only=True``) holds
 ``optimizer``    the optimiser's ``state_dict``
 ``rng``          per process: torch CPU (and CUDA), numpy and python RNG states
 ``step``         optimiser steps done; ``epoch`` and ``batch_in_epoch``: the data-order position
-``config``       the :class:`TrainConfig` as a dict; ``kit_version``; ``world_size``
-``network``      what rebuilds the network and forms its input (:mod:`airpose_lib.model.record`:
-                 variant, backbone, input size, normalisation, camera rule and camera), but for
-                 the backbone pretraining, whose network is not a variant
+``format_version``, ``kit_version``
+
+and the task's own entries (:meth:`airpose_lib.engine.TrainingTask.checkpoint_state`): the
+still-frame trainings add ``config`` (the ``TrainConfig`` as a dict), ``world_size`` and
+``network`` (what rebuilds the network and forms its input, :mod:`airpose_lib.model.record`:
+variant, backbone, input size, normalisation, camera rule and camera; not for the backbone
+pretraining, whose network is not a variant); fine-tuning also ``input_size``, ``camera_K`` and
+``finetune``.
 
 ``<out>/checkpoints/last.pt`` is always the newest; ``step_<n>.pt`` copies are kept as configured.
 """
@@ -17,7 +21,6 @@ A checkpoint (``torch.save`` dict, loadable with ``weights_only=True``) holds
 from __future__ import annotations
 
 import random
-from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -25,9 +28,7 @@ import numpy as np
 import torch
 
 from airpose_lib.atomic import atomic_path
-from airpose_lib.data.training_input import training_input
 from airpose_lib.errors import reading
-from airpose_lib.model.record import NETWORK_KEY, network_record
 
 __all__ = [
     "kit_version",
@@ -37,7 +38,6 @@ __all__ = [
     "load_checkpoint",
     "checkpoint_dir",
     "last_checkpoint",
-    "run_network_entry",
 ]
 
 FORMAT_VERSION = 1
@@ -117,22 +117,3 @@ def load_checkpoint(path: str | Path, map_location: str | torch.device = "cpu") 
     if state.get("format_version") != FORMAT_VERSION:
         raise ValueError(f"{path}: unsupported checkpoint format {state.get('format_version')!r}")
     return state
-
-
-def run_network_entry(config: Mapping[str, Any], dataset: Any) -> dict[str, Any]:
-    """``{"network": record}`` for the checkpoints of a run (``{}`` for task ``pretrain``).
-
-    Args:
-        config: the run's ``TrainConfig.to_dict()``, its data resolved (``prepare_data``).
-        dataset: the training split; its ``crop_size`` is the input size (the config's data,
-            manifest or profile when it has none). The camera is the data's
-            (:func:`airpose_lib.data.training_input.training_input`).
-    """
-    if config.get("task") == "pretrain":
-        return {}
-    size, K = training_input(config)
-    size = getattr(dataset, "crop_size", None) or size
-    if size is None:
-        return {}  # a custom dataset nobody can size: readers ask for input_size, as before
-    return {NETWORK_KEY: network_record(config["variant"], config["backbone"], config.get("model") or {},
-                                        int(size), K)}

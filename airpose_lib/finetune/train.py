@@ -62,6 +62,8 @@ import torch
 from torch import nn
 
 from airpose_lib.atomic import atomic_path
+from airpose_lib.body import load_body_model
+from airpose_lib.data.official_layout import load_sequence
 from airpose_lib.engine import (
     FORMAT_VERSION as CHECKPOINT_FORMAT,
     EngineRun,
@@ -75,9 +77,16 @@ from airpose_lib.engine import (
     run_engine,
 )
 from airpose_lib.folder_lock import folder_lock
+from airpose_lib.model import to_smplx_params
 from airpose_lib.model.record import network_record
+from airpose_lib.prior import load_prior
 from airpose_lib.profiles import profile_path, profile_section
 from airpose_lib.train.sampling import epoch_permutation, seed_everything
+
+from .keypoints import agreement_masks, agreement_summary, agreement_targets, pixel_settings, resolution_scales
+from .loss import FineTuneLoss, finetune_loss_config
+from .network import load_network
+from .predict import frames_in_range, image_sizes, regress_features, sequence_features
 
 __all__ = ["FineTuneConfig", "FineTuneResult", "finetune_config", "finetune", "evaluate_finetune_loss",
            "heldout_split"]
@@ -241,10 +250,6 @@ class FineTuneResult:
 
 # -- pieces ---------------------------------------------------------------------------------------
 def _load_frames(root: Path, cfg: FineTuneConfig):
-    from airpose_lib.data.official_layout import load_sequence
-
-    from .predict import frames_in_range
-
     detectors = tuple(dict.fromkeys(("openpose", "alphapose", cfg.detector)))
     frames = None if cfg.frames is None else frames_in_range(root, cfg.frames[0], cfg.frames[1])
     return load_sequence(root, frames=frames, detectors=detectors, missing_detections=cfg.missing_detections,
@@ -275,8 +280,6 @@ def _feature_fingerprint(model, seq, cfg: FineTuneConfig, input_size: int, K_net
 
 def _feature_cache(model, seq, cfg: FineTuneConfig, input_size: int, K_net: np.ndarray, out_dir: Path,
                    progress: bool) -> dict:
-    from .predict import sequence_features
-
     path = out_dir / "feature_cache.pt"
     fp = _feature_fingerprint(model, seq, cfg, input_size, K_net)
     if path.is_file():
@@ -297,10 +300,6 @@ def _feature_cache(model, seq, cfg: FineTuneConfig, input_size: int, K_net: np.n
 
 def _step_terms(model, loss_fn, feat, P, targets, K, input_size: int, K_net=None,
                 pixel_scale=None) -> dict[str, torch.Tensor]:
-    from airpose_lib.model import to_smplx_params
-
-    from .predict import regress_features
-
     out = regress_features(model, feat, P, input_size)
     # P lives in the virtual camera K_net (a weak camera converts there); the body projects with K.
     K_p = K if K_net is None else K_net
@@ -323,8 +322,6 @@ def evaluate_finetune_loss(model: nn.Module, loss_fn: nn.Module, features: torch
     Returns:
         term -> frame-weighted mean (the ``FineTuneLoss`` keys).
     """
-    from .loss import FineTuneLoss
-
     cfg = dataclasses.replace(loss_fn.config, vposer_latent="mean")
     det = FineTuneLoss(cfg, body_model=loss_fn.body_model, prior=loss_fn.prior)
     was_training = model.training
@@ -531,11 +528,6 @@ class _FineTuneTask(TrainingTask):
 
 def _finetune(checkpoint: Path, root: Path, out_dir: Path, cfg: FineTuneConfig, resume: bool, progress: bool,
               prior, body_model, stop_at, diagnostic) -> FineTuneResult:
-    from .keypoints import agreement_masks, agreement_summary, agreement_targets, pixel_settings, resolution_scales
-    from .loss import FineTuneLoss, finetune_loss_config
-    from .network import load_network
-    from .predict import image_sizes
-
     t0 = time.time()
     if cfg.device == "auto":
         device = torch.device("cuda" if torch.cuda.is_available() else "cpu")
@@ -585,12 +577,8 @@ def _finetune(checkpoint: Path, root: Path, out_dir: Path, cfg: FineTuneConfig, 
         p.requires_grad_(True)
     loss_cfg = finetune_loss_config(train_cfg.variant, cfg.official_loss, **cfg.loss)
     if body_model is None:
-        from airpose_lib.body import load_body_model
-
         body_model = load_body_model(cfg.body_source, "neutral")
     if prior is None and loss_cfg.w_vposer != 0:
-        from airpose_lib.prior import load_prior
-
         prior = load_prior(cfg.prior, cfg.prior_path, tag=cfg.prior_tag)
     loss_fn = FineTuneLoss(loss_cfg, body_model=body_model, prior=prior).to(device)
     optimizer = torch.optim.Adam(params, lr=cfg.lr, amsgrad=cfg.amsgrad, weight_decay=cfg.weight_decay)

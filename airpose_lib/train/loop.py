@@ -40,11 +40,22 @@ import torch.distributed as dist
 from torch import nn
 from torch.utils.data import DataLoader
 
+from airpose_lib.assets import locate
+from airpose_lib.data.dataset import StillFrameDataset
+from airpose_lib.data.generate import ensure_still_dataset
+from airpose_lib.data.manifest import load_manifest
+from airpose_lib.data.official_synthetic import OfficialSyntheticDataset
 from airpose_lib.data.training_input import training_input
 from airpose_lib.engine import EngineRun, Schedule, TrainingTask, process_rank, run_engine, run_folder
+from airpose_lib.losses import SupervisedLoss, loss_config
+from airpose_lib.losses.pretrain import PretrainLoss, PretrainLossConfig
+from airpose_lib.model import build_model, to_smplx_params
+from airpose_lib.model.pretrain import PretrainNet
 from airpose_lib.model.record import NETWORK_KEY, network_record
+from airpose_lib.paths import run_path
 
 from .config import TrainConfig, load_train_config
+from .features import FeatureDataset, ensure_features, load_backbone_file
 from .sampling import ResumableBatchSampler, SeededDataset, _mix, seed_everything, worker_init_fn
 
 __all__ = [
@@ -72,15 +83,10 @@ def default_model_factory(cfg: TrainConfig) -> nn.Module:
     (its backbone loaded from ``cfg.pretrained`` when given; frozen for the ``regressor`` task, whose
     checkpoints therefore hold the whole network), or a
     :class:`~airpose_lib.model.pretrain.PretrainNet` for ``pretrain``."""
-    from airpose_lib.model import build_model
-    from airpose_lib.model.pretrain import PretrainNet
-
     if cfg.task == "pretrain":
         return PretrainNet(cfg.backbone, **cfg.model)
     model = build_model(cfg.variant, backbone=cfg.backbone, **cfg.model)
     if cfg.pretrained is not None:
-        from .features import load_backbone_file
-
         backbone, meta = load_backbone_file(cfg.pretrained)
         if meta["backbone"] != cfg.backbone:
             raise ValueError(f"{cfg.pretrained} is a {meta['backbone']}, the config asks for {cfg.backbone}")
@@ -102,8 +108,6 @@ def prepare_data(cfg: TrainConfig, progress: bool | None = None) -> TrainConfig:
     if data.get("source", "generated") == "official_synthetic":
         # The official release (data_manifests/official_synthetic.yaml): nothing to generate.
         if data.get("root") is None:
-            from airpose_lib.assets import locate
-
             data["root"] = str(locate("official_synthetic").path)
         if cfg.body_source != "smplx":
             raise ValueError("training on the official synthetic data needs body_source='smplx' (its betas "
@@ -115,21 +119,16 @@ def prepare_data(cfg: TrainConfig, progress: bool | None = None) -> TrainConfig:
         if source is None:
             raise ValueError("no still-frame dataset: set data.root, or train with a profile that has a "
                              "`data: still:` section")
-        from airpose_lib.data.generate import ensure_still_dataset
 
         data["root"] = str(ensure_still_dataset(source, progress=show))
     cfg = cfg.replace(data=data)
     if cfg.pretrained == "profile":
         # lazy: the pretraining module runs this engine itself
-        from airpose_lib.data.manifest import load_manifest
-
         from .pretrain import ensure_backbone
 
         fingerprint = load_manifest(Path(data["root"]))["fingerprint"]
         cfg = cfg.replace(pretrained=str(ensure_backbone(cfg.profile, data["root"], fingerprint, progress=show)))
     if cfg.task == "regressor":
-        from .features import ensure_features
-
         if cfg.pretrained is None:
             raise ValueError("the regressor task trains on the features of a pretrained backbone: set pretrained")
         for split in {cfg.train_split, cfg.val_split}:
@@ -140,20 +139,14 @@ def prepare_data(cfg: TrainConfig, progress: bool | None = None) -> TrainConfig:
 def default_dataset_factory(cfg: TrainConfig, split: str):
     """``StillFrameDataset(cfg.data["root"], split, **other data keys)`` (after :func:`prepare_data`),
     or ``OfficialSyntheticDataset`` when ``cfg.data["source"] == "official_synthetic"``."""
-    from airpose_lib.data.dataset import StillFrameDataset
-
     kwargs = {k: v for k, v in cfg.data.items() if k not in ("root", "profile", "source")}
     if cfg.data.get("root") is None:
         raise ValueError("cfg.data has no root; call prepare_data(cfg) first")
     if cfg.task == "regressor":
-        from .features import FeatureDataset, ensure_features
-
         crops = kwargs.pop("crops", "jittered")
         feats = ensure_features(cfg.pretrained, cfg.data["root"], split, crops)
         return FeatureDataset(cfg.data["root"], split, feats, crops=crops, **kwargs)
     if cfg.data.get("source", "generated") == "official_synthetic":
-        from airpose_lib.data.official_synthetic import OfficialSyntheticDataset
-
         return OfficialSyntheticDataset(cfg.data["root"], split=split, **kwargs)
     return StillFrameDataset(cfg.data["root"], split=split, **kwargs)
 
@@ -161,9 +154,6 @@ def default_dataset_factory(cfg: TrainConfig, split: str):
 def default_loss_factory(cfg: TrainConfig) -> nn.Module:
     """The variant's :class:`~airpose_lib.losses.SupervisedLoss` (``cfg.loss`` overrides), or the
     pretraining objective :class:`~airpose_lib.losses.pretrain.PretrainLoss` (task ``pretrain``)."""
-    from airpose_lib.losses import SupervisedLoss, loss_config
-    from airpose_lib.losses.pretrain import PretrainLoss, PretrainLossConfig
-
     if cfg.task == "pretrain":
         return PretrainLoss(PretrainLossConfig(**cfg.loss), source=cfg.body_source)
     return SupervisedLoss(loss_config(cfg.variant, cfg.official_loss, **cfg.loss), source=cfg.body_source)
@@ -179,8 +169,6 @@ MAX_WEAK_SCALE = 5.0
 
 
 def _supervised_terms(out: Mapping, loss_fn: nn.Module, batch: Mapping[str, torch.Tensor], input_size: int) -> dict:
-    from airpose_lib.model import to_smplx_params
-
     if "cam" in out:
         cam = out["cam"]
         out = dict(out, cam=torch.cat((cam[..., :1].clamp(MIN_WEAK_SCALE, MAX_WEAK_SCALE), cam[..., 1:]), dim=-1))
@@ -267,8 +255,6 @@ class TrainResult:
 def default_out_dir(profile: str | Path | None, variant: str, seed: int) -> Path:
     """``<runs>/train/<profile>/<variant>/seed<seed>``, ``<runs>`` = :func:`airpose_lib.paths.runs_root`
     (the checkout's ``runs/`` or ``$AIRPOSE_RUNS``, whatever the working directory)."""
-    from airpose_lib.paths import run_path
-
     name = Path(str(profile)).stem if profile is not None else "default"
     return run_path("train", name, variant, f"seed{seed}")
 

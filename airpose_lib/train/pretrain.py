@@ -27,11 +27,13 @@ from torch.utils.data import DataLoader
 
 from airpose_lib.atomic import atomic_path
 from airpose_lib.data.dataset import StillFrameDataset
+from airpose_lib.data.generate import ensure_still_dataset
+from airpose_lib.data.manifest import load_manifest
 from airpose_lib.data.shards import sha256_file
 from airpose_lib.engine.checkpoint import kit_version, load_checkpoint
 from airpose_lib.eval.metrics import rotation_error
 from airpose_lib.folder_lock import file_lock
-from airpose_lib.geometry import rot6d_to_matrix
+from airpose_lib.geometry import axis_angle_to_matrix, rot6d_to_matrix
 from airpose_lib.losses.pretrain import heading_bin
 from airpose_lib.paths import cache_dir, run_path
 
@@ -73,8 +75,6 @@ def gate_metrics(model: torch.nn.Module, dataset, batch_size: int = 32, max_samp
     Returns ``heading_acc`` (fraction), ``root_rot_median_deg`` / ``root_rot_mean_deg`` of the
     linear ``phi6d`` head, ``theta_mean_deg`` (mean over the 21 joints) and ``n`` crops.
     """
-    from airpose_lib.geometry import axis_angle_to_matrix
-
     model = model.eval()
     n_bins = model.n_heading_bins
     rot, th, hit = [], [], []
@@ -168,17 +168,12 @@ def _load_pretrain_model(checkpoint: str | Path, cfg: TrainConfig) -> torch.nn.M
 
 def profile_backbone_key(profile: str, data_root: str | Path) -> str:
     """The key of the backbone a profile asks for on the dataset in ``data_root``."""
-    from airpose_lib.data.manifest import load_manifest
-
     cfg = pretrain_config(profile).replace(data={"root": str(data_root)})
     return backbone_key(cfg, load_manifest(Path(data_root))["fingerprint"])
 
 
 def profile_backbone(profile: str, progress: bool = False) -> Path:
     """The backbone of a profile for its own still-frame dataset (generated first if missing)."""
-    from airpose_lib.data.generate import ensure_still_dataset
-    from airpose_lib.data.manifest import load_manifest
-
     root = ensure_still_dataset(profile, progress=progress)
     return ensure_backbone(profile, root, load_manifest(Path(root))["fingerprint"], progress=progress)
 

@@ -78,7 +78,7 @@ def _worker_shard(args: tuple[int, str]) -> dict:
 
 def _body_model_hashes(config: GenerationConfig) -> dict[str, str]:
     """SHA-256 of the body-model file of each ground-truth gender (the data depend on it)."""
-    from airpose_lib.body import check_model_file, resolve_model_file
+    from airpose_lib.body import check_model_file, resolve_model_file  # torch: see _run_inprocess
 
     return {g: sha256_file(check_model_file(resolve_model_file(config.body_source, g)))  # a damaged file
             for g in config.scene.genders}                                            # is named as such

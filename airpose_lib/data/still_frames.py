@@ -64,6 +64,8 @@ class StillFrameGenerator:
     """
 
     def __init__(self, config: GenerationConfig, pose_sampler=None) -> None:
+        # Imported when a generator is built (once per rendering process): the renderer starts
+        # VTK/pyvista (optional GL).
         import torch
 
         from airpose_lib.body import BODY_25_FROM_SMPLX, load_body_model

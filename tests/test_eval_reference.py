@@ -166,6 +166,39 @@ def test_airpose_reproduce_compares_after_notebook_02_and_writes_only_with_the_f
     assert "0 differ by more than the reference's seed spread" in capsys.readouterr().out
 
 
+def test_airpose_reproduce_installs_and_compares_the_recordings_after_notebook_05(tmp_path, monkeypatch, capsys):
+    import airpose_lib.eval.reference as reference
+    import airpose_lib.reproduce as rep
+    from airpose_lib import cli
+    from airpose_lib.reproduce.runner import NotebookResult, RunReport
+
+    out_dir = tmp_path / "runs" / "cpu" / "05_airpose_plus"
+    out_dir.mkdir(parents=True)
+    _claims([True, True, False]).to_csv(out_dir / "paper_claims.csv", index=False)
+    for name in RECORDING_FILES:
+        if not (out_dir / name).exists():
+            (out_dir / name).write_text("x\n")
+    ran = ["03_trajectories"]  # a run with neither notebook 02 nor 05
+
+    def fake_run(profile, **kw):
+        r = RunReport(profile="cpu", description="", kit_version="0", kernel_name="python3",
+                      started_at="now", run_dir=str(out_dir.parent), figures_dir=str(tmp_path / "figures"))
+        r.results = [NotebookResult(n, f"{n}.ipynb", status="ok", parameters={"output_dir": str(out_dir)})
+                     for n in ran]
+        return r
+
+    monkeypatch.setattr(rep, "run_profile", fake_run)
+    monkeypatch.setattr(reference, "RESULTS_ROOT", tmp_path / "results")
+    assert cli.main(["reproduce", "--profile", "cpu", "--only", "03", "--write-reference"]) == 2  # nothing to write
+    assert "neither 02_ablation_table nor 05_airpose_plus ran" in capsys.readouterr().err
+    ran[:] = ["03_trajectories", "05_airpose_plus"]
+    assert cli.main(["reproduce", "--profile", "cpu", "--only", "03", "05", "--write-reference"]) == 0
+    assert "wrote" in capsys.readouterr().out
+    assert (tmp_path / "results" / "cpu" / "recordings" / "paper_claims.csv").is_file()
+    assert cli.main(["reproduce", "--profile", "cpu", "--only", "05"]) == 0
+    assert "same verdicts" in capsys.readouterr().out
+
+
 def _claims(holds):
     return pd.DataFrame({"claim": ["pose", "uav2", "uav2"], "sequence": ["person1", "person1", "person1"],
                          "measure": ["MPJPE m", "t error m", "rot error deg"], "value": [0.05, 1.0, 5.0],

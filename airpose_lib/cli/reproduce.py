@@ -45,19 +45,26 @@ def _cmd_reproduce(args: argparse.Namespace) -> int:
 
 
 def _check_reference(report, write: bool) -> None:
-    """After notebook 02: its Table I bundle against ``results/<profile>/``, or installed there
-    with ``--write-reference``. Here, not in the runner: the runner imports nothing of the kit."""
-    from airpose_lib.eval.reference import reference_report
+    """After notebook 02 (Table I) and notebook 05 (the recordings' claims): their results against
+    ``results/<profile>/``, or installed there with ``--write-reference``. Here, not in the
+    runner: the runner imports nothing of the kit."""
+    from airpose_lib.eval.reference import recordings_report, reference_report
 
-    nb = next((r for r in report.results if r.name == "02_ablation_table" and r.status == "ok"), None)
-    if nb is None:
-        if write:
-            raise CLIError("--write-reference: notebook 02_ablation_table did not run; add --only 02_ablation_table")
-        return
-    msg = reference_report(Path(nb.parameters["output_dir"]) / "results", report.profile, write=write,
-                           command=" ".join(["airpose", *sys.argv[1:]]))
-    if msg:
-        print(msg)
+    done = {r.name: r for r in report.results if r.status == "ok"}
+    if write and not {"02_ablation_table", "05_airpose_plus"} & set(done):
+        raise CLIError("--write-reference: neither 02_ablation_table nor 05_airpose_plus ran; add --only "
+                       "02_ablation_table (Table I) or --only 03 04 05 (the recordings)")
+    command = " ".join(["airpose", *sys.argv[1:]])
+    messages = []
+    if "02_ablation_table" in done:
+        out = Path(done["02_ablation_table"].parameters["output_dir"])
+        messages.append(reference_report(out / "results", report.profile, write=write, command=command))
+    if "05_airpose_plus" in done:
+        out = Path(done["05_airpose_plus"].parameters["output_dir"])
+        messages.append(recordings_report(out, report.profile, write=write, command=command))
+    for msg in messages:
+        if msg:
+            print(msg)
 
 
 def add_reproduce(sub) -> None:
@@ -90,6 +97,7 @@ def add_reproduce(sub) -> None:
     rep.add_argument("--quiet", action="store_true",
                      help="print only failures and where the figures are (no per-notebook lines or table)")
     rep.add_argument("--write-reference", action="store_true",
-                     help="store notebook 02's Table I files as the reference in results/<profile>/ "
-                          "(default: only compare with it)")
+                     help="store notebook 02's Table I files as the reference in results/<profile>/, and "
+                          "notebook 05's recording tables in results/<profile>/recordings/ "
+                          "(default: only compare with them)")
     rep.set_defaults(func=_cmd_reproduce)

@@ -33,7 +33,7 @@ from airpose_lib.atomic import atomic_path
 
 from .ablation import PER_SEED_METRICS, table_to_markdown
 
-__all__ = ["REFERENCE_FILES", "RESULTS_ROOT", "reference_dir", "machine_description", "git_commit",
+__all__ = ["REFERENCE_FILES", "RESULTS_ROOT", "reference_dir", "machine_description", "git_commit", "provenance_record",
            "train_wall_s", "oracle_summary", "write_reference", "read_reference_table", "side_by_side",
            "compare_to_reference", "check_against_reference", "install_reference", "reference_report",
            "RECORDING_FILES", "install_recordings_reference", "recordings_report"]
@@ -126,6 +126,14 @@ def _write_text(path: Path, text: str) -> None:
         tmp.write_text(text)
 
 
+def provenance_record(profile: str, command: str) -> dict:
+    """What every results bundle records about how it was made: profile, kit version, git commit,
+    time (UTC), machine and the command."""
+    return {"profile": profile, "kit_version": __version__, "git": git_commit(),
+            "created_at": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
+            "machine": machine_description(), "command": command}
+
+
 def _write_csv(path: Path, frame: pd.DataFrame, index: bool) -> None:
     with atomic_path(path) as tmp:
         frame.to_csv(tmp, index=index)
@@ -158,9 +166,7 @@ def write_reference(out_dir: str | Path, *, table: pd.DataFrame, per_seed: pd.Da
     if oracle is not None:
         _write_csv(out / "oracle.csv", oracle_summary(oracle), index=False)
     provenance = {
-        "profile": profile, "kit_version": __version__, "git": git_commit(),
-        "created_at": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
-        "machine": machine_description(), "command": command,
+        **provenance_record(profile, command),
         "wall_s": {k: (round(float(v), 1) if v is not None else None) for k, v in step_wall_s.items()},
         **dict(extra or {}),
     }
@@ -334,10 +340,7 @@ def install_recordings_reference(notebook_dir: str | Path, profile: str, command
     for name in RECORDING_FILES:
         with atomic_path(dst / name) as tmp:
             shutil.copyfile(src / name, tmp)
-    provenance = {"profile": profile, "kit_version": __version__, "git": git_commit(),
-                  "created_at": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
-                  "machine": machine_description(), "command": command}
-    _write_text(dst / "provenance.json", json.dumps(provenance, indent=2, default=str) + "\n")
+    _write_text(dst / "provenance.json", json.dumps(provenance_record(profile, command), indent=2, default=str) + "\n")
     return dst
 
 

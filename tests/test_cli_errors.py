@@ -258,3 +258,49 @@ def test_user_error_classes_are_where_the_cli_looks():
         module, _, name = spec.partition(":")
         cls = getattr(importlib.import_module(module), name, None)
         assert isinstance(cls, type) and issubclass(cls, Exception), f"{spec}: no such exception class"
+
+
+def _fake_node(*extra: str) -> list[str]:
+    return ["node", "--id", "1", "--port", "5999", "--backend", "fake", "--insecure", "--frames", "2", *extra]
+
+
+# (name, argv, what the one line must say): bad flag values, caught before a drone starts
+BAD_VALUES = [
+    ("node --peers bad", _fake_node("--peers", "bad"), "--peers: peer 'bad': expected ID@PORT"),
+    ("node --peers x@5002", _fake_node("--peers", "x@5002"), "drone id 1..255 and a port 1..65535"),
+    ("node --peers own id", _fake_node("--peers", "1@5002"), "own id 1"),
+    ("node --id 0", ["node", "--id", "0", "--port", "5999", "--backend", "fake", "--insecure"], "--id 0: give a drone id"),
+    ("node --port 99999", ["node", "--id", "1", "--port", "99999", "--backend", "fake", "--insecure"], "--port 99999"),
+    ("node --window-ms -5", _fake_node("--window-ms", "-5"), "--window-ms -5.0: give > 0"),
+    ("node --link-loss 2", _fake_node("--link-loss", "2"), "--link-loss 2.0: give a probability"),
+    ("node --detector foo", _fake_node("--detector", "foo", "--source", "SEQ"), "--detector foo: unknown; give one of openpose"),
+    ("node --source synthetic:bogus=1", _fake_node("--source", "synthetic:bogus=1"), "unknown synthetic option 'bogus'"),
+    ("node --source synthetic:views=abc", _fake_node("--source", "synthetic:views=abc"), "views='abc' is not a valid"),
+    ("node --view 5", _fake_node("--view", "5"), "view 5 not in the 2-view source synthetic; give --view 0..1"),
+    ("launch --drones 0", ["launch", "--drones", "0", "--backend", "fake"], "--drones 0: give 1..255 drones"),
+    ("keys --drones 0", ["keys", "--drones", "0", "--out", "KEYS"], "--drones 0: give 1..255 drones"),
+    ("export --calibration", ["export", "--calibration", "SEQ"], "is not a still-frame dataset (no manifest.yaml)"),
+]
+
+
+@pytest.mark.parametrize("argv,says", [c[1:] for c in BAD_VALUES], ids=[c[0] for c in BAD_VALUES])
+def test_bad_option_values_are_one_line(argv, says, inputs, capsys):
+    argv = [str(inputs["tmp"] / "keys0") if a == "KEYS" else str(inputs["seq"]) if a == "SEQ" else a for a in argv]
+    code, err = _run(argv, capsys)
+    lines = [line for line in err.splitlines() if line.strip()]
+    assert code == 2 and len(lines) == 1 and lines[0].startswith("airpose: error: "), err
+    assert says in lines[0] and "Traceback" not in err, err
+    assert not (inputs["tmp"] / "keys0").exists()
+
+
+@pytest.mark.parametrize("argv,says", [
+    (["train", "--variant", "airpose", "--steps", "abc"], "argument --steps: invalid int value: 'abc'; "
+                                                          "see `airpose train --help`"),
+    (["train"], "the following arguments are required: --variant; see `airpose train --help`"),
+    (["fit", "--sequence", "x", "--init", "y", "--profile", "huge"], "invalid choice: 'huge'"),
+], ids=["bad int", "missing flag", "bad choice"])
+def test_argparse_errors_are_one_line_too(argv, says, capsys):
+    with pytest.raises(SystemExit) as exc:
+        cli.main(argv)
+    err = capsys.readouterr().err
+    assert exc.value.code == 2 and err.count("\n") == 1 and err.startswith("airpose: error: ") and says in err, err

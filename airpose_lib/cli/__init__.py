@@ -49,7 +49,7 @@ _SUBCOMMANDS: tuple[Callable, ...] = (add_body, add_data, add_pretrain, add_trai
 
 def build_parser() -> argparse.ArgumentParser:
     """The ``airpose`` argument parser."""
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="airpose",
         description="Open reproducibility kit for AirPose (Saini et al., RA-L 2022).")
     parser.add_argument("--version", action=_VersionAction)
@@ -58,6 +58,14 @@ def build_parser() -> argparse.ArgumentParser:
         add(sub)
     _add_debug_flag(parser)
     return parser
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse with the kit's error policy: a bad or missing flag is one line, exit status 2 (the
+    usage is one ``--help`` away). Its subcommands' parsers are of this class too."""
+
+    def error(self, message: str):
+        self.exit(EXIT_USER_ERROR, f"airpose: error: {message}; see `{self.prog} --help`\n")
 
 
 class _VersionAction(argparse.Action):

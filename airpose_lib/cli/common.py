@@ -50,6 +50,7 @@ _USER_ERRORS = (
     "airpose_lib.prior.checkpoint:PriorError",
     "airpose_lib.reproduce.runner:ReproductionError",
     "airpose_lib.runtime.launcher:LaunchError",
+    "airpose_lib.runtime.source:SourceError",
     "airpose_lib.runtime.keys:SwarmKeyError",
 )
 

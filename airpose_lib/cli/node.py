@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import argparse
 import math
-import sys
 import time
 from pathlib import Path
 
@@ -30,9 +29,55 @@ __all__ = [
 ]
 
 
+# (flag, attribute, the test a given value must pass, what the value must be); checked before a
+# drone starts (a zero window or rate would never end, a loss of 2 would drop everything).
+_RANGES = (
+    ("--id", "id", lambda v: 1 <= v <= 255, "a drone id 1..255"),
+    ("--port", "port", lambda v: 1 <= v <= 65535, "a TCP port 1..65535"),
+    ("--view", "view", lambda v: v >= 0, "a camera index >= 0"),
+    ("--drones", "drones", lambda v: 1 <= v <= 255, "1..255 drones"),
+    ("--window-ms", "window_ms", lambda v: v > 0, "> 0"),
+    ("--rate", "rate", lambda v: v > 0, "> 0 frames per second"),
+    ("--latency-budget-ms", "latency_budget_ms", lambda v: v > 0, "> 0"),
+    ("--peer-timeout-ms", "peer_timeout_ms", lambda v: v > 0, "> 0"),
+    ("--heartbeat-ms", "heartbeat_ms", lambda v: v > 0, "> 0"),
+    ("--frames", "frames", lambda v: v >= 1, ">= 1 slots"),
+    ("--threads", "threads", lambda v: v >= 1, ">= 1 threads"),
+    ("--link-loss", "link_loss", lambda v: 0 <= v <= 1, "a probability in [0, 1]"),
+)
+
+
+def _check_ranges(args: argparse.Namespace) -> None:
+    """A :class:`CLIError` naming the first numeric option of ``args`` out of its range."""
+    for flag, attr, ok, what in _RANGES:
+        value = getattr(args, attr, None)
+        if value is not None and not ok(value):
+            raise CLIError(f"{flag} {value}: give {what}")
+
+
+def _peers_from_flags(args: argparse.Namespace) -> dict[int, str]:
+    """``--peers`` -> ``{id: endpoint}``, or a :class:`CLIError` naming the bad entry."""
+    from airpose_lib.runtime.transport import parse_peers
+
+    try:
+        peers = parse_peers(args.peers, args.host)
+    except ValueError as e:
+        raise CLIError(f"--peers: {e}") from None
+    if args.id in peers:
+        raise CLIError(f"--peers {' '.join(args.peers)}: lists this drone's own id {args.id}; give the other drones")
+    return peers
+
+
 def check_inputs(args: argparse.Namespace) -> None:
     """Fail before any process starts when ``--source``, ``--checkpoint`` or ``--onnx-dir`` is
-    missing (their contents are checked when they are loaded)."""
+    missing, ``--detector`` unknown or a numeric option out of range (the files' contents are
+    checked when they are loaded)."""
+    _check_ranges(args)
+    if not str(args.source).startswith("synthetic"):  # a recording: its reader is loaded anyway
+        from airpose_lib.data.official_layout import DETECTOR_FILES
+
+        if args.detector not in DETECTOR_FILES:
+            raise CLIError(f"--detector {args.detector}: unknown; give one of {', '.join(DETECTOR_FILES)}")
     if not str(args.source).startswith("synthetic") and not Path(args.source).is_dir():
         raise CLIError(
             f"--source {args.source}: no such folder; give a recording folder in the official layout "
@@ -155,9 +200,9 @@ def config_from_args(args: argparse.Namespace, drone_id: int, port: int, peers: 
 def run_node(args: argparse.Namespace) -> int:
     """Handler of ``airpose node``."""
     from airpose_lib.runtime.drone import DroneProcess
-    from airpose_lib.runtime.transport import parse_peers
 
     check_inputs(args)
+    peers = _peers_from_flags(args)
     if args.t0 == "stdin":  # started by a launcher: never outlive it
         die_with_parent()
         t0 = None
@@ -166,7 +211,7 @@ def run_node(args: argparse.Namespace) -> int:
         print(f"t0 = {t0!r} (start all drones before then)", flush=True)
     else:
         t0 = float(args.t0)
-    cfg = config_from_args(args, args.id, args.port, parse_peers(args.peers, args.host), t0,
+    cfg = config_from_args(args, args.id, args.port, peers, t0,
                            args.clock_offset_ms, args.host, args.view)
     DroneProcess(cfg).run()
     return 0
@@ -241,14 +286,10 @@ def run_export(args: argparse.Namespace) -> int:
     from airpose_lib.runtime.backends import BackendSpec
 
     if args.checkpoint and not Path(args.checkpoint).is_file():
-        print(f"airpose export: error: no checkpoint at {args.checkpoint} (pass a checkpoints/*.pt of "
-              "`airpose train`)", file=sys.stderr)
-        return 2
+        raise CLIError(f"--checkpoint {args.checkpoint}: no such file; give a checkpoints/*.pt of `airpose train`")
     if args.calibration and not (Path(args.calibration) / "manifest.yaml").is_file():
-        print(f"airpose export: error: {args.calibration} is not a still-frame dataset (no manifest.yaml); "
-              "make one with `airpose data generate --profile smoke`", file=sys.stderr)
-        return 2
-    from airpose_lib.data.manifest import DatasetError
+        raise CLIError(f"--calibration {args.calibration} is not a still-frame dataset (no manifest.yaml); "
+                       "make one with `airpose data generate --profile smoke`")
     from airpose_lib.model.quantize import QuantSettings
     from airpose_lib.runtime.edge import ensure_export
 
@@ -258,12 +299,8 @@ def run_export(args: argparse.Namespace) -> int:
                        checkpoint=args.checkpoint)
     settings = QuantSettings(per_channel=not args.per_tensor, calibration=args.calibration_method,
                              backbone_only=not args.quantize_regressor)
-    try:
-        folder = ensure_export(spec, precision, args.calibration, args.calibration_samples, settings,
-                               root=args.out, force=args.force, progress=True)
-    except (FileNotFoundError, DatasetError) as e:
-        print(f"airpose export: error: {e}", file=sys.stderr)
-        return 2
+    folder = ensure_export(spec, precision, args.calibration, args.calibration_samples, settings,
+                           root=args.out, force=args.force, progress=True)
     print(folder)
     return 0
 
@@ -304,6 +341,7 @@ def add_export(sub) -> None:
 def _cmd_keys(args: argparse.Namespace) -> int:
     from airpose_lib.runtime.keys import create_swarm_keys
 
+    _check_ranges(args)
     folder = create_swarm_keys(args.out, range(1, args.drones + 1), force=args.force)
     print(f"CURVE keys of drones 1..{args.drones} in {folder}: give drone d its drone_<d>.key_secret and "
           f"every drone_<j>.key, then `airpose node --keys DIR` (or AIRPOSE_SWARM_KEYS=DIR)")

@@ -20,7 +20,7 @@ from .loop import SlotLoop, last_slot
 from .messaging import PeerMessaging
 from .networks import make_stage_model
 from .records import FrameRecords, node_meta
-from .source import open_source
+from .source import SourceError, open_source
 from .stages import StagePipeline
 from .startup import first_slot, sequence_start, wait_start
 from .sync import Clock, Schedule
@@ -50,7 +50,8 @@ class DroneProcess:
         self.view_index = c.drone_id - 1 if c.view is None else c.view
         self.src = open_source(c.source, c.detector)
         if not 0 <= self.view_index < self.src.num_views:
-            raise ValueError(f"drone {c.drone_id}: view {self.view_index} not in a {self.src.num_views}-view source")
+            raise SourceError(f"drone {c.drone_id}: view {self.view_index} not in the {self.src.num_views}-view "
+                              f"source {c.source}; give --view 0..{self.src.num_views - 1} (default: drone id - 1)")
         self.view = self.src.view(self.view_index)
         if c.backend.kind == "torch" and c.backend.checkpoint:
             size = checkpoint_settings(c.backend.checkpoint).get("input_size")

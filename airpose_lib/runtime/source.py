@@ -30,6 +30,7 @@ __all__ = [
     "ViewSource",
     "SyntheticSource",
     "SyntheticView",
+    "SourceError",
     "open_source",
     "person_box",
     "crop_input",
@@ -147,29 +148,46 @@ class SyntheticSource:
         return self.views[v]
 
 
+class SourceError(ValueError):
+    """A ``--source`` a drone cannot replay: an unknown or malformed ``synthetic:`` option, or a
+    camera the source does not have. The message names the option and the fix."""
+
+
+SYNTHETIC_EXAMPLE = "synthetic:views=2,frames=300,fps=30,size=960x540,seed=0,jitter_ms=1,missing=3+7"
+
+
+def _size(value: str) -> tuple[int, int]:
+    w, _, h = value.partition("x")
+    return int(w), int(h)
+
+
+# ``synthetic:`` key -> (SyntheticSource argument, parser of the value)
+_SYNTHETIC_OPTIONS = {
+    "views": ("num_views", int), "num_views": ("num_views", int),
+    "frames": ("num_frames", int), "num_frames": ("num_frames", int),
+    "fps": ("fps", float),
+    "size": ("size", _size),
+    "seed": ("seed", int),
+    "jitter_ms": ("stamp_jitter_s", lambda v: float(v) / 1000.0),
+    "missing": ("missing_detections", lambda v: [int(x) for x in v.split("+") if x]),
+}
+
+
 def _parse_synthetic(spec: str) -> SyntheticSource:
     kwargs: dict = {}
     _, _, rest = spec.partition(":")
     for item in filter(None, rest.split(",")):
         key, _, value = item.partition("=")
         key = key.strip()
-        if key in ("views", "num_views"):
-            kwargs["num_views"] = int(value)
-        elif key in ("frames", "num_frames"):
-            kwargs["num_frames"] = int(value)
-        elif key == "fps":
-            kwargs["fps"] = float(value)
-        elif key == "size":
-            w, _, h = value.partition("x")
-            kwargs["size"] = (int(w), int(h))
-        elif key == "seed":
-            kwargs["seed"] = int(value)
-        elif key == "jitter_ms":
-            kwargs["stamp_jitter_s"] = float(value) / 1000.0
-        elif key == "missing":
-            kwargs["missing_detections"] = [int(x) for x in value.split("+") if x]
-        else:
-            raise ValueError(f"unknown synthetic source option {key!r} in {spec!r}")
+        if key not in _SYNTHETIC_OPTIONS:
+            raise SourceError(f"--source {spec}: unknown synthetic option {key!r}; known: "
+                              f"{', '.join(_SYNTHETIC_OPTIONS)} (e.g. {SYNTHETIC_EXAMPLE})")
+        name, parse = _SYNTHETIC_OPTIONS[key]
+        try:
+            kwargs[name] = parse(value)
+        except ValueError:
+            raise SourceError(f"--source {spec}: {key}={value!r} is not a valid value "
+                              f"(e.g. {SYNTHETIC_EXAMPLE})") from None
     return SyntheticSource(**kwargs)
 
 

@@ -48,8 +48,11 @@ def parse_peers(items: list[str], host: str = "127.0.0.1") -> dict[int, str]:
     for item in items:
         for part in filter(None, item.split(",")):
             ident, sep, addr = part.partition("@")
-            if not sep:
-                raise ValueError(f"peer {part!r}: expected ID@PORT, ID@HOST:PORT or ID@tcp://HOST:PORT")
+            port = addr.rpartition(":")[2]
+            if not (sep and ident.isdigit() and 1 <= int(ident) <= 255 and port.isdigit()
+                    and 1 <= int(port) <= 65535):
+                raise ValueError(f"peer {part!r}: expected ID@PORT, ID@HOST:PORT or ID@tcp://HOST:PORT with a "
+                                 "drone id 1..255 and a port 1..65535 (e.g. 2@5002)")
             if addr.startswith("tcp://"):
                 ep = addr
             elif ":" in addr:

@@ -163,6 +163,73 @@ def test_pool_workers_die_with_a_killed_parent(tmp_path, open_model_files):
     assert not alive, f"orphans left: {alive}"
 
 
+def _wait_gone(pids: set[int], timeout_s: float = 60.0) -> set[int]:
+    """The processes of ``pids`` still alive after waiting up to ``timeout_s``; those are killed
+    (so that a failing test leaks nothing into the machine)."""
+    t_end = time.time() + timeout_s
+    alive = set(pids)
+    while alive and time.time() < t_end:
+        time.sleep(0.25)
+        alive = {k for k in alive if _alive(k)}
+    for k in alive:
+        os.kill(k, signal.SIGKILL)
+    return alive
+
+
+SLEEPER = "import os, time\ndef job(args):\n    print('WORKER', os.getpid(), flush=True)\n    time.sleep(300)\n"
+ABLATION_PARENT = ("import sys\n"
+                   "sys.path.insert(0, sys.argv[2])\n"
+                   "import sleeper\n"
+                   "import airpose_lib.train.ablation as A\n"
+                   "A._train_single_thread = sleeper.job  # a run that takes long: it sleeps\n"
+                   "A.prepare_data = A.load_train_config = lambda *a, **k: None\n"
+                   "A._finished_run = lambda *a: None\n"
+                   "A._train_parallel('smoke', ['airpose', 'baseline'], [0], sys.argv[1], 2)\n")
+
+
+def test_ablation_training_workers_die_with_a_killed_parent(tmp_path):
+    """SIGKILL the parent of `run_ablation(workers=2)` while both runs train: the two spawned
+    training processes exit too (each would otherwise train on for minutes to hours)."""
+    (tmp_path / "sleeper.py").write_text(SLEEPER)
+    err = open(tmp_path / "stderr.txt", "w")
+    proc = subprocess.Popen([sys.executable, "-c", ABLATION_PARENT, str(tmp_path / "runs"), str(tmp_path)],
+                            stdout=subprocess.PIPE, stderr=err, text=True, env=_env())
+    workers = set()
+    try:
+        while len(workers) < 2:
+            line = proc.stdout.readline()  # the parent prints nothing else; EOF if it fails
+            assert line, f"the parent ended before both workers started: {(tmp_path / 'stderr.txt').read_text()}"
+            if line.startswith("WORKER"):
+                workers.add(int(line.split()[1]))
+        kids = _children(proc.pid)
+        assert workers <= kids
+    finally:
+        proc.send_signal(signal.SIGKILL)
+        proc.wait()
+        err.close()
+    assert not _wait_gone(kids), "orphans left"
+
+
+@pytest.mark.slow
+def test_ddp_ranks_die_with_a_killed_parent(tmp_path):
+    """SIGKILL `airpose train --world-size 2` while its two ranks train: both ranks exit (torch's
+    spawn asks the kernel for it, PR_SET_PDEATHSIG; rank 0 holds the run folder's lock)."""
+    proc = subprocess.Popen([sys.executable, "-m", "airpose_lib", "train", "--variant", "airpose", "--profile",
+                             "smoke", "--world-size", "2", "--steps", "100000", "--quiet", "--out",
+                             str(tmp_path / "run")], env=_env(), stdout=subprocess.DEVNULL,
+                            stderr=subprocess.DEVNULL)
+    try:
+        t_end = time.time() + 300
+        while time.time() < t_end and proc.poll() is None and not (tmp_path / "run" / "log.csv").exists():
+            time.sleep(0.5)  # until rank 0 trains
+        kids = _children(proc.pid)
+        assert len(kids) >= 2, kids
+    finally:
+        proc.send_signal(signal.SIGKILL)
+        proc.wait()
+    assert not _wait_gone(kids), "orphans left"
+
+
 def test_die_with_parent_sets_the_kernel_signal():
     code = ("import ctypes, signal\n"
             "from airpose_lib.process_guard import die_with_parent\n"

@@ -1,6 +1,7 @@
 """Train and evaluate the four ablation variants of Table I with one profile's sizes."""
 from __future__ import annotations
 
+import os
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -8,6 +9,7 @@ from pathlib import Path
 import pandas as pd
 
 from airpose_lib.eval.ablation import VARIANT_LABELS
+from airpose_lib.process_guard import die_with_parent
 
 from .config import load_train_config
 from .evaluate import evaluate_checkpoint
@@ -93,7 +95,9 @@ def _train_parallel(profile: str, variants: Sequence[str], seeds: Sequence[int],
     if not todo:
         return
     prepare_data(load_train_config(profile, todo[0][1], todo[0][2]))  # generate the data once, here
-    with ProcessPoolExecutor(min(workers, len(todo)), mp_context=mp.get_context("spawn")) as pool:
+    # die_with_parent: a worker trains for minutes to hours; it must not outlive a killed parent
+    with ProcessPoolExecutor(min(workers, len(todo)), mp_context=mp.get_context("spawn"),
+                             initializer=die_with_parent, initargs=(os.getpid(),)) as pool:
         for _ in pool.map(_train_single_thread, todo):
             pass
 

@@ -88,7 +88,8 @@ def test_the_lock_is_reentrant_in_one_process(tmp_path):
     ["train", "--variant", "airpose", "--out", "{run}"],
     ["data", "generate", "--out", "{run}"],
     ["finetune", "--checkpoint", "{ckpt}", "--sequence", "{seq}", "--out", "{run}"],
-], ids=["train", "data generate", "finetune"])
+    ["launch", "--drones", "1", "--backend", "fake", "--frames", "2", "--out", "{run}"],
+], ids=["train", "data generate", "finetune", "launch"])
 def test_commands_refuse_a_folder_in_use(argv, holder, tmp_path, capsys):
     folder, proc = holder
     ckpt = tmp_path / "x.pt"
@@ -97,6 +98,23 @@ def test_commands_refuse_a_folder_in_use(argv, holder, tmp_path, capsys):
     code = cli.main([a.format(run=folder, ckpt=ckpt, seq=tmp_path / "seq") for a in argv])
     err = capsys.readouterr().err
     assert code == 2 and f"PID {proc.pid}" in err and str(folder) in err and len(err.strip().splitlines()) == 1
+
+
+def test_reproduce_refuses_a_profile_folder_in_use(tmp_path, capsys):
+    """`airpose reproduce --out OUT` writes OUT/<profile>/: a second run into it is refused."""
+    folder = tmp_path / "out" / "smoke"
+    proc = subprocess.Popen([sys.executable, "-c", HOLD, str(folder)], stdout=subprocess.PIPE, text=True,
+                            env=_env())
+    try:
+        assert proc.stdout.readline().strip() == "LOCKED"
+        code = cli.main(["reproduce", "--profile", "smoke", "--only", "00", "--out", str(tmp_path / "out"),
+                         "--figures", str(tmp_path / "figures")])
+    finally:
+        proc.kill()
+        proc.wait()
+    err = capsys.readouterr().err
+    assert code == 2 and f"PID {proc.pid}" in err and str(folder) in err and len(err.strip().splitlines()) == 1
+    assert not (folder / "report.json").exists()
 
 
 def test_run_logger_is_a_writer(holder):

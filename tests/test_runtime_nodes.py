@@ -11,6 +11,7 @@ import zlib
 import numpy as np
 import zmq
 
+from airpose_lib import cli
 from airpose_lib.runtime import results as R
 from airpose_lib.runtime.backends import BackendSpec, FakeStageModel
 from airpose_lib.runtime.launcher import launch
@@ -294,3 +295,12 @@ def test_spoofed_and_replayed_packets_are_rejected_and_logged(tmp_path):
         ref.stage(2, [np.full(136, 0.01, np.float32)] if used2[i] else [])
         ref.stage(3, [np.full(136, 0.02, np.float32)] if used3[i] else [])
         np.testing.assert_allclose(m["theta6d"][i, 0], ref.result()["theta6d"][0], atol=1e-6)
+
+
+def test_airpose_launch_writes_to_runs_online_by_default(tmp_path, monkeypatch, capsys):
+    """`airpose launch` without --out (the README's example) runs into <runs>/online."""
+    monkeypatch.setenv("AIRPOSE_RUNS", str(tmp_path / "runs"))
+    code = cli.main(["launch", "--drones", "2", "--backend", "fake", "--frames", "3", "--max-runtime-s", "30"])
+    assert code == 0, capsys.readouterr().err
+    for d in (1, 2):
+        assert (tmp_path / "runs" / "online" / f"node_{d}.summary.json").is_file()

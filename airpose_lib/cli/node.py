@@ -12,7 +12,8 @@ import math
 import time
 from pathlib import Path
 
-from airpose_lib.paths import run_path  # these two: standard library only
+from airpose_lib.folder_lock import folder_lock  # these three: standard library only
+from airpose_lib.paths import run_path
 from airpose_lib.process_guard import die_with_parent
 
 from .common import CLIError
@@ -235,17 +236,21 @@ def run_launch(args: argparse.Namespace) -> int:
     from airpose_lib.runtime.launcher import format_summaries, launch
 
     check_inputs(args)
+    out = Path(args.out) if args.out is not None else run_path("online")
     # Every node option that differs from its default is passed on to the drones.
     node_defaults = vars(add_node_defaults())
     options = {k: v for k, v in vars(args).items()
                if k in node_defaults and k not in (*_LAUNCH_OWN, "out") and v != node_defaults[k]}
-    fleet = launch(args.drones, args.out, options, clock_offsets_ms=args.clock_offsets_ms, lead_s=args.lead_s,
-                   threads=args.threads)
-    summaries = fleet.wait(args.timeout_s)
+    # One launcher per folder (its drones are its children); stale=(): drones started by hand may
+    # write there too, and their temp files are not ours to remove.
+    with folder_lock(out, "online run folder", stale=()):
+        fleet = launch(args.drones, out, options, clock_offsets_ms=args.clock_offsets_ms, lead_s=args.lead_s,
+                       threads=args.threads)
+        summaries = fleet.wait(args.timeout_s)
     print(format_summaries(summaries))
     missing = sorted(set(range(1, args.drones + 1)) - set(summaries))
     if missing:
-        print(f"drone(s) {missing} ended without a summary; see {args.out}/node_<id>.log")
+        print(f"drone(s) {missing} ended without a summary; see {out}/node_<id>.log")
         return 1
     return 0
 

@@ -16,8 +16,9 @@ one place where sizes live (render size, dataset size, epochs ...). For every ca
 the folder training runs and notebooks run by hand use too.
 
 It stops at the first failure (later notebooks may consume earlier outputs) unless asked to keep
-going. This module imports nothing else of the kit but :mod:`airpose_lib.paths` (a leaf): it must
-be able to run any notebook.
+going. One run per ``<out>/<profile>/`` at a time (:func:`~airpose_lib.folder_lock.folder_lock`).
+This module imports nothing else of the kit but the leaves :mod:`airpose_lib.paths` and
+:mod:`airpose_lib.folder_lock`: it must be able to run any notebook.
 """
 
 from __future__ import annotations
@@ -36,6 +37,7 @@ import nbformat
 import yaml
 
 from airpose_lib import __version__  # the package root holds only the version
+from airpose_lib.folder_lock import folder_lock
 from airpose_lib.paths import figures_root, runs_root
 from airpose_lib.profiles import PROFILES_DIR, ProfileError, profile_path, read_profile
 from airpose_lib.profiles import profile_names as list_profiles
@@ -486,27 +488,29 @@ def run_profile(
                        started_at=_dt.datetime.now().isoformat(timespec="seconds"),
                        run_dir=str(run_dir), figures_dir=str(figures_dir))
     report.results = [NotebookResult(e.name, e.file) for e in selected]
-    t_start = time.perf_counter()
-    stop = False
-    for i, entry in enumerate(selected):
-        params = {"profile": prof["name"], "output_dir": str(run_dir / entry.name),
-                  **_data_source_parameter(notebooks_dir / entry.file, data_source),
-                  **prof["notebooks"].get(entry.name, {})}
-        if stop:
-            report.results[i].parameters = params
-            report.results[i].error = "not run: an earlier notebook failed"
-            continue
-        if verbose:
-            print(f"[reproduce:{prof['name']}] {entry.name} ...", flush=True)
-        result = _run_one(entry, notebooks_dir / entry.file, params, run_dir, figures_dir,
-                          kernel_name, prof["cell_timeout_s"], log_output, report)
-        report.results[i] = result
+    # stale=(): a notebook run by hand may be writing below run_dir; its temp files are not ours
+    with folder_lock(run_dir, "reproduction folder", stale=()):
+        t_start = time.perf_counter()
+        stop = False
+        for i, entry in enumerate(selected):
+            params = {"profile": prof["name"], "output_dir": str(run_dir / entry.name),
+                      **_data_source_parameter(notebooks_dir / entry.file, data_source),
+                      **prof["notebooks"].get(entry.name, {})}
+            if stop:
+                report.results[i].parameters = params
+                report.results[i].error = "not run: an earlier notebook failed"
+                continue
+            if verbose:
+                print(f"[reproduce:{prof['name']}] {entry.name} ...", flush=True)
+            result = _run_one(entry, notebooks_dir / entry.file, params, run_dir, figures_dir,
+                              kernel_name, prof["cell_timeout_s"], log_output, report)
+            report.results[i] = result
+            report.wall_s = time.perf_counter() - t_start
+            report.write(run_dir / "report.json")  # after every notebook: a killed run leaves a trace
+            if result.status != "ok" and not keep_going:
+                stop = True
         report.wall_s = time.perf_counter() - t_start
-        report.write(run_dir / "report.json")  # after every notebook: a killed run leaves a trace
-        if result.status != "ok" and not keep_going:
-            stop = True
-    report.wall_s = time.perf_counter() - t_start
-    report.write(run_dir / "report.json")
+        report.write(run_dir / "report.json")
     if verbose:
         print(report.table(), flush=True)
     return report

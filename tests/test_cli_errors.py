@@ -284,7 +284,8 @@ BAD_VALUES = [
 
 
 @pytest.mark.parametrize("argv,says", [c[1:] for c in BAD_VALUES], ids=[c[0] for c in BAD_VALUES])
-def test_bad_option_values_are_one_line(argv, says, inputs, capsys):
+def test_bad_option_values_are_one_line(argv, says, inputs, capsys, monkeypatch, tmp_path):
+    monkeypatch.setenv("AIRPOSE_RUNS", str(tmp_path / "runs"))  # a drone that does start writes there
     argv = [str(inputs["tmp"] / "keys0") if a == "KEYS" else str(inputs["seq"]) if a == "SEQ" else a for a in argv]
     code, err = _run(argv, capsys)
     lines = [line for line in err.splitlines() if line.strip()]

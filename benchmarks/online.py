@@ -5,7 +5,10 @@ For 2 and 3 drone processes, the fixed 240 ms window (the paper) and the pipelin
 
 * achieved fps per drone (frames completed in time / schedule duration; mean and worst drone),
 * end-to-end latency (shutter -> result) p50 / p95 over all drones' completed frames,
-* dropped-frame rate (completed late + never started) and frames completed with a fallback,
+* the rate the drones agreed on (pipelined: an overloaded swarm processes every m-th slot,
+  ``airpose_lib.runtime.rate``; ``--fixed-rate`` in ``--extra`` turns that off),
+* dropped-frame rate among the agreed slots (completed late + never started) and frames
+  completed with a fallback,
 * bytes published per frame by one drone (= bytes per peer link: PUB sends one copy to each),
 * accuracy vs the offline computation of the same frames: max |online - offline| with the same
   exchange (0 = identical), and MPJPE between online and offline-with-perfect-exchange joints
@@ -187,14 +190,16 @@ def run_one(cfg: dict, source: str, out_root: Path, acc: Accuracy | None, keep: 
     load1 = os.getloadavg()
     res = [R.load_node_results(out / f"node_{d}.npz") for d in range(1, cfg["drones"] + 1)]
     lat = np.concatenate([r.frames["latency"][r.valid] for r in res])
-    slots_all = sum(len(r) for r in res)
+    # slots of the swarm's agreed rate (runtime.rate): a slot the drones agreed to leave out is not a drop
+    slots_all = sum(int(((r.frames["flags"] & R.RATE_SKIPPED) == 0).sum()) for r in res)
     valid_all = sum(int(r.valid.sum()) for r in res)
     fps = [s["fps"] for s in summaries.values()]
+    agreed = [s.get("agreed_fps") or s["nominal_fps"] for s in summaries.values()]
     row = {**{k: v for k, v in cfg.items() if k != "onnx_dir"}, "slots_per_drone": slots,
-           "fps_mean": float(np.mean(fps)), "fps_min": float(np.min(fps)),
+           "fps_mean": float(np.mean(fps)), "fps_min": float(np.min(fps)), "agreed_fps": float(np.mean(agreed)),
            "latency_p50_ms": 1000 * float(np.percentile(lat, 50)) if len(lat) else None,
            "latency_p95_ms": 1000 * float(np.percentile(lat, 95)) if len(lat) else None,
-           "drop_rate": 1.0 - valid_all / slots_all,
+           "drop_rate": 1.0 - valid_all / slots_all if slots_all else 1.0,
            "fallback_rate": sum(s["fallback_frames"] for s in summaries.values()) / max(valid_all, 1),
            "bytes_per_frame": float(np.mean([s["bytes_per_frame"] for s in summaries.values()])),
            "stage1_ms": 1000 * float(np.median([s["timing_median"].get("stage1", np.nan) for s in summaries.values()])),
@@ -214,7 +219,7 @@ def run_one(cfg: dict, source: str, out_root: Path, acc: Accuracy | None, keep: 
 
 
 def _table(rows: list[dict]) -> str:
-    head = ("| run | drones | mode | backend | net | fps/drone (min) | p50 ms | p95 ms | dropped | fallback "
+    head = ("| run | drones | mode | backend | net | fps/drone (min) | agreed fps | p50 ms | p95 ms | dropped | fallback "
             "| B/frame | stage 1 ms | max abs vs offline | MPJPE vs offline mm | load |")
     lines = [head, "|" + "|".join(["---"] * (head.count("|") - 1)) + "|"]
     for r in rows:
@@ -223,6 +228,7 @@ def _table(rows: list[dict]) -> str:
                             if "rate" in r.get("extra", {}) else "")
         lines.append(f"| {r['name']} | {r['drones']} | {mode} | {r['backend']} | {r['backbone']}@{r['size']}"
                      f"{' f16' if r.get('dtype') == 'float16' else ''} | {f(r['fps_mean'], 2)} ({f(r['fps_min'], 2)}) "
+                     f"| {f(r.get('agreed_fps'), 2)} "
                      f"| {f(r['latency_p50_ms'])} | {f(r['latency_p95_ms'])} | {100 * r['drop_rate']:.1f}% "
                      f"| {100 * r['fallback_rate']:.1f}% | {r['bytes_per_frame']:.0f} | {f(r['stage1_ms'])} "
                      f"| {r.get('max_abs_vs_offline', '-')} | {f(r.get('mpjpe_vs_offline_mm'), 3)} "

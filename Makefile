@@ -2,7 +2,7 @@
 VENV ?= .venv
 PROFILE ?= smoke
 
-.PHONY: setup smoke reproduce test test-all bench
+.PHONY: setup smoke reproduce test test-all test-browser bench
 
 setup:
 	bash scripts/setup.sh
@@ -16,6 +16,12 @@ reproduce: smoke
 # the test suite without the slow end-to-end runs (CI's smoke reproduction runs those)
 test: setup
 	$(VENV)/bin/python -m pytest -q -m "not slow"
+
+# JupyterLab in headless Chromium: notebook 07's 3D view (run after `make smoke`, which caches
+# the estimates it shows; installs Debian's chromium when root and the browser extra)
+test-browser: setup
+	bash scripts/setup_browser.sh
+	AIRPOSE_REQUIRE_BROWSER=1 $(VENV)/bin/python -m pytest -q -m browser tests/browser
 
 test-all: setup
 	$(VENV)/bin/python -m pytest -q

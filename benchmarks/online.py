@@ -5,7 +5,10 @@ For 2 and 3 drone processes, the fixed 240 ms window (the paper) and the pipelin
 
 * achieved fps per drone (frames completed in time / schedule duration; mean and worst drone),
 * end-to-end latency (shutter -> result) p50 / p95 over all drones' completed frames,
-* dropped-frame rate (completed late + never started) and frames completed with a fallback,
+* the rate the drones agreed on (pipelined: an overloaded swarm processes every m-th slot,
+  ``airpose_lib.runtime.rate``; ``--fixed-rate`` turns that off for every run),
+* dropped-frame rate among the agreed slots (completed late + never started) and frames
+  completed with a fallback,
 * bytes published per frame by one drone (= bytes per peer link: PUB sends one copy to each),
 * accuracy vs the offline computation of the same frames: max |online - offline| with the same
   exchange (0 = identical), and MPJPE between online and offline-with-perfect-exchange joints
@@ -18,9 +21,13 @@ The load average is printed with every run: other processes on the machine slow 
     python benchmarks/online.py --source synthetic    # procedural frames, no rendering
     python benchmarks/online.py --quick               # 2 drones, R18 only, short runs
 
-Networks have random weights (seeded) unless ``--checkpoint`` is given: timing does not depend
-on the weights; the accuracy columns then only show online == offline, and the float16 cost of
-an untrained network is not that of a trained one.
+Weights: by default the cpu profile's trained AirPose (``<runs>/train/cpu/airpose/seed123``, from
+``airpose reproduce --profile cpu``) when it exists, for the runs of its backbone and crop size;
+``--checkpoint`` names another, ``--random-weights`` none. Other runs have random (seeded)
+weights: timing does not depend on them, but then the accuracy columns only show online ==
+offline, and the float16 cost of an untrained network is not that of a trained one. The
+``weights`` column says which. Every row also gives its rate as a ratio to the paper's Jetson
+TX2 test (3 fps achieved per drone, Sec. IV-D) and, for int8, to ONNX float32 in the same run.
 """
 from __future__ import annotations
 
@@ -56,6 +63,29 @@ def _sequence(args) -> tuple[str, bool]:
     path = ensure_sequences(configs={name: cfg}, root=Path(args.out) / "sequences", progress=True)[name]
     print(f"sequence {path} ({args.sequence_frames} frames; {time.time() - t:.0f} s)")
     return str(path), True
+
+
+#: Frames per second per drone the paper achieved on its two Jetson TX2 (Sec. IV-D).
+TX2_FPS = 3.0
+#: The trained network used by default (the cpu profile's Table I AirPose, first seed).
+DEFAULT_CHECKPOINT = ("train", "cpu", "airpose", "seed123", "checkpoints", "last.pt")
+
+
+def _default_checkpoint() -> str | None:
+    from airpose_lib.paths import run_path
+
+    path = run_path(*DEFAULT_CHECKPOINT)
+    return str(path) if path.is_file() else None
+
+
+def _checkpoint_for(checkpoint: str | None, backbone: str, size: int) -> str | None:
+    """``checkpoint`` if its network is ``backbone`` at ``size`` px (else the run keeps random weights)."""
+    if checkpoint is None:
+        return None
+    from airpose_lib.runtime.backends import checkpoint_settings
+
+    net = checkpoint_settings(checkpoint)
+    return checkpoint if (net.get("backbone"), net.get("input_size", size)) == (backbone, size) else None
 
 
 def _export(spec, calibration: str | None = None) -> str:
@@ -187,14 +217,16 @@ def run_one(cfg: dict, source: str, out_root: Path, acc: Accuracy | None, keep: 
     load1 = os.getloadavg()
     res = [R.load_node_results(out / f"node_{d}.npz") for d in range(1, cfg["drones"] + 1)]
     lat = np.concatenate([r.frames["latency"][r.valid] for r in res])
-    slots_all = sum(len(r) for r in res)
+    # slots of the swarm's agreed rate (runtime.rate): a slot the drones agreed to leave out is not a drop
+    slots_all = sum(int(((r.frames["flags"] & R.RATE_SKIPPED) == 0).sum()) for r in res)
     valid_all = sum(int(r.valid.sum()) for r in res)
     fps = [s["fps"] for s in summaries.values()]
+    agreed = [s.get("agreed_fps") or s["nominal_fps"] for s in summaries.values()]
     row = {**{k: v for k, v in cfg.items() if k != "onnx_dir"}, "slots_per_drone": slots,
-           "fps_mean": float(np.mean(fps)), "fps_min": float(np.min(fps)),
+           "fps_mean": float(np.mean(fps)), "fps_min": float(np.min(fps)), "agreed_fps": float(np.mean(agreed)),
            "latency_p50_ms": 1000 * float(np.percentile(lat, 50)) if len(lat) else None,
            "latency_p95_ms": 1000 * float(np.percentile(lat, 95)) if len(lat) else None,
-           "drop_rate": 1.0 - valid_all / slots_all,
+           "drop_rate": 1.0 - valid_all / slots_all if slots_all else 1.0,
            "fallback_rate": sum(s["fallback_frames"] for s in summaries.values()) / max(valid_all, 1),
            "bytes_per_frame": float(np.mean([s["bytes_per_frame"] for s in summaries.values()])),
            "stage1_ms": 1000 * float(np.median([s["timing_median"].get("stage1", np.nan) for s in summaries.values()])),
@@ -214,18 +246,27 @@ def run_one(cfg: dict, source: str, out_root: Path, acc: Accuracy | None, keep: 
 
 
 def _table(rows: list[dict]) -> str:
-    head = ("| run | drones | mode | backend | net | fps/drone (min) | p50 ms | p95 ms | dropped | fallback "
-            "| B/frame | stage 1 ms | max abs vs offline | MPJPE vs offline mm | load |")
+    head = ("| run | drones | mode | backend | net | weights | fps/drone (min) | vs TX2 | vs fp32 | agreed fps "
+            "| p50 ms | p95 ms | dropped | fallback | B/frame | stage 1 ms | max abs vs offline | MPJPE vs offline mm "
+            "| MPJPE vs truth mm | load |")
     lines = [head, "|" + "|".join(["---"] * (head.count("|") - 1)) + "|"]
+    same_run = (lambda r: r["name"].replace(r["backend"], "", 1))  # noqa: E731 - the run but its backend
+    fp32 = {same_run(r): r["fps_mean"] for r in rows if r["backend"] == "onnx"}
     for r in rows:
+        key = same_run(r)
+        vs_fp32 = (f"{r['fps_mean'] / fp32[key]:.2f}x" if r["backend"] == "onnx-int8" and fp32.get(key) else "-")
         f = (lambda x, p=1: "-" if x is None else f"{x:.{p}f}")  # noqa: E731
         mode = r["mode"] + (f" {r['extra']['rate']:g} Hz / {r['extra']['latency_budget_ms']:g} ms"
                             if "rate" in r.get("extra", {}) else "")
+        weights = "trained" if r.get("extra", {}).get("checkpoint") else "random"
         lines.append(f"| {r['name']} | {r['drones']} | {mode} | {r['backend']} | {r['backbone']}@{r['size']}"
-                     f"{' f16' if r.get('dtype') == 'float16' else ''} | {f(r['fps_mean'], 2)} ({f(r['fps_min'], 2)}) "
+                     f"{' f16' if r.get('dtype') == 'float16' else ''} | {weights} "
+                     f"| {f(r['fps_mean'], 2)} ({f(r['fps_min'], 2)}) | {r['fps_mean'] / TX2_FPS:.2f}x | {vs_fp32} "
+                     f"| {f(r.get('agreed_fps'), 2)} "
                      f"| {f(r['latency_p50_ms'])} | {f(r['latency_p95_ms'])} | {100 * r['drop_rate']:.1f}% "
                      f"| {100 * r['fallback_rate']:.1f}% | {r['bytes_per_frame']:.0f} | {f(r['stage1_ms'])} "
                      f"| {r.get('max_abs_vs_offline', '-')} | {f(r.get('mpjpe_vs_offline_mm'), 3)} "
+                     f"| {f(r.get('mpjpe_gt_online_mm'), 1)} "
                      f"| {r['loadavg_before']:.1f}/{r['loadavg_after']:.1f} |")
     return "\n".join(lines)
 
@@ -246,7 +287,13 @@ def main() -> None:
     p.add_argument("--no-r50", action="store_true", help="skip the ResNet-50 runs")
     p.add_argument("--no-accuracy", action="store_true")
     p.add_argument("--quick", action="store_true", help="2 drones, ResNet-18, 5 s runs")
-    p.add_argument("--checkpoint", default=None, help="trained weights (every backend)")
+    p.add_argument("--checkpoint", default=None,
+                   help="trained weights, for the runs of its backbone and crop size (default: the cpu "
+                        "profile's trained AirPose when it exists)")
+    p.add_argument("--random-weights", action="store_true", help="no trained weights at all")
+    p.add_argument("--fixed-rate", action="store_true",
+                   help="pipelined runs keep 20 Hz when overloaded (each drone skips on its own) instead of "
+                        "agreeing on a lower common rate")
     p.add_argument("--f16-frames", type=int, default=40, help="frames for the float16 accuracy cost")
     p.add_argument("--out", default=str(ROOT / "runs" / "online_bench"))
     p.add_argument("--keep", action="store_true", help="keep the drones' .jsonl streams")
@@ -264,12 +311,15 @@ def main() -> None:
     backends = args.backends.split(",")
     onnx = {}
     configs = []
-    extra = {"checkpoint": args.checkpoint} if args.checkpoint else {}
+    checkpoint = None if args.random_weights else (args.checkpoint or _default_checkpoint())
+    print(f"weights: {checkpoint or 'random'}")
     for backbone, size in [("resnet18", 128)] + ([] if args.no_r50 else [("resnet50", 224)]):
+        ckpt = _checkpoint_for(checkpoint, backbone, size)
+        extra = {"checkpoint": ckpt} if ckpt else {}
         for backend in backends:
             if backend.startswith("onnx"):
                 onnx[(backend, backbone, size)] = _export(BackendSpec(
-                    kind=backend, backbone=backbone, input_size=size, checkpoint=args.checkpoint), args.calibration)
+                    kind=backend, backbone=backbone, input_size=size, checkpoint=ckpt), args.calibration)
         for backend in backends:
             for n in map(int, args.drones.split(",")):
                 if backbone == "resnet50" and n > 2 and not backend.startswith("onnx"):
@@ -280,6 +330,8 @@ def main() -> None:
                                   else {"rate": 5.0, "latency_budget_ms": 300.0}))
                 for mode, more in modes:
                     tag = f"_{more['rate']:g}hz" if more else ""
+                    if mode == "pipelined" and args.fixed_rate:
+                        more = {**more, "fixed_rate": True}
                     configs.append({"name": f"{backend}_{backbone}_{n}d_{mode}{tag}", "drones": n, "mode": mode,
                                     "backend": backend, "backbone": backbone, "size": size,
                                     "seconds": args.seconds,
@@ -287,6 +339,8 @@ def main() -> None:
                                     "extra": {**extra, **more}})
     b0 = backends[-1]
     od = onnx.get((b0, "resnet18", 128))
+    ckpt18 = _checkpoint_for(checkpoint, "resnet18", 128)
+    extra = {"checkpoint": ckpt18} if ckpt18 else {}
     configs.append({"name": f"{b0}_resnet18_2d_pipelined_f16", "drones": 2, "mode": "pipelined", "backend": b0,
                     "backbone": "resnet18", "size": 128, "seconds": args.seconds, "dtype": "float16", "onnx_dir": od,
                     "extra": dict(extra)})
@@ -302,7 +356,8 @@ def main() -> None:
     f16 = []
     if acc is not None:
         for backbone, size in [("resnet18", 128)] + ([] if args.no_r50 else [("resnet50", 224)]):
-            spec = BackendSpec(kind="torch", backbone=backbone, input_size=size, checkpoint=args.checkpoint)
+            spec = BackendSpec(kind="torch", backbone=backbone, input_size=size,
+                               checkpoint=_checkpoint_for(checkpoint, backbone, size))
             f16.append({"net": f"{backbone}@{size}", **acc.float16_cost(spec, args.f16_frames)})
     report = {"source": source, "cpu_count": os.cpu_count(), "loadavg_end": os.getloadavg(), "runs": rows,
               "float16": f16, "checkpoint": args.checkpoint}

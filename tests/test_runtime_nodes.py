@@ -297,6 +297,26 @@ def test_spoofed_and_replayed_packets_are_rejected_and_logged(tmp_path):
         np.testing.assert_allclose(m["theta6d"][i, 0], ref.result()["theta6d"][0], atol=1e-6)
 
 
+def test_overloaded_drones_agree_on_a_lower_common_rate(tmp_path):
+    """Stage 1 of 110 ms at 20 Hz (50 ms slots): no drone keeps up with every slot. Over the
+    heartbeat both settle on every 3rd slot (110 ms fits in 80 % of 150 ms), process the same
+    slots, and complete them with each other's messages, instead of skipping on their own."""
+    summaries, _ = _run(tmp_path, 2, {"backend": "fake", "fake_compute_ms": 110, "mode": "pipelined", "rate": 20,
+                                      "frames": 120, "heartbeat_ms": 100})
+    frames = {d: {r["slot"]: r for r in _frames(tmp_path / f"node_{d}.jsonl")} for d in (1, 2)}
+    late = range(60, 120)  # after the first 3 s
+    for d in (1, 2):
+        assert {frames[d][k]["divisor"] for k in late} == {3}, f"drone {d}"
+    taken = {d: {k for k in late if not frames[d][k]["flags"] & R.RATE_SKIPPED} for d in (1, 2)}
+    assert taken[1] == taken[2] == {k for k in late if k % 3 == 0}
+    for d in (1, 2):
+        done = [frames[d][k] for k in taken[d] if not frames[d][k]["flags"] & R.INVALID]
+        assert len(done) >= 0.9 * len(taken[d]), f"drone {d}: {len(done)} of {len(taken[d])} completed"
+        assert sum(r["used"][0] == [3 - d] for r in done) >= 0.9 * len(done)  # with the other's message
+        s = summaries[d]
+        assert s["rate_skipped"] > 0 and s["agreed_fps"] < 10 and s["drop_rate"] < 0.2
+
+
 def test_airpose_launch_writes_to_runs_online_by_default(tmp_path, monkeypatch, capsys):
     """`airpose launch` without --out (the README's example) runs into <runs>/online."""
     monkeypatch.setenv("AIRPOSE_RUNS", str(tmp_path / "runs"))

@@ -102,6 +102,11 @@ def add_node_arguments(p: argparse.ArgumentParser) -> None:
     g.add_argument("--rate", type=float, default=20.0, help="pipelined frame rate, Hz (default: 20)")
     g.add_argument("--latency-budget-ms", type=float, default=150.0,
                    help="pipelined per-frame deadline (default: 150)")
+    g.add_argument("--fixed-rate", action="store_true",
+                   help="pipelined: keep the rate even when overloaded (each drone skips slots on its own) "
+                        "instead of agreeing with the others on a lower common rate over the heartbeat")
+    g.add_argument("--max-rate-divisor", type=int, default=8,
+                   help="pipelined: the lowest agreed rate is --rate / this (default: 8)")
     g.add_argument("--tolerance-ms", type=float, default=None,
                    help="stamp matching tolerance (default: half the camera frame period)")
     g.add_argument("--margin-ms", type=float, default=0.0, help="wake this long after a slot's target time")
@@ -188,7 +193,8 @@ def config_from_args(args: argparse.Namespace, drone_id: int, port: int, peers: 
                       args.link_seed + drone_id)
     return NodeConfig(drone_id=drone_id, port=port, peers=peers, source=args.source, view=view,
                       backend=backend, mode=args.mode, window_ms=args.window_ms, rate_hz=args.rate,
-                      latency_budget_ms=args.latency_budget_ms, tolerance_ms=args.tolerance_ms,
+                      latency_budget_ms=args.latency_budget_ms, adaptive_rate=not args.fixed_rate,
+                      max_rate_divisor=args.max_rate_divisor, tolerance_ms=args.tolerance_ms,
                       margin_ms=args.margin_ms, clock_offset_ms=clock_offset_ms, fallback=args.fallback,
                       comm_timeout_ms=args.comm_timeout_ms, peer_timeout_ms=args.peer_timeout_ms,
                       heartbeat_ms=args.heartbeat_ms, frames=args.frames, start_s=args.start_s, t0=t0,

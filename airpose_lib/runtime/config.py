@@ -27,6 +27,8 @@ class NodeConfig:
     window_ms: float = 240.0  # fixed
     rate_hz: float = 20.0  # pipelined
     latency_budget_ms: float = 150.0  # pipelined
+    adaptive_rate: bool = True  # pipelined: overloaded drones agree on a lower common rate (runtime.rate)
+    max_rate_divisor: int = 8  # pipelined: the lowest common rate is rate_hz / this
     tolerance_ms: float | None = None  # stamp matching; default half a frame period
     margin_ms: float = 0.0  # wake after the target shutter time
     clock_offset_ms: float = 0.0

@@ -212,11 +212,13 @@ def launch(num_drones: int, out_dir: str | Path, options: Mapping | Sequence[str
 
 def format_summaries(summaries: dict[int, dict]) -> str:
     """One line per drone: fps, latency, drops, bytes."""
-    rows = ["drone  slots  valid  fps    drop%  p50 ms  p95 ms  fallback  bytes/frame  rejected"]
+    rows = ["drone  slots  valid  fps    agreed  drop%  p50 ms  p95 ms  fallback  bytes/frame  rejected"]
     for d in sorted(summaries):
         s = summaries[d]
         ms = (lambda x: f"{1000 * x:6.1f}" if x is not None else "     -")  # noqa: E731
-        rows.append(f"{d:<6} {s['slots']:<6} {s['valid']:<6} {s['fps']:<6.2f} {100 * (s['drop_rate'] or 0):5.1f}  "
+        agreed = s.get("agreed_fps")
+        rows.append(f"{d:<6} {s['slots']:<6} {s['valid']:<6} {s['fps']:<6.2f} "
+                    f"{agreed if agreed is not None else s['nominal_fps']:<7.2f} {100 * (s['drop_rate'] or 0):5.1f}  "
                     f"{ms(s['latency_p50'])}  {ms(s['latency_p95'])}  {s['fallback_frames']:<8}  "
                     f"{s['bytes_per_frame'] or 0:<11.0f}  {json.dumps(s['rejected'])}")
     return "\n".join(rows)

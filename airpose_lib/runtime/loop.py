@@ -8,7 +8,8 @@ window is discarded (``DROPPED``); a slot the drone is too late to start is ``SK
 camera thread acquires frame k + 2, an inference thread runs stage 1 of frame k + 1 and the main
 thread exchanges messages and runs stages 2-3 of frame k (torch and ONNX Runtime release the
 GIL); several frames in flight. A frame whose stage 1 could not finish by its deadline any more
-is skipped before it costs CPU.
+is skipped before it costs CPU. An overloaded swarm agrees on a lower common rate over the
+heartbeat (:mod:`.rate`): only every m-th slot is acquired, by every drone alike.
 """
 from __future__ import annotations
 
@@ -24,6 +25,7 @@ from . import results as R
 from .camera import DroneCamera
 from .config import NodeConfig
 from .messaging import PeerMessaging
+from .rate import RateAgreement
 from .records import FrameRecords
 from .stages import FrameJob, StagePipeline
 from .startup import Heartbeat
@@ -33,6 +35,7 @@ from .transport import Transport
 __all__ = ["last_slot", "SlotLoop"]
 
 log = logging.getLogger("airpose.runtime")
+_BUSY = "inference busy past the slot"
 
 
 def last_slot(schedule: Schedule, replay: CameraReplay, frames: int | None) -> int:
@@ -66,7 +69,11 @@ class SlotLoop:
         self.stages = stages
         self.messaging = messaging
         self.records = records
-        self.heartbeat = Heartbeat(messaging, cfg.heartbeat_ms / 1000.0)
+        self.rate = RateAgreement(cfg.period_s, adaptive=cfg.mode == "pipelined" and cfg.adaptive_rate,
+                                  max_divisor=cfg.max_rate_divisor)
+        messaging.on_rate = self.rate.heard
+        self.heartbeat = Heartbeat(messaging, cfg.heartbeat_ms / 1000.0, divisor=lambda: self.rate.own)
+        self._divisor = 1  # the swarm's, set by the main thread, read by the camera thread
         self._stop = stop
         self.frames_started = 0
 
@@ -123,8 +130,11 @@ class SlotLoop:
                         worker_done = True
                         continue
                     if job.flags & R.SKIPPED:  # (holds no permit)
+                        if job.skip_reason == _BUSY:
+                            self.rate.overloaded(now)
                         self.records.record(job, done=False)
                         continue
+                    self.rate.observe(now, job.timing["stage1"])
                     self.frames_started += 1
                     self.stages.publish(job)
                     inflight.append(job)
@@ -156,6 +166,7 @@ class SlotLoop:
                         permits.release()
                     now = self.clock.now()
             self.messaging.mailbox.prune(now - 2.0)
+            self._divisor = self.rate.divisor(self.messaging.peers.alive(now))
             finished = (k >= end if not pipelined else worker_done) and not inflight
             if finished:
                 break
@@ -198,7 +209,11 @@ class SlotLoop:
                 if self._stop.is_set():
                     return
                 job = self.new_job(k)
-                if self.too_late(k, self.clock.now()):
+                job.divisor = m = self._divisor
+                if k % m:
+                    job.flags |= R.SKIPPED | R.RATE_SKIPPED
+                    job.skip_reason = f"swarm rate 1/{m}"
+                elif self.too_late(k, self.clock.now()):
                     job.flags |= R.SKIPPED
                     job.skip_reason = "camera busy past the slot"
                 else:
@@ -242,7 +257,7 @@ class SlotLoop:
                         permits.release()
                         self.stages.lower_stage1_estimate()
                         job.flags |= R.SKIPPED
-                        job.skip_reason = "inference busy past the slot"
+                        job.skip_reason = _BUSY
                     else:
                         try:
                             job = self.stages.stage1(job)

@@ -18,7 +18,7 @@ import numpy as np
 
 from .sync import Mailbox, PeerTable
 from .transport import Transport
-from .wire import BYE, DATA, SKIP, Packet, WireError, decode_packet, encode_packet
+from .wire import BYE, DATA, HELLO, SKIP, Packet, WireError, decode_packet, encode_packet
 
 __all__ = ["PeerMessaging"]
 
@@ -60,16 +60,18 @@ class PeerMessaging:
         self._seen_set: set = set()
         self._finished_stamps: deque = deque(maxlen=64)
         self._skips: deque = deque(maxlen=256)  # (drone, slot) the others said they skip
+        self.on_rate: Callable[[int, int], None] | None = None  # (drone, divisor) of each HELLO
 
     # -- out -----------------------------------------------------------------------------------
-    def send(self, kind: int, job=None, stage: int = 0, payload: np.ndarray | None = None) -> None:
+    def send(self, kind: int, job=None, stage: int = 0, payload: np.ndarray | None = None,
+             rate_divisor: int = 1) -> None:
         """Publish a packet about ``job`` (a :class:`~.stages.FrameJob`; None: a HELLO or BYE
-        stamped now)."""
+        stamped now); a HELLO carries the slot divisor this drone asks for."""
         now = self.now()
         buf = encode_packet(kind, self.drone_id, stage=stage,
                             frame_index=max(job.frame_index, 0) if job else 0, slot=job.slot if job else 0,
                             stamp=job.stamp if job and not math.isnan(job.stamp) else now, sent=now,
-                            payload=payload, dtype=self.message_dtype)
+                            payload=payload, dtype=self.message_dtype, rate_divisor=rate_divisor)
         if self.transport.send(buf):
             if kind == DATA:
                 self.bytes_data += len(buf)
@@ -103,6 +105,8 @@ class PeerMessaging:
                 continue
             if self.peers.heard(pkt.drone, now):
                 log.info("drone %d is alive", pkt.drone)
+            if pkt.kind == HELLO and self.on_rate is not None:
+                self.on_rate(pkt.drone, pkt.rate_divisor)
             if pkt.kind in (SKIP, DATA) and self._replayed(pkt):
                 self._reject("replay", f"replay of drone {pkt.drone}'s {pkt.kind_name} message of slot {pkt.slot} "
                              f"(stage {pkt.stage}, stamp {pkt.stamp:.3f})", len(buf))

@@ -65,7 +65,7 @@ class FrameRecords:
                                 if job.frame_index >= 0 and hasattr(self.view, "numbers") else None),
                "stamp": None if math.isnan(job.stamp) else job.stamp,
                "shutter": None if math.isnan(job.shutter) else job.shutter, "target": job.target,
-               "t_done": now, "used": job.used, "timing": job.timing,
+               "t_done": now, "used": job.used, "timing": job.timing, "divisor": job.divisor,
                "marks": {k: v - job.target for k, v in job.marks.items()}}
         if done:
             if now > job.deadline:
@@ -96,6 +96,7 @@ class FrameRecords:
         valid = (flags & R.INVALID) == 0
         lat = np.array([r["latency"] for r, ok in zip(recs, valid) if ok], np.float64)
         n = len(recs)
+        taken = n - int(((flags & R.RATE_SKIPPED) != 0).sum())  # slots of the agreed rate
         span = n * period_s if n else math.nan
         timings = defaultdict(list)
         for r, ok in zip(recs, valid):
@@ -116,7 +117,9 @@ class FrameRecords:
             "stamp_mismatch_frames": int((valid & ((flags & R.STAMP_MISMATCH) != 0)).sum()),
             "nominal_fps": 1.0 / period_s,
             "fps": float(valid.sum() / span) if n else 0.0,
-            "drop_rate": float(1.0 - valid.mean()) if n else None,
+            # the swarm's agreed rate (runtime.rate) and the share of its slots not completed in time
+            "rate_skipped": n - taken, "agreed_fps": taken / span if n else None,
+            "drop_rate": float(1.0 - valid.sum() / taken) if taken else None,
             "latency_p50": pct(lat, 50), "latency_p95": pct(lat, 95), "latency_max": pct(lat, 100),
             "bytes_data": m.bytes_data, "data_packets": m.data_packets, "bytes_hello": m.bytes_hello,
             "frames_started": frames_started,

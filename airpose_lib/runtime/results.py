@@ -36,6 +36,7 @@ __all__ = [
     "NO_DETECTION",
     "DROPPED",
     "SKIPPED",
+    "RATE_SKIPPED",
     "INVALID",
     "fallback_flag",
     "describe_flags",
@@ -58,10 +59,11 @@ STAMP_MISMATCH = 16  # a drone sent this stage for a frame outside the stamp tol
 NO_DETECTION = 32  # no detection in this frame: the previous box was used
 DROPPED = 64  # completed after its deadline: discarded (the paper's fixed window)
 SKIPPED = 128  # never started (the node was busy past the slot, or no frame/box)
+RATE_SKIPPED = 256  # with SKIPPED: not a slot of the swarm's agreed lower rate (runtime.rate)
 INVALID = DROPPED | SKIPPED
 FLAGS = {"fallback_s2": FALLBACK_S2, "fallback_s3": FALLBACK_S3, "no_peers": NO_PEERS,
          "last_used": LAST_USED, "stamp_mismatch": STAMP_MISMATCH, "no_detection": NO_DETECTION,
-         "dropped": DROPPED, "skipped": SKIPPED}
+         "dropped": DROPPED, "skipped": SKIPPED, "rate_skipped": RATE_SKIPPED}
 
 PARAM_KEYS = ("phi6d", "theta6d", "beta", "tau", "cam")
 _SHAPES = {"phi6d": (6,), "theta6d": (21, 6), "beta": (10,), "tau": (3,), "cam": (3,), "P": (3,),
@@ -153,7 +155,7 @@ def mask_to_ids(mask: int) -> list[int]:
 def _records_to_arrays(records: list[dict]) -> dict[str, np.ndarray]:
     n = len(records)
     out: dict[str, np.ndarray] = {}
-    for key in ("slot", "frame_index", "frame_number", "flags", "drone", "view"):
+    for key in ("slot", "frame_index", "frame_number", "flags", "drone", "view", "divisor"):
         out[key] = np.array([r.get(key, -1) if r.get(key) is not None else -1 for r in records], np.int64)
     for key in ("stamp", "shutter", "target", "t_done", "latency"):
         out[key] = np.array([np.nan if r.get(key) is None else r[key] for r in records], np.float64)

@@ -52,6 +52,7 @@ class FrameJob:
     marks: dict = field(default_factory=dict)  # local clock at the frame's events
     skip_reason: str | None = None
     crop: np.ndarray | None = None  # (1, 3, S, S) between acquisition and stage 1
+    divisor: int = 1  # the swarm's slot divisor when the slot came up (runtime.rate)
 
 
 class StagePipeline:

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import select
 import sys
+from collections.abc import Callable
 
 from .messaging import PeerMessaging
 from .sync import Schedule
@@ -43,15 +44,17 @@ def first_slot(schedule: Schedule, now: float, restart: bool) -> int:
 
 
 class Heartbeat:
-    """HELLO every ``period_s`` seconds of the drone's clock."""
+    """HELLO every ``period_s`` seconds of the drone's clock, with the slot divisor that
+    ``divisor()`` says this drone asks for (:mod:`.rate`)."""
 
-    def __init__(self, messaging: PeerMessaging, period_s: float) -> None:
+    def __init__(self, messaging: PeerMessaging, period_s: float, divisor: Callable[[], int] = lambda: 1) -> None:
         self.messaging = messaging
         self.period_s = period_s
+        self.divisor = divisor
         self.next = 0.0  # local time of the next HELLO
 
     def beat(self, now: float) -> None:
         """Send a HELLO if one is due at ``now``."""
         if now >= self.next:
-            self.messaging.send(HELLO)
+            self.messaging.send(HELLO, rate_divisor=self.divisor())
             self.next = now + self.period_s

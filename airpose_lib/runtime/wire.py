@@ -10,7 +10,8 @@ A packet is a fixed 40-byte little-endian header followed by the payload::
     6       1     drone id of the sender (1..255)
     7       1     stage  (1..3: the iteration after which the message was produced; 0 otherwise)
     8       1     dtype  (0 = float32, 1 = float16)
-    9       1     flags  (reserved, 0)
+    9       1     rate divisor m (HELLO: the sender asks the swarm to process every m-th slot,
+                         runtime.rate; 0 or 1 = every slot; 0 in other kinds)
     10      2     payload length in bytes
     12      4     frame index (the sender's camera frame counter; logging only)
     16      4     schedule slot (for SKIP and diagnostics; DATA is matched by the stamp)
@@ -84,6 +85,7 @@ class Packet:
     sent: float
     payload: np.ndarray
     version: int = WIRE_VERSION
+    rate_divisor: int = 1  # HELLO: the slot divisor the sender asks for
 
     @property
     def kind_name(self) -> str:
@@ -106,7 +108,7 @@ def packet_nbytes(kind: int = DATA, dtype="float32") -> int:
 
 def encode_packet(kind: int, drone: int, *, stage: int = 0, frame_index: int = 0, slot: int = 0, stamp: float = 0.0,
                   sent: float = 0.0, payload: np.ndarray | None = None, dtype="float32",
-                  version: int = WIRE_VERSION) -> bytes:
+                  version: int = WIRE_VERSION, rate_divisor: int = 1) -> bytes:
     """Build one packet.
 
     Args:
@@ -120,6 +122,7 @@ def encode_packet(kind: int, drone: int, *, stage: int = 0, frame_index: int = 0
         payload: DATA only, ``(136,)`` values, cast to ``dtype``.
         dtype: ``"float32"`` (544-byte payload) or ``"float16"`` (272 bytes).
         version: header version (tests use other values to make a wrong-version packet).
+        rate_divisor: HELLO only, 1..255: the slot divisor the sender asks for.
     """
     code = _dtype_code(dtype)
     if kind == DATA:
@@ -135,7 +138,10 @@ def encode_packet(kind: int, drone: int, *, stage: int = 0, frame_index: int = 0
         raise ValueError(f"unknown packet kind {kind}")
     if not 1 <= drone <= 255:
         raise ValueError(f"drone id must be in 1..255, got {drone}")
-    head = HEADER.pack(MAGIC, version, kind, drone, stage, code, 0, len(body), frame_index & 0xFFFFFFFF,
+    if not 1 <= rate_divisor <= 255:
+        raise ValueError(f"rate divisor must be in 1..255, got {rate_divisor}")
+    divisor_byte = rate_divisor if kind == HELLO else 0
+    head = HEADER.pack(MAGIC, version, kind, drone, stage, code, divisor_byte, len(body), frame_index & 0xFFFFFFFF,
                        slot & 0xFFFFFFFF, float(stamp), float(sent), 0)
     crc = zlib.crc32(body, zlib.crc32(head))
     return head[:-4] + struct.pack("<I", crc) + body
@@ -146,7 +152,7 @@ def decode_packet(buf: bytes) -> Packet:
     buf = bytes(buf)
     if len(buf) < HEADER_BYTES:
         raise WireError("short", f"short packet: {len(buf)} bytes < {HEADER_BYTES}-byte header")
-    magic, version, kind, drone, stage, code, _flags, n, frame_index, slot, stamp, sent, crc = HEADER.unpack_from(buf)
+    magic, version, kind, drone, stage, code, divisor, n, frame_index, slot, stamp, sent, crc = HEADER.unpack_from(buf)
     if magic != MAGIC:
         raise WireError("magic", f"bad magic {magic!r}")
     if version != WIRE_VERSION:
@@ -176,4 +182,4 @@ def decode_packet(buf: bytes) -> Packet:
     if not (np.isfinite(stamp) and np.isfinite(sent)):
         raise WireError("non_finite", "non-finite time stamp")
     return Packet(kind=kind, drone=drone, stage=stage, frame_index=frame_index, slot=slot, stamp=stamp, sent=sent,
-                  payload=payload, version=version)
+                  payload=payload, version=version, rate_divisor=max(1, divisor) if kind == HELLO else 1)

@@ -201,9 +201,10 @@ def show_interactive(scene: RecordingScene, window_size: tuple[int, int] = (900,
     pv.set_jupyter_backend("trame")
     plotter = pv.Plotter(notebook=True, off_screen=True, window_size=list(window_size))
     data = _populate(plotter, scene, 0)
-    plotter.add_legend(labels=[[label, colour] for label, colour in _legend_entries(scene)], bcolor="white",
-                       face="rectangle", size=(0.4, 0.15), loc="lower right")
     _set_view(plotter, scene)
+    # The legend is HTML under the view: VTK's legend box clipped its labels at this window size.
+    legend = widgets.HTML(" &nbsp; ".join(f'<span style="color:{colour}">&#9632; {label}</span>'
+                                          for label, colour in _legend_entries(scene)))
     slider = widgets.IntSlider(value=0, min=0, max=scene.num_frames - 1, step=1, description="frame",
                                continuous_update=False, layout=widgets.Layout(width="60%"))
     label = widgets.Label()
@@ -217,7 +218,7 @@ def show_interactive(scene: RecordingScene, window_size: tuple[int, int] = (900,
     slider.observe(on_change, names="value")
     on_change()
     viewer = plotter.show(jupyter_backend="trame", return_viewer=True)
-    return widgets.VBox([widgets.HBox([slider, label]), viewer])
+    return widgets.VBox([widgets.HBox([slider, label]), viewer, legend])
 
 
 def plot_static_frames(scene: RecordingScene, n_frames: int = 3, image_size: tuple[int, int] = (640, 440),

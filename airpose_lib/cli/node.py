@@ -74,15 +74,15 @@ def check_inputs(args: argparse.Namespace) -> None:
     missing, ``--detector`` unknown or a numeric option out of range (the files' contents are
     checked when they are loaded)."""
     _check_ranges(args)
-    if not str(args.source).startswith("synthetic"):  # a recording: its reader is loaded anyway
-        from airpose_lib.data.official_layout import DETECTOR_FILES
+    if not str(args.source).startswith("synthetic"):
+        if not Path(args.source).is_dir():
+            raise CLIError(
+                f"--source {args.source}: no such folder; give a recording folder in the official layout "
+                "(machine_1/, machine_2/) or synthetic[:views=2,frames=300,...]")
+        from airpose_lib.data.official_layout import DETECTOR_FILES  # a recording's reader: loaded anyway
 
         if args.detector not in DETECTOR_FILES:
             raise CLIError(f"--detector {args.detector}: unknown; give one of {', '.join(DETECTOR_FILES)}")
-    if not str(args.source).startswith("synthetic") and not Path(args.source).is_dir():
-        raise CLIError(
-            f"--source {args.source}: no such folder; give a recording folder in the official layout "
-            "(machine_1/, machine_2/) or synthetic[:views=2,frames=300,...]")
     if args.checkpoint is not None and not Path(args.checkpoint).is_file():
         raise CLIError(f"--checkpoint {args.checkpoint}: no such file; give a state_dict or a "
                               "checkpoints/*.pt of `airpose train`")

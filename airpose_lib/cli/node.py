@@ -88,8 +88,8 @@ def check_inputs(args: argparse.Namespace) -> None:
                               "checkpoints/*.pt of `airpose train`")
     if args.backend == "onnx" and (args.onnx_dir is None or not (Path(args.onnx_dir) / "meta.json").is_file()):
         what = "no meta.json in it" if args.onnx_dir and Path(args.onnx_dir).is_dir() else "no such folder"
-        raise CLIError(f"--onnx-dir {args.onnx_dir}: {what}; give a folder written by "
-                              "airpose_lib.model.onnx_export.export_onnx")
+        raise CLIError(f"--onnx-dir {args.onnx_dir}: {what}; give a folder written by `airpose export` "
+                              "(it prints the folder)")
 
 
 def add_node_arguments(p: argparse.ArgumentParser) -> None:

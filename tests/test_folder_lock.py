@@ -228,6 +228,25 @@ def test_ablation_training_workers_die_with_a_killed_parent(tmp_path):
     assert not _wait_gone(kids), "orphans left"
 
 
+def test_drones_die_with_a_killed_launcher(tmp_path):
+    """SIGKILL `airpose launch --drones 2` while its drones run: both drone processes exit."""
+    out = tmp_path / "online"
+    proc = subprocess.Popen([sys.executable, "-m", "airpose_lib", "launch", "--drones", "2", "--backend", "fake",
+                             "--frames", "100000", "--out", str(out)], env=_env(), stdout=subprocess.DEVNULL,
+                            stderr=subprocess.DEVNULL)
+    try:
+        t_end = time.time() + 120
+        while time.time() < t_end and proc.poll() is None and not all(
+                (out / f"node_{d}.jsonl").exists() for d in (1, 2)):
+            time.sleep(0.25)  # until both drones run their schedule
+        kids = _children(proc.pid)
+        assert len(kids) >= 2, kids
+    finally:
+        proc.send_signal(signal.SIGKILL)
+        proc.wait()
+    assert not _wait_gone(kids), "orphans left"
+
+
 @pytest.mark.slow
 def test_ddp_ranks_die_with_a_killed_parent(tmp_path):
     """SIGKILL `airpose train --world-size 2` while its two ranks train: both ranks exit (torch's

@@ -155,32 +155,6 @@ def _alive(pid: int) -> bool:
     return st is not None and st[0] != "Z"
 
 
-def test_pool_workers_die_with_a_killed_parent(tmp_path, open_model_files):
-    """SIGKILL `airpose data generate --workers 2` mid-run: its two render workers and the
-    multiprocessing resource tracker exit too (they used to run on, ~1.7 GB)."""
-    proc = subprocess.Popen([sys.executable, "-m", "airpose_lib", "data", "generate", "--profile", "smoke",
-                             "--workers", "2", "--out", str(tmp_path / "data")], env=_env(),
-                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    data = tmp_path / "data"
-    try:
-        t_end = time.time() + 300
-        while time.time() < t_end and proc.poll() is None and not list(data.glob("shard_*")):
-            time.sleep(0.5)  # until the workers render (a first shard is finished)
-        kids = _children(proc.pid)
-        assert len(kids) >= 3, kids  # 2 workers + the resource tracker
-    finally:
-        proc.send_signal(signal.SIGKILL)
-        proc.wait()
-    t_end = time.time() + 60
-    alive = kids
-    while alive and time.time() < t_end:
-        time.sleep(0.25)
-        alive = {k for k in kids if _alive(k)}
-    for k in alive:  # do not leak them into the machine if the test fails
-        os.kill(k, signal.SIGKILL)
-    assert not alive, f"orphans left: {alive}"
-
-
 def _wait_gone(pids: set[int], timeout_s: float = 60.0) -> set[int]:
     """The processes of ``pids`` still alive after waiting up to ``timeout_s``; those are killed
     (so that a failing test leaks nothing into the machine)."""
@@ -192,6 +166,34 @@ def _wait_gone(pids: set[int], timeout_s: float = 60.0) -> set[int]:
     for k in alive:
         os.kill(k, signal.SIGKILL)
     return alive
+
+
+def _orphans_of_a_killed(argv: list[str], started, min_children: int, timeout_s: float = 300.0) -> set[int]:
+    """Run ``python ARGV``, wait until ``started()`` is true (or it ends), SIGKILL it and return its
+    descendants still alive a minute later."""
+    proc = subprocess.Popen([sys.executable, *argv], env=_env(), stdout=subprocess.DEVNULL,
+                            stderr=subprocess.DEVNULL)
+    try:
+        t_end = time.time() + timeout_s
+        while time.time() < t_end and proc.poll() is None and not started():
+            time.sleep(0.25)
+        kids = _children(proc.pid)
+        assert len(kids) >= min_children, kids
+    finally:
+        proc.send_signal(signal.SIGKILL)
+        proc.wait()
+    return _wait_gone(kids)
+
+
+def test_pool_workers_die_with_a_killed_parent(tmp_path, open_model_files):
+    """SIGKILL `airpose data generate --workers 2` mid-run: its two render workers and the
+    multiprocessing resource tracker exit too (they used to run on, ~1.7 GB)."""
+    data = tmp_path / "data"
+    alive = _orphans_of_a_killed(["-m", "airpose_lib", "data", "generate", "--profile", "smoke", "--workers", "2",
+                                  "--out", str(data)],
+                                 lambda: bool(list(data.glob("shard_*"))),  # the workers render
+                                 min_children=3)  # 2 workers + the resource tracker
+    assert not alive, f"orphans left: {alive}"
 
 
 SLEEPER = "import os, time\ndef job(args):\n    print('WORKER', os.getpid(), flush=True)\n    time.sleep(300)\n"
@@ -231,40 +233,21 @@ def test_ablation_training_workers_die_with_a_killed_parent(tmp_path):
 def test_drones_die_with_a_killed_launcher(tmp_path):
     """SIGKILL `airpose launch --drones 2` while its drones run: both drone processes exit."""
     out = tmp_path / "online"
-    proc = subprocess.Popen([sys.executable, "-m", "airpose_lib", "launch", "--drones", "2", "--backend", "fake",
-                             "--frames", "100000", "--out", str(out)], env=_env(), stdout=subprocess.DEVNULL,
-                            stderr=subprocess.DEVNULL)
-    try:
-        t_end = time.time() + 120
-        while time.time() < t_end and proc.poll() is None and not all(
-                (out / f"node_{d}.jsonl").exists() for d in (1, 2)):
-            time.sleep(0.25)  # until both drones run their schedule
-        kids = _children(proc.pid)
-        assert len(kids) >= 2, kids
-    finally:
-        proc.send_signal(signal.SIGKILL)
-        proc.wait()
-    assert not _wait_gone(kids), "orphans left"
+    alive = _orphans_of_a_killed(["-m", "airpose_lib", "launch", "--drones", "2", "--backend", "fake", "--frames",
+                                  "100000", "--out", str(out)],
+                                 lambda: all((out / f"node_{d}.jsonl").exists() for d in (1, 2)), min_children=2)
+    assert not alive, f"orphans left: {alive}"
 
 
 @pytest.mark.slow
 def test_ddp_ranks_die_with_a_killed_parent(tmp_path):
     """SIGKILL `airpose train --world-size 2` while its two ranks train: both ranks exit (torch's
     spawn asks the kernel for it, PR_SET_PDEATHSIG; rank 0 holds the run folder's lock)."""
-    proc = subprocess.Popen([sys.executable, "-m", "airpose_lib", "train", "--variant", "airpose", "--profile",
-                             "smoke", "--world-size", "2", "--steps", "100000", "--quiet", "--out",
-                             str(tmp_path / "run")], env=_env(), stdout=subprocess.DEVNULL,
-                            stderr=subprocess.DEVNULL)
-    try:
-        t_end = time.time() + 300
-        while time.time() < t_end and proc.poll() is None and not (tmp_path / "run" / "log.csv").exists():
-            time.sleep(0.5)  # until rank 0 trains
-        kids = _children(proc.pid)
-        assert len(kids) >= 2, kids
-    finally:
-        proc.send_signal(signal.SIGKILL)
-        proc.wait()
-    assert not _wait_gone(kids), "orphans left"
+    run = tmp_path / "run"
+    alive = _orphans_of_a_killed(["-m", "airpose_lib", "train", "--variant", "airpose", "--profile", "smoke",
+                                  "--world-size", "2", "--steps", "100000", "--quiet", "--out", str(run)],
+                                 lambda: (run / "log.csv").exists(), min_children=2)  # rank 0 trains
+    assert not alive, f"orphans left: {alive}"
 
 
 def test_die_with_parent_sets_the_kernel_signal():

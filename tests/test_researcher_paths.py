@@ -187,6 +187,12 @@ def test_online_figures_draw_from_node_records(tmp_path):
             plot_fault_states(np.stack([states, states]), 0.05, "20 % loss")]
     labels = figs[1].axes[1].get_legend_handles_labels()[1]
     assert any("4.17 fps" in lab for lab in labels)  # the window line is in the legend
+    rate = figs[1].axes[1]
+    figs[1].canvas.draw()
+    renderer = figs[1].canvas.get_renderer()
+    legend = rate.get_legend().get_window_extent(renderer)
+    covered = [a for a in [*rate.patches, *rate.texts] if legend.overlaps(a.get_window_extent(renderer))]
+    assert not covered  # the legend sits above the tallest bar (the paper's 20 fps) and its value
     for f in figs:
         f.savefig(tmp_path / "f.png")
         plt.close(f)

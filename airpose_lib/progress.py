@@ -47,6 +47,27 @@ def _widgets_available() -> bool:
     return True
 
 
+class _LineStream:
+    """A text stream in which each redraw of a bar starts a new line: tqdm returns to the start
+    of the line with a carriage return, which a log file keeps, so every redraw of a run would
+    otherwise pile up on one physical line."""
+
+    def __init__(self, stream) -> None:
+        self._stream = stream
+        self._at_line_start = True
+
+    def write(self, s: str) -> int:
+        if s.startswith("\r"):
+            s = ("" if self._at_line_start else "\n") + s[1:]
+        s = s.replace("\r", "\n")
+        if s:
+            self._at_line_start = s.endswith("\n")
+        return self._stream.write(s)
+
+    def flush(self) -> None:
+        self._stream.flush()
+
+
 def progress_bar(iterable: Iterable | None = None, *, total: int | None = None, desc: str | None = None,
                  enabled: bool = True, **kwargs: Any):
     """A ``tqdm`` bar suited to where the output goes.
@@ -80,4 +101,5 @@ def progress_bar(iterable: Iterable | None = None, *, total: int | None = None, 
         kwargs.setdefault("dynamic_ncols", False)
         kwargs.setdefault("ncols", 100)
         kwargs.setdefault("ascii", True)
+        kwargs.setdefault("file", _LineStream(sys.stderr))
     return tqdm(iterable, total=total, desc=desc, disable=disable, **kwargs)

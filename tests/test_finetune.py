@@ -459,7 +459,7 @@ def test_cli_predict_and_finetune(tiny_ckpt, smoke_root, tmp_path, body32, capsy
     assert load_predictions(out)["frames"].tolist() == [0, 1, 2]
     torch.manual_seed(1)
     prior = save_prior(VPoser(32, 8).eval(), tmp_path / "prior.pt")
-    # the predictions file is what `airpose fit --init` reads (its `--frames` are positions)
+    # the predictions file is what `airpose fit --init` reads (its `--frames` are image numbers too)
     from airpose_lib import cli
 
     assert cli.main(["fit", "--sequence", str(smoke_root), "--init", str(out), "--frames", "0:3", "--iterations", "1",

@@ -80,6 +80,16 @@ def test_fit_a_sequence_in_the_official_layout(tmp_path, capsys, open_model_file
     prov = json.loads(str(res["provenance"]))
     assert prov["skipped_frames"] == [2] and prov["config"]["iterations"] == 5
     np.testing.assert_array_equal(res["frames"], np.arange(10, 10 + F))
+    # --frames are image numbers, as in `predict` and `finetune` (the images here are numbered 10..15)
+    part = tmp_path / "part.npz"
+    assert main(["fit", "--sequence", str(root), "--init", str(init), "--out", str(part), "--frames", "12:15",
+                 "--prior-path", str(prior_file), "--iterations", "2", "--quiet"]) == 0
+    np.testing.assert_array_equal(np.load(part)["frames"], [12, 13, 14])
+    capsys.readouterr()
+    assert main(["fit", "--sequence", str(root), "--init", str(init), "--frames", "0:5",
+                 "--prior-path", str(prior_file)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "no image numbered in [0, 5)" in err
     # Missing arrays in the initialisation are a clean error.
     np.savez(init, phi=phi.numpy())
     assert main(["fit", "--sequence", str(root), "--init", str(init), "--prior-path", str(prior_file)]) == 2

@@ -52,7 +52,8 @@ def test_progress_off_a_terminal_writes_a_line_every_few_seconds(monkeypatch):
     for _ in range(5000):
         bar.update(1)
     bar.close()
-    redraws = [s for s in log.getvalue().replace("\n", "\r").split("\r") if s.strip()]
+    assert "\r" not in log.getvalue()  # a log file gets one line per redraw, not all on one line
+    redraws = [s for s in log.getvalue().split("\n") if s.strip()]
     assert 1 <= len(redraws) <= 3, redraws  # start and end, not one per step
     assert "5000/5000" in redraws[-1]
 
@@ -187,6 +188,12 @@ def test_online_figures_draw_from_node_records(tmp_path):
             plot_fault_states(np.stack([states, states]), 0.05, "20 % loss")]
     labels = figs[1].axes[1].get_legend_handles_labels()[1]
     assert any("4.17 fps" in lab for lab in labels)  # the window line is in the legend
+    rate = figs[1].axes[1]
+    figs[1].canvas.draw()
+    renderer = figs[1].canvas.get_renderer()
+    legend = rate.get_legend().get_window_extent(renderer)
+    covered = [a for a in [*rate.patches, *rate.texts] if legend.overlaps(a.get_window_extent(renderer))]
+    assert not covered  # the legend sits above the tallest bar (the paper's 20 fps) and its value
     for f in figs:
         f.savefig(tmp_path / "f.png")
         plt.close(f)

@@ -50,3 +50,39 @@ def test_table1_figure_is_readable():
 def test_without_reference_two_bars_per_method():
     fig = plot_table1(_table().drop(index=ORACLE_LABEL))
     assert all(len(ax.patches) == 8 for ax in fig.axes)
+
+
+def _title_overlaps(fig) -> list[str]:
+    """Panel titles the figure title covers (after a draw with the layout engine)."""
+    fig.canvas.draw()
+    renderer = fig.canvas.get_renderer()
+    top = fig._suptitle.get_window_extent(renderer)
+    return [ax.get_title() for ax in fig.axes
+            if ax.get_title() and top.overlaps(ax.title.get_window_extent(renderer))]
+
+
+def test_qualitative_figures_keep_the_title_clear_of_the_panel_titles():
+    """The title is given to the plot functions (a notebook's own ``suptitle(y=1.0)`` on a
+    constrained layout was drawn over the first row's titles)."""
+    import matplotlib.pyplot as plt
+
+    from airpose_lib.viz.ablation import plot_ablation_meshes, plot_ablation_samples
+
+    rng = np.random.default_rng(0)
+    n, V, S = 2, 2, 64
+    crops = np.zeros((n, V, S, S, 3), np.uint8)
+    methods = ["Baseline", "Baseline+Multi-view", "Baseline+Fullcam", "AirPose"]
+    uv = {m: rng.uniform(8, 56, (n, V, 22, 2)) for m in methods}
+    pos = {m: rng.normal(size=(n, V, 3)) for m in methods}
+    fig = plot_ablation_samples(crops, uv, rng.uniform(8, 56, (n, V, 22, 2)), pos, np.zeros((n, 3)),
+                                title="ablation variants on 2 test samples (smoke profile)")
+    assert fig._suptitle.get_text().startswith("ablation variants") and not _title_overlaps(fig)
+    plt.close(fig)
+
+    verts = np.array([[-0.3, -0.3, 3.0], [0.3, -0.3, 3.0], [0.0, 0.4, 3.0], [0.0, 0.0, 2.6]])
+    faces = np.array([[0, 1, 2], [0, 1, 3], [1, 2, 3], [0, 2, 3]])
+    K = np.broadcast_to(np.array([[80.0, 0, 32], [0, 80.0, 32], [0, 0, 1]]), (n, V, 3, 3))
+    vertices = {m: np.broadcast_to(verts, (n, V, 4, 3)) for m in ["Ground truth", *methods]}
+    fig = plot_ablation_meshes(crops, vertices, faces, K, title="ablation variants: meshes in the crops")
+    assert fig._suptitle.get_text() == "ablation variants: meshes in the crops" and not _title_overlaps(fig)
+    plt.close(fig)

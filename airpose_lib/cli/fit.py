@@ -15,6 +15,7 @@ __all__ = ['add_fit']
 
 def _cmd_fit(args: argparse.Namespace) -> int:
     from airpose_lib.data.official_layout import load_sequence
+    from airpose_lib.finetune.predict import frames_in_range
     from airpose_lib.fitting import fit_sequence
     from airpose_lib.fitting.recording import (fit_config, initialisation_for, open_initialisation, refined_path,
                                                save_refinement)
@@ -23,9 +24,13 @@ def _cmd_fit(args: argparse.Namespace) -> int:
     require_folder(args.sequence, "--sequence", SEQUENCE_FOLDER)
     require_file(args.init, "--init", "the .npz of `airpose predict`")
     require_path(args.prior_path, "--prior-path", "a prior checkpoint file or folder")
-    rng = parse_range(args.frames, "positions", "0:1000")
+    rng = parse_range(args.frames)
     pred = open_initialisation(args.init)
-    seq = load_sequence(args.sequence, frames=None if rng is None else slice(*rng), ground_truth=False)
+    try:  # image numbers, as in `predict` and `finetune`
+        frames = None if rng is None else frames_in_range(args.sequence, *rng)
+    except ValueError as e:
+        raise CLIError(str(e)) from None
+    seq = load_sequence(args.sequence, frames=frames, ground_truth=False)
     try:
         init = initialisation_for(pred, args.init, seq.frames)
         cfg = fit_config(args.profile, official_temporal=args.official_temporal, iterations=args.iterations,
@@ -62,7 +67,8 @@ def add_fit(sub) -> None:
     fit.add_argument("--profile", choices=PROFILES, default="smoke",
                      help="iterations/weights from the profile's `fitting:` section (default: smoke)")
     fit.add_argument("--frames", default=None, metavar="START:STOP",
-                     help="a slice of the sequence's frames (positions, e.g. 0:1000)")
+                     help="only the images numbered START..STOP-1 (either end may be left out), "
+                          "as in `predict` and `finetune`")
     fit.add_argument("--prior", choices=("kit", "vposer"), default="kit",
                      help="kit: trained by `airpose prior train`; vposer: official V02_05 (default: kit)")
     fit.add_argument("--prior-path", type=Path, default=None, help="a prior checkpoint file or folder")

@@ -147,7 +147,7 @@ def plot_ablation_samples(crops: np.ndarray, joints_crop: Mapping[str, np.ndarra
 
 
 def plot_ablation_meshes(crops: np.ndarray, vertices: Mapping[str, np.ndarray], faces: np.ndarray,
-                         K_crop: np.ndarray):
+                         K_crop: np.ndarray, title: str | None = None):
     """Each estimate's body mesh rendered into the crops with the crop's own intrinsics (mesh and
     image align exactly when the estimate is right), ground truth first.
 
@@ -156,8 +156,9 @@ def plot_ablation_meshes(crops: np.ndarray, vertices: Mapping[str, np.ndarray], 
         vertices: method -> ``(n, V, Nv, 3)`` camera-frame vertices.
         faces: ``(M, 3)`` triangles.
         K_crop: ``(n, V, 3, 3)`` crop intrinsics.
+        title: figure title, above the column titles (never over them).
     """
     n, V, S = crops.shape[:3]
     whole_crop = np.broadcast_to(np.array([[0.0, 0.0], [S - 1.0, S - 1.0]]), (n, V, 2, 2))
     return plot_mesh_overlays(crops, vertices, faces, K_crop, frame_labels=[f"sample {i + 1}" for i in range(n)],
-                              zoom_points=whole_crop)
+                              zoom_points=whole_crop, title=title)

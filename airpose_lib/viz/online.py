@@ -89,6 +89,7 @@ def plot_latency(runs: Mapping[str, Sequence], fps: Mapping[str, float], title: 
     bars = b.bar(names, vals, color=colors, edgecolor="black", linewidth=0.5)
     b.bar_label(bars, fmt="%.2f", fontsize=7)
     b.axhline(1 / 0.240, color="0.4", ls=":", lw=1, label="4.17 fps: one frame per 240 ms window")
+    b.set_ylim(0, 1.3 * max(vals))  # room for the legend above the tallest bar and its label
     b.set_ylabel("frames per second per drone")
     b.set_title("achieved rate (dropped frames excluded)")
     b.legend(loc="upper right")

@@ -5,7 +5,7 @@ import math
 
 import pytest
 
-from airpose_lib.runtime.rate import RateAgreement, needed_divisor
+from airpose_lib.runtime.rate import RateAgreement, needed_divisor, takes_slot
 from airpose_lib.runtime.wire import DATA, HELLO, decode_packet, encode_packet
 
 PERIOD = 0.05  # 20 Hz
@@ -54,7 +54,8 @@ def test_swarm_takes_the_largest_divisor_of_living_drones():
     r.heard(3, 2)
     assert r.divisor(alive={2, 3}) == 4
     assert r.divisor(alive={3}) == 2  # drone 2 is silent: its request no longer counts
-    assert r.takes(8, {2, 3}) == (True, 4) and r.takes(9, {2, 3}) == (False, 4)
+    m = r.divisor(alive={2, 3})
+    assert takes_slot(8, m) and not takes_slot(9, m)
 
 
 def test_hello_carries_the_divisor_and_other_kinds_do_not():

@@ -25,7 +25,7 @@ from . import results as R
 from .camera import DroneCamera
 from .config import NodeConfig
 from .messaging import PeerMessaging
-from .rate import RateAgreement
+from .rate import RateAgreement, takes_slot
 from .records import FrameRecords
 from .stages import FrameJob, StagePipeline
 from .startup import Heartbeat
@@ -210,7 +210,7 @@ class SlotLoop:
                     return
                 job = self.new_job(k)
                 job.divisor = m = self._divisor
-                if k % m:
+                if not takes_slot(k, m):
                     job.flags |= R.SKIPPED | R.RATE_SKIPPED
                     job.skip_reason = f"swarm rate 1/{m}"
                 elif self.too_late(k, self.clock.now()):

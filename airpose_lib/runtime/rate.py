@@ -20,7 +20,7 @@ import statistics
 from collections import deque
 from collections.abc import Iterable
 
-__all__ = ["needed_divisor", "RateAgreement"]
+__all__ = ["needed_divisor", "takes_slot", "RateAgreement"]
 
 
 def needed_divisor(stage1_s: float, period_s: float, headroom: float = 0.8, max_divisor: int = 8) -> int:
@@ -33,6 +33,12 @@ def needed_divisor(stage1_s: float, period_s: float, headroom: float = 0.8, max_
     if not math.isfinite(stage1_s) or stage1_s <= 0:
         return 1
     return max(1, min(max_divisor, math.ceil(stage1_s / (headroom * period_s) - 1e-9)))
+
+
+def takes_slot(slot: int, divisor: int) -> bool:
+    """Whether a swarm at slot divisor ``divisor`` processes ``slot`` (by its absolute number, so
+    that drones with the same divisor process the same frames)."""
+    return slot % divisor == 0
 
 
 class RateAgreement:
@@ -99,8 +105,3 @@ class RateAgreement:
     def divisor(self, alive: Iterable[int]) -> int:
         """The swarm's divisor: the largest asked by this drone or a living peer."""
         return max([self.own] + [self._peers.get(d, 1) for d in alive])
-
-    def takes(self, slot: int, alive: Iterable[int]) -> tuple[bool, int]:
-        """Whether the swarm processes ``slot`` at its current divisor, and that divisor."""
-        m = self.divisor(alive)
-        return slot % m == 0, m

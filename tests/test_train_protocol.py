@@ -173,3 +173,50 @@ def test_feature_key_changes_with_the_backbone_and_the_data(tmp_path):
     manifest["shards"][1]["sha256"] = "3"  # a regenerated shard
     (data / "manifest.yaml").write_text(yaml.safe_dump(manifest))
     assert feature_key(b1, data, "train", "jittered") != k
+
+
+def test_a_second_pretraining_stage_starts_from_the_first(tmp_path, monkeypatch, open_model_files):
+    """`continue_from:` trains the earlier stage first (or finds it), then starts the later one from
+    its backbone; the later key depends on the earlier one; a second call trains nothing."""
+    import yaml
+
+    import airpose_lib.train.loop as loop
+    from airpose_lib.data.generate import GenerationConfig, generate_still_dataset
+    from airpose_lib.data.manifest import load_manifest
+    from airpose_lib.train.features import load_backbone_file
+    from airpose_lib.train.pretrain import ensure_backbone, pretrain_stages, stage_keys
+
+    monkeypatch.setenv("AIRPOSE_CACHE", str(tmp_path / "cache"))
+    root = tmp_path / "data"
+    generate_still_dataset(GenerationConfig(num_samples=8, shard_size=4, crop_size=32, seed=0), root,
+                           workers=1, progress=False, record=False)
+    section = {"steps": 1, "batch_size": 2, "backbone": "resnet18", "lr": 1e-3, "seed": 0, "checkpoint_every": 1,
+               "val_every": None, "log_every": 1, "num_workers": 0, "model": {"n_heading_bins": 12}}
+    profile = tmp_path / "two.yaml"
+    profile.write_text(yaml.safe_dump({"pretrain": {**section, "continue_from": {"steps": 2}}}))
+    fp = load_manifest(root)["fingerprint"]
+    stages = pretrain_stages(str(profile))
+    assert [c.steps for c in stages] == [2, 1]
+    keys = stage_keys(stages, fp)
+    one = tmp_path / "one.yaml"
+    one.write_text(yaml.safe_dump({"pretrain": {**section, "steps": 2}}))
+    assert stage_keys(pretrain_stages(str(one)), fp) == keys[:1]  # the first stage alone: same key
+    other = tmp_path / "other.yaml"
+    other.write_text(yaml.safe_dump({"pretrain": {**section, "continue_from": {"steps": 3}}}))
+    assert stage_keys(pretrain_stages(str(other)), fp)[-1] != keys[-1]  # another start, another key
+
+    path = ensure_backbone(str(profile), root, fp, out_root=tmp_path / "runs")
+    assert path.stem == keys[-1]
+    record = json.loads(path.with_suffix(".json").read_text())
+    assert record["steps"] == 1 and record["total_steps"] == 3
+    assert record["continued_from"]["key"] == keys[0] and record["continued_from"]["steps"] == 2
+    first, _ = load_backbone_file(path.with_name(f"{keys[0]}.pt"))
+    second, _ = load_backbone_file(path)
+    fresh = PretrainNet("resnet18").backbone
+    w1, w2 = (m.conv1.weight.detach() for m in (first, second))
+    step = float((w2 - w1).abs().max())
+    assert 0 < step < 0.01  # one Adam step of lr 1e-3 (fp16 file) from the first stage's weights
+    assert float((fresh.conv1.weight.detach() - w1).abs().max()) > 10 * step
+
+    monkeypatch.setattr(loop, "train", lambda *a, **k: pytest.fail("trained again"))
+    assert ensure_backbone(str(profile), root, fp, out_root=tmp_path / "runs") == path

@@ -84,9 +84,10 @@ def default_model_factory(cfg: TrainConfig) -> nn.Module:
     checkpoints therefore hold the whole network), or a
     :class:`~airpose_lib.model.pretrain.PretrainNet` for ``pretrain``."""
     if cfg.task == "pretrain":
-        return PretrainNet(cfg.backbone, **cfg.model)
-    model = build_model(cfg.variant, backbone=cfg.backbone, **cfg.model)
-    if cfg.pretrained is not None:
+        model = PretrainNet(cfg.backbone, **cfg.model)
+    else:
+        model = build_model(cfg.variant, backbone=cfg.backbone, **cfg.model)
+    if cfg.pretrained is not None:  # for pretrain: a later stage (new heads on the earlier backbone)
         backbone, meta = load_backbone_file(cfg.pretrained)
         if meta["backbone"] != cfg.backbone:
             raise ValueError(f"{cfg.pretrained} is a {meta['backbone']}, the config asks for {cfg.backbone}")

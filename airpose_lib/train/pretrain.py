@@ -9,6 +9,11 @@ training engine (:func:`airpose_lib.train.loop.train`, task ``"pretrain"``;
 objective). The key hashes the ``pretrain:`` settings and the dataset's configuration fingerprint,
 so a change of either trains a new backbone.
 
+A ``pretrain:`` section may name an earlier stage (``continue_from:``, the same settings with a
+few changed, e.g. ``{steps: 4000}``): that stage is made first (or found), and this one starts from
+its backbone with new heads and a new optimiser. The key of a later stage includes the key of the
+stage it starts from, so a user without the committed file rebuilds the whole chain from nothing.
+
 The file holds the backbone's weights in float16 (half the size; the features differ from the
 float32 network's by about 1e-3 relative, far below what the regressors resolve) and a JSON
 record: backbone name, key, the gate's measurements on the test split, the wall time and the
@@ -36,27 +41,54 @@ from airpose_lib.folder_lock import file_lock
 from airpose_lib.geometry import axis_angle_to_matrix, rot6d_to_matrix
 from airpose_lib.losses.pretrain import heading_bin
 from airpose_lib.paths import cache_dir, run_path
+from airpose_lib.profiles import profile_section
 
 from .config import TrainConfig, load_train_config
 
-__all__ = ["PRETRAIN_VERSION", "pretrain_config", "backbone_key", "ensure_backbone", "profile_backbone", "profile_backbone_key",
-           "export_backbone", "gate_metrics", "reference_backbone_path", "write_reference_backbone"]
+__all__ = ["PRETRAIN_VERSION", "pretrain_config", "pretrain_stages", "backbone_key", "stage_keys", "ensure_backbone",
+           "profile_backbone", "profile_backbone_key", "export_backbone", "gate_metrics", "reference_backbone_path", "write_reference_backbone"]
 
 #: Bumped when the same settings would train another backbone.
 PRETRAIN_VERSION = 1
 _REPO = Path(__file__).resolve().parents[2]
 
 
+def pretrain_stages(profile: str, **overrides) -> list[TrainConfig]:
+    """The stages of a profile's pretraining, first to last, as :class:`TrainConfig` s (task
+    ``pretrain``): one, or two when the ``pretrain:`` section has ``continue_from:`` (the settings
+    of the earlier stage as changes to the section's). ``overrides`` apply to the last stage."""
+    settings = profile_section(profile, "pretrain")
+    earlier = settings.pop("continue_from", None)
+    name = Path(str(profile)).stem
+
+    def stage(values: dict, extra: dict) -> TrainConfig:
+        cfg = load_train_config(None, "pretrain", task="pretrain", **{**values, **extra})
+        return cfg.replace(profile=name)
+
+    last = stage(settings, overrides)
+    if not earlier:
+        return [last]
+    if not isinstance(earlier, dict):
+        raise ValueError(f"profile {profile}: `pretrain: continue_from:` must be a mapping of settings "
+                         f"(e.g. {{steps: 4000}}), not {earlier!r}")
+    return [stage({**settings, **earlier}, {}), last]
+
+
 def pretrain_config(profile: str, **overrides) -> TrainConfig:
-    """The ``pretrain:`` section of a profile as a :class:`TrainConfig` (task ``pretrain``)."""
-    return load_train_config(profile, "pretrain", section="pretrain", task="pretrain", **overrides)
+    """The last stage of a profile's pretraining (:func:`pretrain_stages`)."""
+    return pretrain_stages(profile, **overrides)[-1]
 
 
-def backbone_key(cfg: TrainConfig, data_fingerprint: str) -> str:
-    """First 16 hex digits of the SHA-256 of the settings that make the backbone."""
+def backbone_key(cfg: TrainConfig, data_fingerprint: str, start_key: str | None = None) -> str:
+    """First 16 hex digits of the SHA-256 of the settings that make the backbone.
+
+    ``start_key`` is the key of the backbone this stage starts from (``None``: from scratch); it
+    takes the place of ``cfg.pretrained``, a path that differs between machines.
+    """
     settings = {k: v for k, v in cfg.to_dict().items()
                 if k not in ("progress", "data", "num_workers", "log_every", "checkpoint_every", "keep_checkpoints",
                              "val_every", "val_batches", "device", "num_threads", "profile")}
+    settings["pretrained"] = start_key
     blob = json.dumps({"version": PRETRAIN_VERSION, "settings": settings, "data": data_fingerprint},
                       sort_keys=True, default=str)
     return hashlib.sha256(blob.encode()).hexdigest()[:16]
@@ -120,6 +152,28 @@ def _reference_if_valid(profile: str, key: str) -> Path | None:
     return ref
 
 
+def _at_hand(profile: str, key: str) -> Path | None:
+    """The backbone ``key`` from the cache, or from the committed reference (copied into the cache)."""
+    target = cache_dir() / "backbones" / f"{key}.pt"
+    if target.is_file():
+        return target
+    ref = _reference_if_valid(profile, key)
+    if ref is None:
+        return None
+    target.parent.mkdir(parents=True, exist_ok=True)
+    shutil.copyfile(ref, target)
+    shutil.copyfile(ref.with_suffix(".json"), target.with_suffix(".json"))
+    return target
+
+
+def stage_keys(stages: list[TrainConfig], data_fingerprint: str) -> list[str]:
+    """The key of each stage of :func:`pretrain_stages` (each includes the one before)."""
+    keys: list[str] = []
+    for cfg in stages:
+        keys.append(backbone_key(cfg, data_fingerprint, keys[-1] if keys else None))
+    return keys
+
+
 def ensure_backbone(profile: str, data_root: str | Path, data_fingerprint: str, out_root: str | Path | None = None,
                     progress: bool = False, **overrides) -> Path:
     """The profile's pretrained backbone file (see the module docstring for where it comes from).
@@ -128,22 +182,35 @@ def ensure_backbone(profile: str, data_root: str | Path, data_fingerprint: str, 
         profile: reproduction profile (its ``pretrain:`` section).
         data_root: the still-frame dataset to pretrain on (train split; the test split gates).
         data_fingerprint: that dataset's configuration fingerprint (part of the key).
-        out_root: parent of the pretraining run folder (default ``<runs>/pretrain/<profile>``).
-        overrides: TrainConfig fields over the ``pretrain:`` section.
+        out_root: parent of the pretraining run folders (default ``<runs>/pretrain/<profile>``).
+        overrides: TrainConfig fields over the ``pretrain:`` section (its last stage).
     """
+    stages = [cfg.replace(data={"root": str(data_root)}) for cfg in pretrain_stages(profile, **overrides)]
+    keys = stage_keys(stages, data_fingerprint)
+    start, path = 0, None
+    for i in reversed(range(len(stages))):  # the latest stage already made needs nothing before it
+        with file_lock(cache_dir() / "backbones" / f"{keys[i]}.lock"):
+            found = _at_hand(profile, keys[i])
+        if found is not None:
+            start, path = i + 1, found
+            break
+    for i in range(start, len(stages)):
+        path = _train_stage(profile, stages[i], keys[i], path, data_root, data_fingerprint, out_root, progress)
+    return path
+
+
+def _train_stage(profile: str, cfg: TrainConfig, key: str, start: Path | None, data_root: str | Path,
+                 data_fingerprint: str, out_root: str | Path | None, progress: bool) -> Path:
+    """Train one stage (from ``start``'s backbone, or from scratch), gate it, export it as ``key``."""
     from .loop import train  # the engine imports this module for its "regressor" task
 
-    cfg = pretrain_config(profile, **overrides).replace(data={"root": str(data_root)})
-    key = backbone_key(cfg, data_fingerprint)
     target = cache_dir() / "backbones" / f"{key}.pt"
+    target.parent.mkdir(parents=True, exist_ok=True)
     with file_lock(target.with_suffix(".lock")):
-        if target.is_file():
-            return target
-        ref = _reference_if_valid(profile, key)
-        if ref is not None:
-            shutil.copyfile(ref, target)
-            shutil.copyfile(ref.with_suffix(".json"), target.with_suffix(".json"))
-            return target
+        found = _at_hand(profile, key)
+        if found is not None:
+            return found
+        cfg = cfg.replace(pretrained=None if start is None else str(start))
         out = Path(out_root) if out_root is not None else run_path("pretrain", profile)
         t0 = time.time()
         run = train("pretrain", profile, out_dir=out / key, config=cfg.replace(progress=progress))
@@ -154,6 +221,11 @@ def ensure_backbone(profile: str, data_root: str | Path, data_fingerprint: str, 
                 "config": cfg.to_dict(), "data_fingerprint": data_fingerprint, "gate": gate,
                 "train_wall_s": round(wall, 1), "steps": run.step,
                 "command": f"airpose pretrain --profile {profile}"}
+        if start is not None:
+            earlier = json.loads(Path(start).with_suffix(".json").read_text())
+            meta["continued_from"] = {k: earlier.get(k) for k in ("key", "steps", "train_wall_s", "gate", "sha256",
+                                                                  "continued_from")}
+            meta["total_steps"] = run.step + int(earlier.get("total_steps", earlier.get("steps", 0)))
         export_backbone(run.checkpoint, target, meta)
     return target
 
@@ -167,9 +239,9 @@ def _load_pretrain_model(checkpoint: str | Path, cfg: TrainConfig) -> torch.nn.M
 
 
 def profile_backbone_key(profile: str, data_root: str | Path) -> str:
-    """The key of the backbone a profile asks for on the dataset in ``data_root``."""
-    cfg = pretrain_config(profile).replace(data={"root": str(data_root)})
-    return backbone_key(cfg, load_manifest(Path(data_root))["fingerprint"])
+    """The key of the backbone a profile asks for on the dataset in ``data_root`` (its last stage)."""
+    stages = [cfg.replace(data={"root": str(data_root)}) for cfg in pretrain_stages(profile)]
+    return stage_keys(stages, load_manifest(Path(data_root))["fingerprint"])[-1]
 
 
 def profile_backbone(profile: str, progress: bool = False) -> Path:

@@ -18,6 +18,7 @@ The file is read by :mod:`airpose_lib.profiles`; ``train`` imports nothing from 
 from __future__ import annotations
 
 import dataclasses
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -36,6 +37,8 @@ class TrainConfig:
         steps: optimiser steps in total.
         batch_size: global batch (samples; each holds V views), split evenly over processes.
         lr, amsgrad, weight_decay: Adam (paper: lr 5e-5, AMSGrad, batch 30, seed 123).
+        lr_schedule: ``"constant"`` (the paper) or ``"cosine"`` (from ``lr`` to 0 at ``steps``).
+        warmup_steps: the learning rate rises linearly from 0 over this many steps first (0: none).
         grad_clip: clip the gradient norm to this value (None: no clipping, as the paper).
         seed: seeds python, numpy, torch, the data order and every sample's augmentation.
         backbone: ``resnet50`` (paper), ``resnet34``, ``resnet18``.
@@ -79,6 +82,8 @@ class TrainConfig:
     lr: float = 5e-5
     amsgrad: bool = True
     weight_decay: float = 0.0
+    lr_schedule: str = "constant"
+    warmup_steps: int = 0
     grad_clip: float | None = None
     seed: int = 123
     backbone: str = "resnet50"
@@ -109,12 +114,26 @@ class TrainConfig:
     def __post_init__(self) -> None:
         if self.task not in ("supervised", "regressor", "pretrain"):
             raise ValueError(f"task must be 'supervised', 'regressor' or 'pretrain', got {self.task!r}")
+        if self.lr_schedule not in ("constant", "cosine"):
+            raise ValueError(f"lr_schedule must be 'constant' or 'cosine', got {self.lr_schedule!r}")
+        if self.warmup_steps < 0:
+            raise ValueError("warmup_steps must be >= 0")
         if self.steps < 0 or self.batch_size < 1:
             raise ValueError("steps must be >= 0 and batch_size >= 1")
         if self.world_size < 1 or self.batch_size % self.world_size:
             raise ValueError(f"batch_size {self.batch_size} must be a multiple of world_size {self.world_size}")
         if self.checkpoint_every < 1 or self.log_every < 1:
             raise ValueError("checkpoint_every and log_every must be >= 1")
+
+    def lr_at(self, step: int) -> float:
+        """The learning rate of optimiser step ``step + 1`` (``step`` steps done)."""
+        scale = 1.0
+        if self.warmup_steps and step < self.warmup_steps:
+            scale = (step + 1) / self.warmup_steps
+        elif self.lr_schedule == "cosine" and self.steps > self.warmup_steps:
+            done = (step - self.warmup_steps) / (self.steps - self.warmup_steps)
+            scale = 0.5 * (1.0 + math.cos(math.pi * min(max(done, 0.0), 1.0)))
+        return self.lr * scale
 
     def to_dict(self) -> dict:
         return dataclasses.asdict(self)
@@ -123,7 +142,7 @@ class TrainConfig:
         return dataclasses.replace(self, **changes)
 
     # Fields whose change makes a resumed run differ from a straight one.
-    RESUME_KEYS = ("variant", "batch_size", "lr", "amsgrad", "weight_decay", "grad_clip", "seed", "backbone",
+    RESUME_KEYS = ("variant", "batch_size", "lr", "lr_schedule", "warmup_steps", "amsgrad", "weight_decay", "grad_clip", "seed", "backbone",
                    "model", "freeze_backbone", "loss", "official_loss", "body_source", "data", "train_split",
                    "task", "pretrained")
 

@@ -421,6 +421,9 @@ class StillFrameTask(TrainingTask):
             yield _to_device(batch, self.device)
 
     def train_step(self, batch: Mapping[str, torch.Tensor], step: int) -> dict[str, torch.Tensor]:
+        lr = self.cfg.lr_at(step)  # a function of the step alone, so a resumed run follows it too
+        for group in self.optimizer.param_groups:
+            group["lr"] = lr
         return self.step_fn(self.net, self.loss_fn, batch)
 
     def train_mode(self) -> None:

@@ -89,6 +89,9 @@ def backbone_key(cfg: TrainConfig, data_fingerprint: str, start_key: str | None 
                 if k not in ("progress", "data", "num_workers", "log_every", "checkpoint_every", "keep_checkpoints",
                              "val_every", "val_batches", "device", "num_threads", "profile")}
     settings["pretrained"] = start_key
+    for name, default in (("lr_schedule", "constant"), ("warmup_steps", 0)):
+        if settings.get(name) == default:  # added after the first committed backbone, whose key stays
+            settings.pop(name)
     blob = json.dumps({"version": PRETRAIN_VERSION, "settings": settings, "data": data_fingerprint},
                       sort_keys=True, default=str)
     return hashlib.sha256(blob.encode()).hexdigest()[:16]

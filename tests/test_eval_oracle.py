@@ -91,3 +91,23 @@ def test_oracle_error_on_a_taller_subject_is_the_stature_ratio(open_model):
     np.testing.assert_allclose(t["mpe_m"], expected, atol=1e-6)
     np.testing.assert_allclose(t["err_z_m"], arrays["tau"][..., 2].reshape(-1) * (1 / s - 1), atol=1e-6)
     assert t["mpe_m"].min() > 0.5  # 10 % taller at 8-14 m: the floor is metres-scale, not noise
+
+
+def test_recording_oracle_puts_uav2_off_by_the_stature_ratio_of_the_drones_distance(open_model):
+    """Two views do not fix the scale: both drones come out 1/s as far, so UAV2 in UAV1 is off by
+    (1 - 1/s) of their distance."""
+    from airpose_lib.eval.oracle import oracle_recording_estimate
+    from airpose_lib.eval.recordings import relative_camera_positions
+
+    s = 1.1
+    a = _arrays(open_model, s)
+    gt = {"theta_view": np.broadcast_to(a["theta"][:, None], (3, 2, 21, 3)), "phi": a["phi"], "tau": a["tau"],
+          "j2d": a["j2d"], "K": np.broadcast_to(K, (2, 3, 3))}
+    est = oracle_recording_estimate(gt, body_model=open_model)
+    assert est["theta"].shape == (3, 2, 21, 3, 3) and not est["beta"].any() and est["valid"].all()
+    np.testing.assert_allclose(est["tau"], a["tau"] / s, atol=1e-6)
+    R_gt, t_gt = relative_camera_positions(gt)
+    R_est, t_est = relative_camera_positions(est)
+    np.testing.assert_allclose(R_est, R_gt, atol=1e-12)
+    np.testing.assert_allclose(np.linalg.norm(t_est - t_gt, axis=-1), (1 - 1 / s) * np.linalg.norm(t_gt, axis=-1),
+                               atol=1e-6)

@@ -9,6 +9,12 @@ the ground-truth 2D joints. Its MPE against the ground-truth tau is what remains
 (and gender) spread of the test subjects: no monocular network can beat it on average without
 reading body size from the pixels (issue 11, point 8).
 
+On a two-drone recording (:func:`oracle_recording_estimate`) the same oracle, frame by frame and
+view by view, is the floor of UAV2's position in UAV1 as well: two views do not fix the scale
+either (the whole scene, cameras included, can grow by k with the same images), so a body of
+the wrong size puts both drones k times too far and UAV2's position in UAV1 is off by
+``|k - 1|`` times the drones' distance.
+
 tau is solved in two steps per view: the algebraic (DLT-style) least-squares solution, linear in
 tau, then a few Gauss-Newton steps on the pixel reprojection error.
 """
@@ -22,8 +28,9 @@ import torch
 
 from airpose_lib.body import load_body_model
 from airpose_lib.body.forward import BodyForward, axis_angle_rotations
+from airpose_lib.geometry import axis_angle_to_matrix
 
-__all__ = ["ORACLE_LABEL", "solve_translation", "mean_body_joints", "oracle_per_view"]
+__all__ = ["ORACLE_LABEL", "solve_translation", "mean_body_joints", "oracle_per_view", "oracle_recording_estimate"]
 
 #: Row name of the oracle in Table I.
 ORACLE_LABEL = "Oracle (GT pose, mean body)"
@@ -126,3 +133,26 @@ def oracle_per_view(arrays: Mapping[str, np.ndarray], body_model=None, body_sour
         "err_x_m": err[..., 0].reshape(-1), "err_y_m": err[..., 1].reshape(-1), "err_z_m": err[..., 2].reshape(-1),
         "reproj_px": reproj.reshape(-1),
     })
+
+
+def oracle_recording_estimate(ground_truth: Mapping[str, np.ndarray], body_model=None, body_source: str = "open",
+                              gauss_newton_steps: int = 5) -> dict[str, np.ndarray]:
+    """The mean-body oracle over a recording, as an estimate of :mod:`airpose_lib.eval.recordings`.
+
+    Args:
+        ground_truth: a recording's ``ground_truth.npz``: ``theta_view (F, V, 21, 3)`` axis-angle,
+            ``phi (F, V, 3, 3)``, ``j2d (F, V, 22, 2)`` pixels of the rendered images, ``K (V, 3, 3)``
+            (or ``(F, V, 3, 3)``) their intrinsics.
+        body_model, body_source: the body posed with beta = 0 (:func:`mean_body_joints`).
+    Returns:
+        ``phi`` (the ground truth's), ``tau (F, V, 3)`` (solved), ``theta (F, V, 21, 3, 3)``,
+        ``beta (F, V, 10)`` zeros and ``valid (F, V)`` all true; float64.
+    """
+    theta = np.asarray(ground_truth["theta_view"], dtype=np.float64)
+    F, V = theta.shape[:2]
+    X0 = mean_body_joints(theta.reshape(F * V, 21, 3), body_model, body_source).reshape(F, V, 22, 3)
+    phi = np.asarray(ground_truth["phi"], dtype=np.float64)
+    K = np.broadcast_to(np.asarray(ground_truth["K"], dtype=np.float64), (F, V, 3, 3))
+    tau = solve_translation(np.einsum("fvij,fvkj->fvki", phi, X0), ground_truth["j2d"], K, gauss_newton_steps)
+    return {"phi": phi, "tau": tau, "theta": axis_angle_to_matrix(torch.as_tensor(theta)).numpy(),
+            "beta": np.zeros((F, V, 10)), "valid": np.ones((F, V), dtype=bool)}

@@ -24,6 +24,10 @@ Methods (keys of :attr:`RecordingExperiment.estimates`):
   paper's "vanilla SPIN" in the depth comparison (SPIN's weights cannot be used here).
 - ``"AirPose (pre-trained)"``, ``"Baseline"``, ``"AirPose"`` (fine-tuned on person 1),
   ``"AirPose+"`` (AirPose's estimates refined offline).
+
+The error tables also have a row ``"Oracle (GT pose, mean body)"`` where ground truth exists
+(:func:`airpose_lib.eval.oracle.oracle_recording_estimate`): the floor of every position error,
+UAV2-in-UAV1 included, for an estimate that cannot read the person's stature.
 """
 from __future__ import annotations
 
@@ -44,6 +48,7 @@ from airpose_lib.data.official_real import load_official_real
 from airpose_lib.data.sequences import ensure_sequences
 from airpose_lib.engine.checkpoint import last_checkpoint, load_checkpoint
 from airpose_lib.eval import metrics as M
+from airpose_lib.eval.oracle import ORACLE_LABEL, oracle_recording_estimate
 from airpose_lib.eval.recordings import body_joints, paper_claims, per_view_params, recording_table
 from airpose_lib.finetune.keypoints import resolution_scales
 from airpose_lib.finetune.network import load_network
@@ -474,7 +479,11 @@ def _run_recording_experiment(profile: str, out: Path, sequences: dict | None, s
             mask = np.all([np.all(e["valid"], axis=1) for m, e in est.items() if m in _NETWORKS], axis=0)
             fps = float(seq.ground_truth.get("fps", 30.0))
             t = recording_table(est, seq.ground_truth, joints[person], fps=fps, sequence=person, mask=mask)
-            tables.append(t)
+            # the physical floor: ground-truth pose and 2D joints, mean body (eval/oracle.py)
+            oracle = oracle_recording_estimate(seq.ground_truth, body)
+            floor = recording_table({ORACLE_LABEL: oracle}, seq.ground_truth, {ORACLE_LABEL: body_joints(oracle, body)},
+                                    fps=fps, sequence=person, mask=mask)
+            tables += [t, floor]
     table = pd.concat(tables, ignore_index=True) if tables else pd.DataFrame()
     return RecordingExperiment(profile=profile, out_dir=out, sequences=seqs, estimates=estimates, joints=joints,
                                tables=table, checkpoints=checkpoints, fit_info=fit_info,

@@ -5,11 +5,12 @@
     python benchmarks/inference.py --no-train --runtimes onnx onnx-int8   # fp32 vs int8 only
 
 Per view, batch 1, AirPose variant: stage 1 (backbone + first iteration) and stages 2 + 3 (one
-regressor iteration each, message in and out), in torch (NCHW and channels_last) and ONNX
-Runtime with a float32 or an int8 stage 1 (``airpose_lib.model.quantize``: static QDQ,
-per-channel weights, calibrated on the kit's still-frame crops: ``--calibration DIR``, default
-the smoke profile's dataset, ``airpose data generate --profile smoke``), as ``DroneNode`` /
-``OnnxDroneNode`` run them. Targets for ResNet-50 at 224 px: stage 1 <= 40 ms, stages 2 + 3
+regressor iteration each, message in and out), as ``DroneNode`` / ``OnnxDroneNode`` run them:
+in torch (NCHW, channels_last, and ``torch-bf16``: the channels_last backbone under bfloat16
+autocast, the kit's one bf16 path, since ONNX Runtime's x86 CPU provider runs no bf16
+convolutions) and in ONNX Runtime with a float32 or an int8 stage 1 (``airpose_lib.model.quantize``:
+static QDQ, per-channel weights, calibrated on the kit's still-frame crops: ``--calibration DIR``,
+default the smoke profile's dataset, ``airpose data generate --profile smoke``). Targets for ResNet-50 at 224 px: stage 1 <= 40 ms, stages 2 + 3
 <= 1 ms, int8 stage 1 <= 0.5 x float32 (the paper: ~43 ms and ~2.5 ms on a Jetson TX2).
 Training: forward + backward + Adam step of the AirPose network (no body-model loss) on
 ``--train-batch`` images (half as many two-view samples), channels_last, images per second.
@@ -35,8 +36,8 @@ import torch
 #: The paper's per-view timings on a Jetson TX2 (Sec. IV-D), ms.
 TX2_STAGE1_MS = 43.0
 TX2_STAGES23_MS = 2.5
-RUNTIMES = {"torch": "torch", "torch-cl": "torch channels_last", "onnx": "ONNX Runtime fp32",
-            "onnx-int8": "ONNX Runtime int8"}
+RUNTIMES = {"torch": "torch", "torch-cl": "torch channels_last", "torch-bf16": "torch channels_last, bf16 backbone",
+            "onnx": "ONNX Runtime fp32", "onnx-int8": "ONNX Runtime int8"}
 
 
 def _interleaved_ms(fns: dict[str, Callable], repeat: int, warmup: int = 2) -> dict[str, tuple[float, float, float]]:
@@ -78,6 +79,19 @@ def _later(node) -> Callable:
     return run
 
 
+class _Bf16Backbone(torch.nn.Module):
+    """A backbone run under CPU bfloat16 autocast (AVX-512 BF16 / AMX kernels where the CPU has
+    them), its pooled feature returned in float32 so the regressor and the messages stay float32."""
+
+    def __init__(self, backbone: torch.nn.Module):
+        super().__init__()
+        self.inner = backbone
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        with torch.autocast("cpu", dtype=torch.bfloat16):
+            return self.inner(x).float()
+
+
 def _nodes(runtimes, backbone: str, size: int, threads: int, folders: dict) -> dict:
     """One DroneNode / OnnxDroneNode per runtime, ``threads`` intra-op threads each."""
     from airpose_lib.model import DroneNode, build_model
@@ -87,7 +101,10 @@ def _nodes(runtimes, backbone: str, size: int, threads: int, folders: dict) -> d
     for rt in runtimes:
         if rt.startswith("torch"):
             torch.manual_seed(0)
-            nodes[rt] = DroneNode(build_model("airpose", backbone, channels_last=rt == "torch-cl").eval())
+            model = build_model("airpose", backbone, channels_last=rt in ("torch-cl", "torch-bf16")).eval()
+            if rt == "torch-bf16":
+                model.backbone = _Bf16Backbone(model.backbone)
+            nodes[rt] = DroneNode(model)
         else:
             nodes[rt] = OnnxDroneNode(folders[rt], num_threads=threads, precision="int8" if rt == "onnx-int8" else "fp32")
     return nodes

@@ -148,7 +148,7 @@ def oracle_recording_estimate(ground_truth: Mapping[str, np.ndarray], body_model
         ``phi`` (the ground truth's), ``tau (F, V, 3)`` (solved), ``theta (F, V, 21, 3, 3)``,
         ``beta (F, V, 10)`` zeros and ``valid (F, V)`` all true; float64.
     """
-    theta = np.asarray(ground_truth["theta_view"], dtype=np.float64)
+    theta = np.array(ground_truth["theta_view"], dtype=np.float64)  # a copy: the input may be read-only
     F, V = theta.shape[:2]
     X0 = mean_body_joints(theta.reshape(F * V, 21, 3), body_model, body_source).reshape(F, V, 22, 3)
     phi = np.asarray(ground_truth["phi"], dtype=np.float64)

@@ -329,3 +329,31 @@ def test_kit_profiles_have_train_sections(profile):
     paper = load_train_config("paper", "airpose")
     if profile == "paper":
         assert (paper.lr, paper.batch_size, paper.seed, paper.backbone) == (5e-5, 30, 123, "resnet50")
+
+
+def test_learning_rate_schedules_by_hand():
+    import math
+
+    from airpose_lib.train.config import TrainConfig
+
+    const = TrainConfig(steps=10, lr=0.3)
+    assert [const.lr_at(s) for s in (0, 5, 9)] == [0.3, 0.3, 0.3]
+    cos = TrainConfig(steps=10, lr=1.0, lr_schedule="cosine", warmup_steps=2)
+    expected = [0.5, 1.0] + [0.5 * (1 + math.cos(math.pi * (s - 2) / 8)) for s in range(2, 10)]
+    assert [cos.lr_at(s) for s in range(10)] == pytest.approx(expected)
+    assert cos.lr_at(6) == pytest.approx(0.5) and cos.lr_at(10) == pytest.approx(0.0)
+    with pytest.raises(ValueError, match="lr_schedule"):
+        TrainConfig(lr_schedule="step")
+
+
+def test_a_resumed_cosine_run_follows_the_schedule(tmp_path, open_model_files):
+    """The engine sets each step's rate from lr_at(step): the log shows it, and a run stopped
+    half-way and resumed ends with the straight run's weights."""
+    cfg = tiny_config(lr=1e-3, lr_schedule="cosine", warmup_steps=1)
+    straight = train("airpose", config=cfg, out_dir=tmp_path / "a", **FAKES)
+    logged = [float(r["lr"]) for r in read_log(tmp_path / "a" / "log.csv") if r["split"] == "train"]
+    # the row of step s (1-based) is written after its update, whose rate was lr_at(s - 1)
+    assert logged == pytest.approx([cfg.lr_at(s - 1) for s in range(1, cfg.steps + 1)])
+    train("airpose", config=cfg, out_dir=tmp_path / "b", **FAKES, stop_at=2)
+    resumed = train("airpose", config=cfg, out_dir=tmp_path / "b", **FAKES)
+    _assert_same_state(_weights(straight.checkpoint), _weights(resumed.checkpoint))

@@ -180,3 +180,13 @@ def test_paper_claims_measure_and_judge_each_claim():
     verdict = c[c["sequence"] == "overall"].set_index("claim")["verdict"]
     assert verdict["depth_smooth"] == "holds"
     assert (verdict.drop("depth_smooth") == "not measurable").all()
+
+
+def test_recording_table_gives_the_median_uav2_errors_beside_the_means():
+    gt = _ground_truth(F=8)
+    est = {k: gt[k].copy() for k in ("phi", "tau", "theta", "beta")}
+    est["tau"][:5, 1, 2] += 1.0  # UAV2's depth 1 m off in 5 of 8 frames: UAV2-in-UAV1 off by 1 m there
+    row = recording_table({"A": est}, gt, {"A": gt["j3d_cam"]}, fps=10.0).iloc[0]
+    assert row["rel_t_err_m"] == pytest.approx(5 / 8)
+    assert row["rel_t_median_m"] == pytest.approx(1.0)
+    assert row["rel_rot_median_deg"] == pytest.approx(0.0, abs=1e-5)

@@ -50,6 +50,8 @@ RECORDING_METRICS: dict[str, str] = {
     "depth_err_m": "mean |z error| of the person position over both views",
     "rel_t_err_m": "error of UAV2's position in UAV1 from the two body poses",
     "rel_rot_deg": "error of UAV2's orientation in UAV1",
+    "rel_t_median_m": "median over frames of the UAV2-in-UAV1 position error",
+    "rel_rot_median_deg": "median over frames of the UAV2-in-UAV1 orientation error",
     "jitter_mps2": "mean acceleration of the joints in the camera frame, m/s^2",
     "jitter_gt_mps2": "the same for the ground truth",
 }
@@ -205,6 +207,8 @@ def recording_table(estimates: Mapping[str, Mapping], ground_truth: Mapping, joi
             per_frame = t[t["view"] == 0]
             row["rel_t_err_m"] = per_frame["rel_t_err_m"].mean()
             row["rel_rot_deg"] = per_frame["rel_rot_deg"].mean()
+            row["rel_t_median_m"] = per_frame["rel_t_err_m"].median()
+            row["rel_rot_median_deg"] = per_frame["rel_rot_deg"].median()
         row["jitter_mps2"] = M.jitter(jp.transpose(0, 1), fps).mean().item()
         row["jitter_gt_mps2"] = jit_gt
         rows.append(row)

@@ -314,8 +314,9 @@ def main() -> None:
     checkpoint = None if args.random_weights else (args.checkpoint or _default_checkpoint())
     print(f"weights: {checkpoint or 'random'}")
     for backbone, size in [("resnet18", 128)] + ([] if args.no_r50 else [("resnet50", 224)]):
-        if args.only and not any(backbone in o or "_" not in o for o in args.only.split(",")):
-            continue  # no selected run uses this network: do not export (or calibrate) it
+        others = ("resnet18", "resnet50")
+        if args.only and all(any(b in o for b in others if b != backbone) for o in args.only.split(",")):
+            continue  # every --only filter names another network: do not export (or calibrate) this one
         ckpt = _checkpoint_for(checkpoint, backbone, size)
         extra = {"checkpoint": ckpt} if ckpt else {}
         for backend in backends:

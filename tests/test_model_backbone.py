@@ -159,3 +159,22 @@ def test_channels_last_same_numbers():
         torch.testing.assert_close(b(x), a(x), rtol=1e-4, atol=1e-5)
     b.set_channels_last(False)
     assert b.conv1.weight.is_contiguous() and not b.channels_last
+
+
+@pytest.mark.parametrize("cut", ["layer1.0", "layer3.1", "layer4.0", "layer4.1"])
+@pytest.mark.parametrize("channels_last", [False, True])
+def test_the_trunk_cut_at_a_block_is_the_whole_trunk(cut, channels_last):
+    torch.manual_seed(0)
+    net = resnet18(channels_last=channels_last).eval()
+    x = torch.randn(2, 3, 64, 64)
+    h = net.forward_until(x, cut)
+    assert h.dim() == 4 and h.shape[0] == 2
+    torch.testing.assert_close(net.forward_from(h, cut), net(x), rtol=1e-5, atol=1e-5)
+    assert net.blocks_from(cut)[0] is net.get_submodule(cut)
+
+
+def test_unknown_cut():
+    with pytest.raises(ValueError, match="layer4.1"):
+        resnet18().forward_until(torch.zeros(1, 3, 32, 32), "layer5.0")
+    assert resnet18().block_names()[-2:] == ("layer4.0", "layer4.1")
+    assert len(resnet50().block_names()) == 16

@@ -220,3 +220,68 @@ def test_a_second_pretraining_stage_starts_from_the_first(tmp_path, monkeypatch,
 
     monkeypatch.setattr(loop, "train", lambda *a, **k: pytest.fail("trained again"))
     assert ensure_backbone(str(profile), root, fp, out_root=tmp_path / "runs") == path
+
+
+def test_regressor_with_its_last_backbone_block_trainable(tmp_path, monkeypatch, open_model_files):
+    """trainable_from: the features are the cut's input; the step on them equals the whole network
+    on the crops; only the blocks from the cut and the regressor move, at their own rates."""
+    import airpose_lib.train.loop as loop
+    from airpose_lib.data.generate import GenerationConfig, generate_still_dataset
+    from airpose_lib.train.config import TrainConfig
+    from airpose_lib.train.features import FeatureDataset, ensure_features
+
+    monkeypatch.setenv("AIRPOSE_CACHE", str(tmp_path / "cache"))
+    root = tmp_path / "data"
+    generate_still_dataset(GenerationConfig(num_samples=8, shard_size=4, crop_size=32, seed=0), root,
+                           workers=1, progress=False, record=False)
+    torch.manual_seed(1)
+    trunk = PretrainNet("resnet18").backbone
+    bfile = tmp_path / "backbone.pt"
+    torch.save({"state_dict": trunk.state_dict(), "meta_json": json.dumps({"backbone": "resnet18"})}, bfile)
+    cfg = TrainConfig(variant="airpose", task="regressor", pretrained=str(bfile), backbone="resnet18",
+                      trainable_from="layer4.1", backbone_lr_scale=0.1, steps=2, batch_size=2, lr=1e-3,
+                      data={"root": str(root)}, val_every=None, checkpoint_every=1, log_every=1,
+                      progress=False, loss={"vertex_subsample": 50})
+    path = ensure_features(bfile, root, "train", cut="layer4.1")
+    assert path != ensure_features(bfile, root, "train")  # another cut, another file
+    assert np.load(path).shape[1:] == (2, 512, 1, 1)  # (V, C, h, w) at 32 px
+
+    model = loop.default_model_factory(cfg).eval()
+    trainable = {n for n, p in model.named_parameters() if p.requires_grad}
+    assert any(n.startswith("backbone.layer4.1.") for n in trainable)
+    assert not any(n.startswith("backbone.") and not n.startswith("backbone.layer4.1.") for n in trainable)
+    loss_fn = loop.default_loss_factory(cfg)
+    assert isinstance(loop.default_dataset_factory(cfg, "train"), FeatureDataset)
+    feats = FeatureDataset(root, "train", path, augment=False)  # no view swap: item for item as the crops
+    from airpose_lib.data.dataset import StillFrameDataset
+
+    crops = StillFrameDataset(root, "train", augment=False)
+    fb = {k: torch.stack([feats[i][k] for i in range(2)]) for k in feats[0]}
+    ib = {k: torch.stack([crops[i][k] for i in range(2)]) for k in crops[0]}
+    with torch.no_grad():
+        on_feats = loop.task_forward(cfg)(model, loss_fn, fb)["total"]
+        on_crops = loop.forward_loss(model, loss_fn, ib)["total"]
+    assert float(on_feats) == pytest.approx(float(on_crops), rel=1e-4)
+
+    result = loop.train("airpose", config=cfg, out_dir=tmp_path / "run", resume=False)
+    state = torch.load(result.checkpoint, map_location="cpu", weights_only=False)["model"]
+    start = model.state_dict()
+    moved = lambda k: not torch.equal(state[k], start[k])  # noqa: E731
+    assert moved("backbone.layer4.1.conv2.weight") and moved("regressor.fc1.weight")
+    assert not moved("backbone.layer4.0.conv1.weight") and not moved("backbone.conv1.weight")
+    assert torch.equal(state["backbone.layer4.1.bn1.running_mean"], start["backbone.layer4.1.bn1.running_mean"])
+    # one Adam step moves a weight by about its rate: the trunk's is a tenth of the regressor's
+    d_trunk = (state["backbone.layer4.1.conv2.weight"] - start["backbone.layer4.1.conv2.weight"]).abs().max()
+    d_head = (state["regressor.fc1.weight"] - start["regressor.fc1.weight"]).abs().max()
+    assert float(d_trunk) < 0.5 * float(d_head)
+
+
+def test_the_committed_cpu_backbone_keeps_its_key():
+    """A new TrainConfig field must not silently orphan the committed backbone (a new key would
+    retrain both stages, about two hours, on a user's first cpu run)."""
+    from airpose_lib.train.pretrain import pretrain_stages, reference_backbone_path, stage_keys
+
+    record = json.loads(reference_backbone_path("cpu").with_suffix(".json").read_text())
+    keys = stage_keys(pretrain_stages("cpu"), record["data_fingerprint"])
+    assert keys[-1] == record["key"]
+    assert keys[0] == record["continued_from"]["key"]

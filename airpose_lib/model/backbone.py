@@ -145,6 +145,51 @@ class ResNet(nn.Module):
         x = self.layer4(self.layer3(self.layer2(self.layer1(x))))
         return torch.flatten(self.avgpool(x), 1)
 
+    # -- the trunk cut in two at a block, for training only the blocks after the cut ------------
+
+    def block_names(self) -> tuple[str, ...]:
+        """The residual blocks in order: ``("layer1.0", ..., "layer4.1")`` (state-dict prefixes)."""
+        return tuple(f"layer{i}.{j}" for i in range(1, 5) for j in range(len(getattr(self, f"layer{i}"))))
+
+    def _cut_index(self, cut: str) -> int:
+        names = self.block_names()
+        if cut not in names:
+            raise ValueError(f"unknown block {cut!r} of this {self.block_name} trunk; choose one of {list(names)}")
+        return names.index(cut)
+
+    def _blocks(self) -> list[nn.Module]:
+        return [block for i in range(1, 5) for block in getattr(self, f"layer{i}")]
+
+    def forward_until(self, x: Tensor, cut: str) -> Tensor:
+        """The stem and the blocks before ``cut``.
+
+        Args: x ``(B, 3, H, W)`` normalised RGB; cut: a name of :meth:`block_names`.
+        Returns: the input of block ``cut``, ``(B, C, h, w)`` (e.g. ``(B, 256, 8, 8)`` for
+        ``"layer4.0"`` of a ResNet-18 at 128 px).
+        """
+        if self.channels_last:
+            x = x.contiguous(memory_format=torch.channels_last)
+        x = self.maxpool(self.relu(self.bn1(self.conv1(x))))
+        for block in self._blocks()[:self._cut_index(cut)]:
+            x = block(x)
+        return x
+
+    def forward_from(self, h: Tensor, cut: str) -> Tensor:
+        """Block ``cut``, the blocks after it and the pooling: ``forward(x) ==
+        forward_from(forward_until(x, cut), cut)``.
+
+        Args: h ``(B, C, h, w)`` the input of block ``cut``. Returns ``(B, feature_dim)``.
+        """
+        if self.channels_last:
+            h = h.contiguous(memory_format=torch.channels_last)
+        for block in self._blocks()[self._cut_index(cut):]:
+            h = block(h)
+        return torch.flatten(self.avgpool(h), 1)
+
+    def blocks_from(self, cut: str) -> list[nn.Module]:
+        """The modules :meth:`forward_from` runs with weights: block ``cut`` and those after it."""
+        return self._blocks()[self._cut_index(cut):]
+
     def load_torchvision_state_dict(self, state_dict: Mapping[str, Tensor], strict: bool = True):
         """Load a torchvision-format ResNet state dict (e.g. ImageNet weights); ``fc.*`` is dropped.
 

@@ -275,6 +275,11 @@ class AirPoseNet(nn.Module):
         """Backbone features. Args: images ``(N, 3, S, S)``. Returns ``(N, C)``."""
         return self.backbone(images)
 
+    def features_from(self, h: Tensor, cut: str) -> Tensor:
+        """Backbone features from cached block inputs (:meth:`ResNet.forward_from`).
+        Args: h ``(B, V, C, h, w)`` the input of block ``cut`` for each view. Returns ``(B, V, feature_dim)``."""
+        return self.backbone.forward_from(h.flatten(0, 1), cut).unflatten(0, h.shape[:2])
+
     def initial_state(self, batch_shape: tuple[int, ...]) -> dict[str, Tensor]:
         """Mean parameters expanded to ``batch_shape``: phi6d (..., 6), theta6d (..., 126),
         beta (..., 10), and tau_n (..., 3) (= tau / 20) or cam (..., 3)."""

@@ -74,6 +74,11 @@ class TrainConfig:
             ``"pretrain"`` (that backbone, :mod:`airpose_lib.train.pretrain`).
         pretrained: a pretrained backbone file (:func:`airpose_lib.train.pretrain.ensure_backbone`)
             to start from; ``"profile"`` resolves the profile's own; None: random initialisation.
+        trainable_from: task ``regressor`` only: the first backbone block that trains with the
+            regressor (e.g. ``"layer4.1"``, the last block of a ResNet-18); the features are then
+            cached at that block's input and the blocks from it on adapt to the variant's loss
+            (their BatchNorm statistics stay frozen). None: the whole backbone is frozen.
+        backbone_lr_scale: the learning rate of those blocks, as a fraction of ``lr``.
     """
 
     variant: str = "airpose"
@@ -110,12 +115,18 @@ class TrainConfig:
     progress: bool = True
     task: str = "supervised"
     pretrained: str | None = None
+    trainable_from: str | None = None
+    backbone_lr_scale: float = 1.0
 
     def __post_init__(self) -> None:
         if self.task not in ("supervised", "regressor", "pretrain"):
             raise ValueError(f"task must be 'supervised', 'regressor' or 'pretrain', got {self.task!r}")
         if self.lr_schedule not in ("constant", "cosine"):
             raise ValueError(f"lr_schedule must be 'constant' or 'cosine', got {self.lr_schedule!r}")
+        if self.trainable_from is not None and self.task != "regressor":
+            raise ValueError("trainable_from applies to the regressor task only")
+        if self.backbone_lr_scale <= 0:
+            raise ValueError("backbone_lr_scale must be > 0")
         if self.warmup_steps < 0:
             raise ValueError("warmup_steps must be >= 0")
         if self.steps < 0 or self.batch_size < 1:
@@ -144,7 +155,7 @@ class TrainConfig:
     # Fields whose change makes a resumed run differ from a straight one.
     RESUME_KEYS = ("variant", "batch_size", "lr", "lr_schedule", "warmup_steps", "amsgrad", "weight_decay", "grad_clip", "seed", "backbone",
                    "model", "freeze_backbone", "loss", "official_loss", "body_source", "data", "train_split",
-                   "task", "pretrained")
+                   "task", "pretrained", "trainable_from", "backbone_lr_scale")
 
 
 def load_train_config(profile: str | Path | None, variant: str, seed: int | None = None,

@@ -34,8 +34,8 @@ __all__ = ["predict", "evaluate", "load_trained_model", "evaluate_checkpoint"]
 
 @torch.no_grad()
 def predict(model: nn.Module, dataset, batch_size: int = 8, device: str | torch.device = "cpu",
-            body: BodyForward | str = "open", num_workers: int = 0, max_samples: int | None = None
-            ) -> tuple[dict[str, torch.Tensor], dict[str, torch.Tensor]]:
+            body: BodyForward | str = "open", num_workers: int = 0, max_samples: int | None = None,
+            feature_cut: str | None = None) -> tuple[dict[str, torch.Tensor], dict[str, torch.Tensor]]:
     """Predictions and matching ground truth for a dataset, in order.
 
     Args:
@@ -44,7 +44,8 @@ def predict(model: nn.Module, dataset, batch_size: int = 8, device: str | torch.
             (``"open"``, ``"smplx"``).
 
     The dataset may serve crops (``images``) or cached backbone ``features`` (a
-    :class:`~airpose_lib.train.features.FeatureDataset`; then only the regressor runs).
+    :class:`~airpose_lib.train.features.FeatureDataset`; then only the regressor runs, after the
+    backbone blocks from ``feature_cut`` when the features are that block's input).
 
     Returns:
         ``pred``: phi (N, V, 3, 3), theta (N, V, 21, 3, 3), beta (N, V, 10), tau (N, V, 3),
@@ -63,7 +64,8 @@ def predict(model: nn.Module, dataset, batch_size: int = 8, device: str | torch.
     for batch in loader:
         batch = {k: v.to(device) if isinstance(v, torch.Tensor) else v for k, v in batch.items()}
         if "features" in batch:
-            out = model.regress(batch["features"], batch["P"])
+            feat = batch["features"] if feature_cut is None else model.features_from(batch["features"], feature_cut)
+            out = model.regress(feat, batch["P"])
             size = int(batch["crop_size"][0])
         else:
             out = model(batch["images"], batch["P"])
@@ -122,4 +124,4 @@ def evaluate_checkpoint(checkpoint: str | Path, split: str = "test", method: str
         cfg = cfg.replace(data=dict(cfg.data, crops=crops))
     dataset = default_dataset_factory(prepare_data(cfg, progress=False), split)
     return evaluate(model, dataset, method or cfg.variant, batch_size=batch_size, device=device,
-                    max_samples=max_samples, body=cfg.body_source)
+                    max_samples=max_samples, body=cfg.body_source, feature_cut=cfg.trainable_from)

@@ -50,51 +50,60 @@ def _dataset_id(root: Path) -> dict:
             "shards": [r.get("sha256") for r in manifest.get("shards", [])]}
 
 
-def feature_key(backbone_file: str | Path, data_root: str | Path, split: str, crops: str) -> str:
-    """SHA-256 (first 16 hex digits) of everything the features depend on."""
-    blob = json.dumps({"version": FEATURES_VERSION, "backbone": sha256_file(Path(backbone_file)),
-                       "data": _dataset_id(Path(data_root)), "split": split, "crops": crops}, sort_keys=True)
+def feature_key(backbone_file: str | Path, data_root: str | Path, split: str, crops: str,
+                cut: str | None = None) -> str:
+    """SHA-256 (first 16 hex digits) of everything the features depend on (``cut``: the block
+    whose input they are; None, the pooled features, leaves the key of earlier versions)."""
+    what = {"version": FEATURES_VERSION, "backbone": sha256_file(Path(backbone_file)),
+            "data": _dataset_id(Path(data_root)), "split": split, "crops": crops}
+    if cut is not None:
+        what["cut"] = cut
+    blob = json.dumps(what, sort_keys=True)
     return hashlib.sha256(blob.encode()).hexdigest()[:16]
 
 
 @torch.no_grad()
 def compute_features(backbone: torch.nn.Module, dataset: StillFrameDataset, batch_size: int = 64,
-                     progress: bool = False) -> np.ndarray:
-    """Features ``(N, V, C)`` float32 of every crop of ``dataset`` (in order, no augmentation)."""
+                     progress: bool = False, cut: str | None = None) -> np.ndarray:
+    """Features of every crop of ``dataset`` (in order, no augmentation), float32: the pooled
+    ``(N, V, C)``, or with ``cut`` the input of that block, ``(N, V, C, h, w)``."""
     backbone = backbone.eval()
     loader = DataLoader(dataset, batch_size=batch_size, shuffle=False)
     out = []
     for batch in progress_bar(loader, enabled=progress, desc="features"):
         x = batch["images"]
         B, V = x.shape[:2]
-        out.append(backbone(x.flatten(0, 1)).reshape(B, V, -1).numpy())
+        f = backbone(x.flatten(0, 1)) if cut is None else backbone.forward_until(x.flatten(0, 1), cut)
+        out.append(f.contiguous().reshape(B, V, *f.shape[1:]).numpy())
     return np.concatenate(out).astype(np.float32)
 
 
 def ensure_features(backbone_file: str | Path, data_root: str | Path, split: str, crops: str = "jittered",
-                    progress: bool = False) -> Path:
-    """The feature file of a dataset split (computed on first use, atomically, under a lock).
+                    progress: bool = False, cut: str | None = None) -> Path:
+    """The feature file of a dataset split (computed on first use, atomically, under a lock);
+    ``cut`` as :func:`compute_features`.
 
     Returns ``<kit cache>/features/<key>.npy``.
     """
-    key = feature_key(backbone_file, data_root, split, crops)
+    key = feature_key(backbone_file, data_root, split, crops, cut)
     path = cache_dir() / "features" / f"{key}.npy"
     with file_lock(path.with_suffix(".lock")):
         if not path.is_file():
             backbone, _ = load_backbone_file(backbone_file)
             ds = StillFrameDataset(data_root, split, augment=False, crops=crops)
-            feats = compute_features(backbone, ds, progress=progress)
+            feats = compute_features(backbone, ds, progress=progress, cut=cut)
             with atomic_path(path) as tmp:
                 with open(tmp, "wb") as f:
                     np.save(f, feats)
             (path.with_suffix(".json")).write_text(json.dumps(
                 {"backbone_file": str(backbone_file), "data_root": str(data_root), "split": split,
-                 "crops": crops, "shape": list(feats.shape)}, indent=2))
+                 "crops": crops, "cut": cut, "shape": list(feats.shape)}, indent=2))
     return path
 
 
 class FeatureDataset(Dataset):
-    """A still-frame split whose items carry backbone ``features (V, C)`` instead of ``images``.
+    """A still-frame split whose items carry backbone ``features (V, C)`` (or ``(V, C, h, w)``, the
+    input of a block: :func:`compute_features`) instead of ``images``.
 
     Items hold every key of :class:`~airpose_lib.data.dataset.StillFrameDataset` but ``images``,
     plus ``features``; the view-swap augmentation permutes the features with the other per-view

@@ -26,6 +26,7 @@ dropout masks (per-process RNG streams).
 
 from __future__ import annotations
 
+import functools
 import json
 import os
 import socket
@@ -71,6 +72,7 @@ __all__ = [
     "regressor_forward_loss",
     "pretrain_forward_loss",
     "TASK_FORWARD",
+    "task_forward",
     "StillFrameTask",
     "run_network_entry",
     "validation_loss",
@@ -95,6 +97,10 @@ def default_model_factory(cfg: TrainConfig) -> nn.Module:
     if cfg.task == "regressor":
         for p in model.backbone.parameters():
             p.requires_grad_(False)
+        if cfg.trainable_from is not None:  # the last blocks adapt to the variant's loss
+            for block in model.backbone.blocks_from(cfg.trainable_from):
+                for p in block.parameters():
+                    p.requires_grad_(True)
     return model
 
 
@@ -133,7 +139,7 @@ def prepare_data(cfg: TrainConfig, progress: bool | None = None) -> TrainConfig:
         if cfg.pretrained is None:
             raise ValueError("the regressor task trains on the features of a pretrained backbone: set pretrained")
         for split in {cfg.train_split, cfg.val_split}:
-            ensure_features(cfg.pretrained, data["root"], split, progress=show)
+            ensure_features(cfg.pretrained, data["root"], split, progress=show, cut=cfg.trainable_from)
     return cfg
 
 
@@ -145,7 +151,7 @@ def default_dataset_factory(cfg: TrainConfig, split: str):
         raise ValueError("cfg.data has no root; call prepare_data(cfg) first")
     if cfg.task == "regressor":
         crops = kwargs.pop("crops", "jittered")
-        feats = ensure_features(cfg.pretrained, cfg.data["root"], split, crops)
+        feats = ensure_features(cfg.pretrained, cfg.data["root"], split, crops, cut=cfg.trainable_from)
         return FeatureDataset(cfg.data["root"], split, feats, crops=crops, **kwargs)
     if cfg.data.get("source", "generated") == "official_synthetic":
         return OfficialSyntheticDataset(cfg.data["root"], split=split, **kwargs)
@@ -187,10 +193,14 @@ def forward_loss(model: nn.Module, loss_fn: nn.Module, batch: Mapping[str, torch
     return _supervised_terms(out, loss_fn, batch, int(batch["images"].shape[-1]))
 
 
-def regressor_forward_loss(model: nn.Module, loss_fn: nn.Module, batch: Mapping[str, torch.Tensor]) -> dict:
+def regressor_forward_loss(model: nn.Module, loss_fn: nn.Module, batch: Mapping[str, torch.Tensor],
+                           cut: str | None = None) -> dict:
     """Task ``regressor``: the variant's regressor on cached ``features (B, V, C)``; same terms.
-    (Single process: the regressor alone is far too small to gain from DDP.)"""
-    out = _unwrap(model).regress(batch["features"], batch["P"])
+    With ``cut`` (``TrainConfig.trainable_from``) the features are the input ``(B, V, C, h, w)``
+    of that backbone block, and the blocks from it on run first."""
+    net = _unwrap(model)
+    feat = batch["features"] if cut is None else net.features_from(batch["features"], cut)
+    out = net.regress(feat, batch["P"])
     return _supervised_terms(out, loss_fn, batch, int(batch["crop_size"][0]))
 
 
@@ -203,6 +213,13 @@ def pretrain_forward_loss(model: nn.Module, loss_fn: nn.Module, batch: Mapping[s
 #: The step of each task (SPIN's ``train_step`` per task, one engine around them).
 TASK_FORWARD: dict[str, Callable] = {"supervised": forward_loss, "regressor": regressor_forward_loss,
                                      "pretrain": pretrain_forward_loss}
+
+
+def task_forward(cfg: TrainConfig) -> Callable:
+    """The step of ``cfg.task`` (:data:`TASK_FORWARD`), bound to the config's feature cut."""
+    if cfg.task == "regressor" and cfg.trainable_from is not None:
+        return functools.partial(regressor_forward_loss, cut=cfg.trainable_from)
+    return TASK_FORWARD[cfg.task]
 
 
 def run_network_entry(config: Mapping[str, Any], dataset: Any) -> dict[str, Any]:
@@ -360,8 +377,19 @@ def _unwrap(model: nn.Module) -> nn.Module:
 
 def _set_train_mode(model: nn.Module, cfg: TrainConfig) -> None:
     model.train()
-    if cfg.freeze_backbone and hasattr(model, "backbone"):
-        model.backbone.eval()  # frozen BatchNorm statistics
+    if (cfg.freeze_backbone or cfg.task == "regressor") and hasattr(model, "backbone"):
+        model.backbone.eval()  # frozen BatchNorm statistics (the regressor task's features were made so)
+
+
+def _param_groups(model: nn.Module, cfg: TrainConfig) -> list[dict]:
+    """The trainable parameters; the backbone's at ``cfg.backbone_lr_scale`` of the rate."""
+    backbone = {id(p) for p in model.backbone.parameters()} if hasattr(model, "backbone") else set()
+    params = [p for p in model.parameters() if p.requires_grad]
+    rest = [p for p in params if id(p) not in backbone]
+    trunk = [p for p in params if id(p) in backbone]
+    if not trunk or cfg.backbone_lr_scale == 1.0:
+        return [{"params": params}]  # one group: the optimiser state of earlier checkpoints still loads
+    return [{"params": rest}, {"params": trunk, "lr_scale": cfg.backbone_lr_scale}]
 
 
 def _check_resume(saved: dict, cfg: TrainConfig) -> None:
@@ -405,10 +433,10 @@ class StillFrameTask(TrainingTask):
         self.cfg, self.model, self.loss_fn, self.device = cfg, model, loss_fn, device
         self.train_ds, self.val_ds, self.rank, self.world = train_ds, val_ds, rank, world
         self.network = dict(network or {})  # the checkpoints' network record (run_network_entry)
-        self.optimizer = torch.optim.Adam([p for p in model.parameters() if p.requires_grad], lr=cfg.lr,
-                                          amsgrad=cfg.amsgrad, weight_decay=cfg.weight_decay)
+        self.optimizer = torch.optim.Adam(_param_groups(model, cfg), lr=cfg.lr, amsgrad=cfg.amsgrad,
+                                          weight_decay=cfg.weight_decay)
         self.net: nn.Module = model  # the DDP wrapper once begun
-        self.step_fn = TASK_FORWARD[cfg.task]
+        self.step_fn = task_forward(cfg)
 
     def batches(self, epoch: int, start: int):
         cfg = self.cfg
@@ -423,7 +451,7 @@ class StillFrameTask(TrainingTask):
     def train_step(self, batch: Mapping[str, torch.Tensor], step: int) -> dict[str, torch.Tensor]:
         lr = self.cfg.lr_at(step)  # a function of the step alone, so a resumed run follows it too
         for group in self.optimizer.param_groups:
-            group["lr"] = lr
+            group["lr"] = lr * group.get("lr_scale", 1.0)
         return self.step_fn(self.net, self.loss_fn, batch)
 
     def train_mode(self) -> None:
@@ -518,7 +546,7 @@ def validation_loss(model: nn.Module, loss_fn: nn.Module, dataset, cfg: TrainCon
         if cfg.val_batches is not None and b >= cfg.val_batches:
             break
         batch = _to_device(batch, device)
-        terms = TASK_FORWARD[cfg.task](model, loss_fn, batch)
+        terms = task_forward(cfg)(model, loss_fn, batch)
         k = batch["phi"].shape[0]
         for key, v in terms.items():
             sums[key] = sums.get(key, 0.0) + float(v) * k

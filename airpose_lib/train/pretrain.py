@@ -87,7 +87,8 @@ def backbone_key(cfg: TrainConfig, data_fingerprint: str, start_key: str | None 
     """
     settings = {k: v for k, v in cfg.to_dict().items()
                 if k not in ("progress", "data", "num_workers", "log_every", "checkpoint_every", "keep_checkpoints",
-                             "val_every", "val_batches", "device", "num_threads", "profile")}
+                             "val_every", "val_batches", "device", "num_threads", "profile",
+                             "trainable_from", "backbone_lr_scale")}  # the last two: regressor-task fields
     settings["pretrained"] = start_key
     for name, default in (("lr_schedule", "constant"), ("warmup_steps", 0)):
         if settings.get(name) == default:  # added after the first committed backbone, whose key stays

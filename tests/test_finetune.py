@@ -319,7 +319,9 @@ def test_predict_sequence_roundtrip_and_airpose_plus_init(variant, request, smok
         ref = to_smplx_params(model(torch.from_numpy(crops), P_t), P_t, K_net)
     np.testing.assert_allclose(pred["P"], P, atol=1e-6)
     for k in ("phi", "tau", "theta", "beta"):
-        np.testing.assert_allclose(pred[k], ref[k].numpy(), atol=1e-5, err_msg=k)
+        # rtol: batches of 3 and of 4 take other float32 kernel paths (oneDNN on an AMX Xeon put
+        # tau ~9 m 1.5e-5 m apart); a wrong crop or camera moves these by 1e-2 and more
+        np.testing.assert_allclose(pred[k], ref[k].numpy(), rtol=1e-4, atol=1e-5, err_msg=k)
 
     path = save_predictions(tmp_path / "pred.npz", pred)
     back = load_predictions(path)

@@ -139,11 +139,13 @@ class ResNet(nn.Module):
 
     def forward(self, x: Tensor) -> Tensor:
         """Args: x ``(B, 3, H, W)`` normalised RGB. Returns ``(B, feature_dim)``."""
+        x = self.layer4(self.layer3(self.layer2(self.layer1(self._stem(x)))))
+        return torch.flatten(self.avgpool(x), 1)
+
+    def _stem(self, x: Tensor) -> Tensor:
         if self.channels_last:
             x = x.contiguous(memory_format=torch.channels_last)
-        x = self.maxpool(self.relu(self.bn1(self.conv1(x))))
-        x = self.layer4(self.layer3(self.layer2(self.layer1(x))))
-        return torch.flatten(self.avgpool(x), 1)
+        return self.maxpool(self.relu(self.bn1(self.conv1(x))))
 
     # -- the trunk cut in two at a block, for training only the blocks after the cut ------------
 
@@ -167,9 +169,7 @@ class ResNet(nn.Module):
         Returns: the input of block ``cut``, ``(B, C, h, w)`` (e.g. ``(B, 256, 8, 8)`` for
         ``"layer4.0"`` of a ResNet-18 at 128 px).
         """
-        if self.channels_last:
-            x = x.contiguous(memory_format=torch.channels_last)
-        x = self.maxpool(self.relu(self.bn1(self.conv1(x))))
+        x = self._stem(x)
         for block in self._blocks()[:self._cut_index(cut)]:
             x = block(x)
         return x
@@ -182,7 +182,7 @@ class ResNet(nn.Module):
         """
         if self.channels_last:
             h = h.contiguous(memory_format=torch.channels_last)
-        for block in self._blocks()[self._cut_index(cut):]:
+        for block in self.blocks_from(cut):
             h = block(h)
         return torch.flatten(self.avgpool(h), 1)
 

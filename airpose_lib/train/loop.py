@@ -540,13 +540,14 @@ def validation_loss(model: nn.Module, loss_fn: nn.Module, dataset, cfg: TrainCon
     sampler = ResumableBatchSampler(len(dataset), bs, cfg.seed, epoch=0, drop_last=False, shuffle=False)
     loader = DataLoader(SeededDataset(dataset), batch_sampler=sampler, num_workers=cfg.num_workers,
                         worker_init_fn=worker_init_fn, generator=torch.Generator().manual_seed(cfg.seed))
+    step = task_forward(cfg)
     sums: dict[str, float] = {}
     n = 0
     for b, batch in enumerate(loader):
         if cfg.val_batches is not None and b >= cfg.val_batches:
             break
         batch = _to_device(batch, device)
-        terms = task_forward(cfg)(model, loss_fn, batch)
+        terms = step(model, loss_fn, batch)
         k = batch["phi"].shape[0]
         for key, v in terms.items():
             sums[key] = sums.get(key, 0.0) + float(v) * k

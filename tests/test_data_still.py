@@ -87,6 +87,19 @@ def test_same_seed_gives_identical_bytes(reference, tmp_path):
     assert other["status"] == "incomplete"
 
 
+def test_a_larger_dataset_begins_with_the_smaller_ones_training_shards(reference, tmp_path):
+    """Shard k depends on (seed, k) only: a profile's dataset can grow and an earlier pretraining
+    stage, pinned to the smaller size, still names the samples it was trained on (cpu.yaml)."""
+    root, _ = reference
+    larger = _generate(tmp_path / "larger", CFG.replace(num_samples=20))
+    assert larger["splits"]["test"] == [4]  # the smaller one's test shard (2) is training data now
+    for k in (0, 1):  # the same arrays; only the file's record of the dataset's fingerprint differs
+        a, b = read_shard(root / shard_name(k)), read_shard(tmp_path / "larger" / shard_name(k))
+        assert a.keys() == b.keys()
+        assert all(np.array_equal(a[x], b[x]) for x in a if x != "meta")
+        assert a["meta"]["fingerprint"] != b["meta"]["fingerprint"]
+
+
 def test_interrupted_generation_resumes_to_the_same_dataset(reference, tmp_path):
     root = tmp_path / "resumed"
     part = _generate(root, stop_after_shards=1)

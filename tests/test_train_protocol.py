@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -222,6 +223,51 @@ def test_a_second_pretraining_stage_starts_from_the_first(tmp_path, monkeypatch,
     assert ensure_backbone(str(profile), root, fp, out_root=tmp_path / "runs") == path
 
 
+def test_earlier_stages_keep_their_dataset_when_the_profile_data_grow(tmp_path, monkeypatch, open_model_files):
+    """Three stages; the first two pinned to a smaller dataset (`data: still:` changes) keep the
+    keys they had when that was the profile's dataset, and are trained on it (generated in the
+    cache when needed); the last stage trains on the dataset it is given."""
+    import yaml
+
+    from airpose_lib.data.generate import GenerationConfig, default_root, generate_still_dataset
+    from airpose_lib.data.manifest import load_manifest
+    from airpose_lib.train.pretrain import ensure_backbone, pretrain_stages, stage_keys
+
+    monkeypatch.setenv("AIRPOSE_CACHE", str(tmp_path / "cache"))
+    small = {"num_samples": 4, "shard_size": 2, "crop_size": 32, "seed": 0}
+    section = {"steps": 1, "batch_size": 2, "backbone": "resnet18", "lr": 1e-3, "seed": 0, "checkpoint_every": 1,
+               "val_every": None, "log_every": 1, "num_workers": 0, "model": {"n_heading_bins": 12}}
+    before = tmp_path / "grow.yaml"  # the profile when its dataset was the small one: two stages
+    before.write_text(yaml.safe_dump({"data": {"still": small},
+                                      "pretrain": {**section, "continue_from": {"steps": 2}}}))
+    small_fp = GenerationConfig(**small).fingerprint()
+    old_keys = stage_keys(pretrain_stages(str(before)), small_fp)
+
+    after = tmp_path / "grown" / "grow.yaml"  # the dataset grew; a third stage was added
+    after.parent.mkdir()
+    after.write_text(yaml.safe_dump({"data": {"still": {**small, "num_samples": 6}}, "pretrain": {
+        **section, "continue_from": {"steps": 1, "data": {"still": {"num_samples": 4}}, "continue_from": {"steps": 2}}}}))
+    stages = pretrain_stages(str(after))
+    assert [c.steps for c in stages] == [2, 1, 1]
+    assert [c.data.get("fingerprint") for c in stages] == [small_fp, small_fp, None]
+    assert stages[0].data["root"] == str(default_root("grow").with_name(f"still_grow-{small_fp[:12]}"))
+    root = tmp_path / "data"
+    generate_still_dataset(GenerationConfig(**{**small, "num_samples": 6}), root, workers=1, progress=False,
+                           record=False)
+    fp = load_manifest(root)["fingerprint"]
+    keys = stage_keys(stages, fp)
+    assert keys[:2] == old_keys and keys[2] not in old_keys
+
+    path = ensure_backbone(str(after), root, fp, out_root=tmp_path / "runs")
+    assert path.stem == keys[-1]
+    record = json.loads(path.with_suffix(".json").read_text())
+    assert record["data_fingerprint"] == fp and record["total_steps"] == 4
+    assert record["continued_from"]["key"] == keys[1]
+    earlier = json.loads(path.with_name(f"{keys[1]}.json").read_text())
+    assert earlier["data_fingerprint"] == small_fp and earlier["config"]["data"]["root"] == stages[0].data["root"]
+    assert load_manifest(Path(stages[0].data["root"]))["totals"]["samples"] == 4  # generated for them
+
+
 def test_regressor_with_its_last_backbone_block_trainable(tmp_path, monkeypatch, open_model_files):
     """trainable_from: the features are the cut's input; the step on them equals the whole network
     on the crops; only the blocks from the cut and the regressor move, at their own rates."""
@@ -278,10 +324,13 @@ def test_regressor_with_its_last_backbone_block_trainable(tmp_path, monkeypatch,
 
 def test_the_committed_cpu_backbone_keeps_its_key():
     """A new TrainConfig field must not silently orphan the committed backbone (a new key would
-    retrain both stages, about two hours, on a user's first cpu run)."""
+    retrain both stages, hours on a 2-core machine, on a user's first cpu run)."""
     from airpose_lib.train.pretrain import pretrain_stages, reference_backbone_path, stage_keys
 
     record = json.loads(reference_backbone_path("cpu").with_suffix(".json").read_text())
     keys = stage_keys(pretrain_stages("cpu"), record["data_fingerprint"])
-    assert keys[-1] == record["key"]
-    assert keys[0] == record["continued_from"]["key"]
+    chain = []  # the committed record names the stages it continued, last to first
+    while record:
+        chain.append(record["key"])
+        record = record.get("continued_from")
+    assert keys == chain[::-1]

@@ -32,7 +32,7 @@ from torch.utils.data import DataLoader
 
 from airpose_lib.atomic import atomic_path
 from airpose_lib.data.dataset import StillFrameDataset
-from airpose_lib.data.generate import ensure_still_dataset
+from airpose_lib.data.generate import GenerationConfig, default_root, ensure_still_dataset, profile_config
 from airpose_lib.data.manifest import load_manifest
 from airpose_lib.data.shards import sha256_file
 from airpose_lib.engine.checkpoint import kit_version, load_checkpoint
@@ -55,23 +55,48 @@ _REPO = Path(__file__).resolve().parents[2]
 
 def pretrain_stages(profile: str, **overrides) -> list[TrainConfig]:
     """The stages of a profile's pretraining, first to last, as :class:`TrainConfig` s (task
-    ``pretrain``): one, or two when the ``pretrain:`` section has ``continue_from:`` (the settings
-    of the earlier stage as changes to the section's). ``overrides`` apply to the last stage."""
+    ``pretrain``). A ``pretrain:`` section may name the stage it continues (``continue_from:``, the
+    earlier stage's settings as changes to its own), which may name one in turn, and so on.
+    ``overrides`` apply to the last stage.
+
+    A stage with ``data: {still: {...}}`` pretrains on its own still-frame dataset: the profile's
+    ``data: still:`` settings with those changes (e.g. the smaller dataset that earlier stages were
+    trained on, when the profile's grew). Its ``cfg.data`` then holds that dataset's ``root``,
+    ``fingerprint`` and ``generation`` settings; the other stages take the dataset that
+    :func:`ensure_backbone` is given.
+    """
     settings = profile_section(profile, "pretrain")
-    earlier = settings.pop("continue_from", None)
+    chain = [settings]
+    while (earlier := chain[-1].pop("continue_from", None)) is not None:
+        if not isinstance(earlier, dict):
+            raise ValueError(f"profile {profile}: `pretrain: continue_from:` must be a mapping of settings "
+                             f"(e.g. {{steps: 4000}}), not {earlier!r}")
+        chain.append({**chain[-1], **earlier})
     name = Path(str(profile)).stem
 
     def stage(values: dict, extra: dict) -> TrainConfig:
-        cfg = load_train_config(None, "pretrain", task="pretrain", **{**values, **extra})
-        return cfg.replace(profile=name)
+        values = {**values, **extra}
+        data = values.pop("data", None) or {}
+        cfg = load_train_config(None, "pretrain", task="pretrain", **values).replace(profile=name)
+        if "still" in data:
+            if set(data) != {"still"}:
+                raise ValueError(f"profile {profile}: a pretraining stage's `data:` takes only `still:` "
+                                 f"(changes to the profile's `data: still:`), not {sorted(set(data) - {'still'})}")
+            cfg = cfg.replace(data=_stage_dataset(profile, name, data["still"] or {}))
+        return cfg
 
-    last = stage(settings, overrides)
-    if not earlier:
-        return [last]
-    if not isinstance(earlier, dict):
-        raise ValueError(f"profile {profile}: `pretrain: continue_from:` must be a mapping of settings "
-                         f"(e.g. {{steps: 4000}}), not {earlier!r}")
-    return [stage({**settings, **earlier}, {}), last]
+    return [stage(values, overrides if i == 0 else {}) for i, values in reversed(list(enumerate(chain)))]
+
+
+def _stage_dataset(profile: str, name: str, changes: dict) -> dict:
+    """``root``, ``fingerprint`` and ``generation`` of the profile's still-frame dataset with
+    ``changes``; the profile's own folder when the changes change nothing."""
+    base = profile_config(profile)
+    config = GenerationConfig.from_dict({**base.to_dict(), **changes})
+    fp = config.fingerprint()
+    root = default_root(name) if fp == base.fingerprint() else \
+        default_root(name).with_name(f"{default_root(name).name}-{fp[:12]}")
+    return {"root": str(root), "fingerprint": fp, "generation": config.to_dict()}
 
 
 def pretrain_config(profile: str, **overrides) -> TrainConfig:
@@ -171,11 +196,20 @@ def _at_hand(profile: str, key: str) -> Path | None:
 
 
 def stage_keys(stages: list[TrainConfig], data_fingerprint: str) -> list[str]:
-    """The key of each stage of :func:`pretrain_stages` (each includes the one before)."""
+    """The key of each stage of :func:`pretrain_stages` (each includes the one before).
+
+    ``data_fingerprint`` is that of the dataset the stages without their own dataset train on.
+    """
     keys: list[str] = []
     for cfg in stages:
-        keys.append(backbone_key(cfg, data_fingerprint, keys[-1] if keys else None))
+        fp = cfg.data.get("fingerprint", data_fingerprint)
+        keys.append(backbone_key(cfg, fp, keys[-1] if keys else None))
     return keys
+
+
+def _with_data(stages: list[TrainConfig], data_root: str | Path) -> list[TrainConfig]:
+    """``data_root`` for the stages that have no dataset of their own."""
+    return [cfg if "fingerprint" in cfg.data else cfg.replace(data={"root": str(data_root)}) for cfg in stages]
 
 
 def ensure_backbone(profile: str, data_root: str | Path, data_fingerprint: str, out_root: str | Path | None = None,
@@ -189,7 +223,7 @@ def ensure_backbone(profile: str, data_root: str | Path, data_fingerprint: str, 
         out_root: parent of the pretraining run folders (default ``<runs>/pretrain/<profile>``).
         overrides: TrainConfig fields over the ``pretrain:`` section (its last stage).
     """
-    stages = [cfg.replace(data={"root": str(data_root)}) for cfg in pretrain_stages(profile, **overrides)]
+    stages = _with_data(pretrain_stages(profile, **overrides), data_root)
     keys = stage_keys(stages, data_fingerprint)
     start, path = 0, None
     for i in reversed(range(len(stages))):  # the latest stage already made needs nothing before it
@@ -199,13 +233,14 @@ def ensure_backbone(profile: str, data_root: str | Path, data_fingerprint: str, 
             start, path = i + 1, found
             break
     for i in range(start, len(stages)):
-        path = _train_stage(profile, stages[i], keys[i], path, data_root, data_fingerprint, out_root, progress)
+        path = _train_stage(profile, stages[i], keys[i], path, data_fingerprint, out_root, progress)
     return path
 
 
-def _train_stage(profile: str, cfg: TrainConfig, key: str, start: Path | None, data_root: str | Path,
-                 data_fingerprint: str, out_root: str | Path | None, progress: bool) -> Path:
-    """Train one stage (from ``start``'s backbone, or from scratch), gate it, export it as ``key``."""
+def _train_stage(profile: str, cfg: TrainConfig, key: str, start: Path | None, data_fingerprint: str,
+                 out_root: str | Path | None, progress: bool) -> Path:
+    """Train one stage (from ``start``'s backbone, or from scratch) on its dataset (``cfg.data``),
+    gate it on that dataset's test split, export it as ``key``."""
     from .loop import train  # the engine imports this module for its "regressor" task
 
     target = cache_dir() / "backbones" / f"{key}.pt"
@@ -214,7 +249,12 @@ def _train_stage(profile: str, cfg: TrainConfig, key: str, start: Path | None, d
         found = _at_hand(profile, key)
         if found is not None:
             return found
-        cfg = cfg.replace(pretrained=None if start is None else str(start))
+        data_root = cfg.data["root"]
+        if "generation" in cfg.data:  # a dataset of the stage's own, made only when the stage trains
+            data_fingerprint = cfg.data["fingerprint"]
+            ensure_still_dataset(config=GenerationConfig.from_dict(cfg.data["generation"]), root=data_root,
+                                 progress=progress)
+        cfg = cfg.replace(pretrained=None if start is None else str(start), data={"root": str(data_root)})
         out = Path(out_root) if out_root is not None else run_path("pretrain", profile)
         t0 = time.time()
         run = train("pretrain", profile, out_dir=out / key, config=cfg.replace(progress=progress))
@@ -244,8 +284,7 @@ def _load_pretrain_model(checkpoint: str | Path, cfg: TrainConfig) -> torch.nn.M
 
 def profile_backbone_key(profile: str, data_root: str | Path) -> str:
     """The key of the backbone a profile asks for on the dataset in ``data_root`` (its last stage)."""
-    stages = [cfg.replace(data={"root": str(data_root)}) for cfg in pretrain_stages(profile)]
-    return stage_keys(stages, load_manifest(Path(data_root))["fingerprint"])[-1]
+    return stage_keys(_with_data(pretrain_stages(profile), data_root), load_manifest(Path(data_root))["fingerprint"])[-1]
 
 
 def profile_backbone(profile: str, progress: bool = False) -> Path:

@@ -93,9 +93,9 @@ def _stage_dataset(profile: str, name: str, changes: dict) -> dict:
     ``changes``; the profile's own folder when the changes change nothing."""
     base = profile_config(profile)
     config = GenerationConfig.from_dict({**base.to_dict(), **changes})
-    fp = config.fingerprint()
-    root = default_root(name) if fp == base.fingerprint() else \
-        default_root(name).with_name(f"{default_root(name).name}-{fp[:12]}")
+    fp, root = config.fingerprint(), default_root(name)
+    if fp != base.fingerprint():
+        root = root.with_name(f"{root.name}-{fp[:12]}")
     return {"root": str(root), "fingerprint": fp, "generation": config.to_dict()}
 
 
@@ -207,9 +207,11 @@ def stage_keys(stages: list[TrainConfig], data_fingerprint: str) -> list[str]:
     return keys
 
 
-def _with_data(stages: list[TrainConfig], data_root: str | Path) -> list[TrainConfig]:
-    """``data_root`` for the stages that have no dataset of their own."""
-    return [cfg if "fingerprint" in cfg.data else cfg.replace(data={"root": str(data_root)}) for cfg in stages]
+def _with_data(stages: list[TrainConfig], data_root: str | Path, data_fingerprint: str) -> list[TrainConfig]:
+    """The dataset in ``data_root`` (``root`` and ``fingerprint``) for the stages that have none
+    of their own."""
+    given = {"root": str(data_root), "fingerprint": data_fingerprint}
+    return [cfg if "generation" in cfg.data else cfg.replace(data=given) for cfg in stages]
 
 
 def ensure_backbone(profile: str, data_root: str | Path, data_fingerprint: str, out_root: str | Path | None = None,
@@ -223,7 +225,7 @@ def ensure_backbone(profile: str, data_root: str | Path, data_fingerprint: str, 
         out_root: parent of the pretraining run folders (default ``<runs>/pretrain/<profile>``).
         overrides: TrainConfig fields over the ``pretrain:`` section (its last stage).
     """
-    stages = _with_data(pretrain_stages(profile, **overrides), data_root)
+    stages = _with_data(pretrain_stages(profile, **overrides), data_root, data_fingerprint)
     keys = stage_keys(stages, data_fingerprint)
     start, path = 0, None
     for i in reversed(range(len(stages))):  # the latest stage already made needs nothing before it
@@ -233,12 +235,12 @@ def ensure_backbone(profile: str, data_root: str | Path, data_fingerprint: str, 
             start, path = i + 1, found
             break
     for i in range(start, len(stages)):
-        path = _train_stage(profile, stages[i], keys[i], path, data_fingerprint, out_root, progress)
+        path = _train_stage(profile, stages[i], keys[i], path, out_root, progress)
     return path
 
 
-def _train_stage(profile: str, cfg: TrainConfig, key: str, start: Path | None, data_fingerprint: str,
-                 out_root: str | Path | None, progress: bool) -> Path:
+def _train_stage(profile: str, cfg: TrainConfig, key: str, start: Path | None, out_root: str | Path | None,
+                 progress: bool) -> Path:
     """Train one stage (from ``start``'s backbone, or from scratch) on its dataset (``cfg.data``),
     gate it on that dataset's test split, export it as ``key``."""
     from .loop import train  # the engine imports this module for its "regressor" task
@@ -249,9 +251,8 @@ def _train_stage(profile: str, cfg: TrainConfig, key: str, start: Path | None, d
         found = _at_hand(profile, key)
         if found is not None:
             return found
-        data_root = cfg.data["root"]
+        data_root, data_fingerprint = cfg.data["root"], cfg.data["fingerprint"]
         if "generation" in cfg.data:  # a dataset of the stage's own, made only when the stage trains
-            data_fingerprint = cfg.data["fingerprint"]
             ensure_still_dataset(config=GenerationConfig.from_dict(cfg.data["generation"]), root=data_root,
                                  progress=progress)
         cfg = cfg.replace(pretrained=None if start is None else str(start), data={"root": str(data_root)})
@@ -284,7 +285,8 @@ def _load_pretrain_model(checkpoint: str | Path, cfg: TrainConfig) -> torch.nn.M
 
 def profile_backbone_key(profile: str, data_root: str | Path) -> str:
     """The key of the backbone a profile asks for on the dataset in ``data_root`` (its last stage)."""
-    return stage_keys(_with_data(pretrain_stages(profile), data_root), load_manifest(Path(data_root))["fingerprint"])[-1]
+    fingerprint = load_manifest(Path(data_root))["fingerprint"]
+    return stage_keys(_with_data(pretrain_stages(profile), data_root, fingerprint), fingerprint)[-1]
 
 
 def profile_backbone(profile: str, progress: bool = False) -> Path:

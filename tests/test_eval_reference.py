@@ -1,5 +1,9 @@
 """Results bundles (results/<profile>/) and the check of a new run against them."""
 import json
+import os
+import shutil
+import subprocess
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -68,6 +72,18 @@ def test_bundle_has_every_file_and_its_provenance(tmp_path):
 def test_machine_description_reads_the_cpu_and_memory():
     m = machine_description()
     assert m["cpu"] and m["ram_gib"] > 0
+
+
+def test_machine_description_names_the_vector_extensions():
+    """Read against lscpu's flag list, an independent reader of the same kernel table."""
+    lscpu = shutil.which("lscpu")
+    if lscpu is None or not Path("/proc/cpuinfo").is_file():
+        pytest.skip("needs lscpu and /proc/cpuinfo")
+    out = subprocess.run([lscpu], capture_output=True, text=True, check=True,
+                         env={**os.environ, "LC_ALL": "C"}).stdout
+    flags = set(next(line for line in out.splitlines() if line.startswith("Flags:")).split(":", 1)[1].split())
+    m = machine_description()
+    assert m["vector_extensions"] == [f for f in ("avx2", "avx512f", "avx512_bf16", "amx_tile") if f in flags]
 
 
 def test_side_by_side_puts_reference_and_paper_next_to_the_run(tmp_path):

@@ -43,3 +43,18 @@ def test_parallel_training_equals_sequential_and_is_reused(tiny_profile, tmp_pat
     mtime = par_path.stat().st_mtime_ns
     _train_parallel(tiny_profile, variants, seeds, tmp_path / "parallel", workers=2)  # nothing to do
     assert par_path.stat().st_mtime_ns == mtime
+
+
+def test_a_run_left_by_other_settings_is_trained_afresh(tiny_profile, tmp_path, capsys):
+    """E.g. a new committed backbone: the old run cannot be resumed, and must not stop a reproduction."""
+    from airpose_lib.engine.checkpoint import load_checkpoint
+    from airpose_lib.train.ablation import trained_checkpoint
+
+    first = load_checkpoint(trained_checkpoint(tiny_profile, "baseline", 1, tmp_path))
+    changed = tmp_path / "changed.yaml"
+    settings = yaml.safe_load(tiny_profile.read_text())
+    settings["train"]["lr"] = first["config"]["lr"] * 2
+    changed.write_text(yaml.safe_dump(settings))
+    again = load_checkpoint(trained_checkpoint(changed, "baseline", 1, tmp_path))
+    assert again["config"]["lr"] == settings["train"]["lr"] and again["step"] == 3
+    assert "trained with other lr than the profile asks for now; training it afresh" in capsys.readouterr().out

@@ -53,16 +53,26 @@ def reference_dir(profile: str, root: str | Path | None = None) -> Path:
 
 
 # -- provenance -----------------------------------------------------------------------------------
+# Vector extensions that set CPU training speed: two machines both named "AMD EPYC" differed 3x
+# per thread (AVX2 only against AVX-512), so the model name alone does not explain wall times.
+_VECTOR_FLAGS = ("avx2", "avx512f", "avx512_bf16", "amx_tile")
+
+
 def machine_description() -> dict:
-    """Platform, CPU model (``/proc/cpuinfo``), core count, RAM (``/proc/meminfo``) and load average."""
-    cpu, ram_gib = platform.processor() or None, None
+    """Platform, CPU model and vector extensions (``/proc/cpuinfo``), core count, RAM
+    (``/proc/meminfo``) and load average."""
+    cpu, ram_gib, vector = platform.processor() or None, None, None
     try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                cpu = line.split(":", 1)[1].strip()
-                break
+        info = Path("/proc/cpuinfo").read_text().splitlines()
     except OSError:
-        pass
+        info = []
+    model = next((line for line in info if line.startswith("model name")), None)
+    if model is not None:
+        cpu = model.split(":", 1)[1].strip()
+    flags = next((line for line in info if line.startswith("flags")), None)
+    if flags is not None:
+        present = set(flags.split(":", 1)[1].split())
+        vector = [f for f in _VECTOR_FLAGS if f in present]
     try:
         for line in Path("/proc/meminfo").read_text().splitlines():
             if line.startswith("MemTotal"):
@@ -72,7 +82,7 @@ def machine_description() -> dict:
         pass
     load = os.getloadavg() if hasattr(os, "getloadavg") else None
     return {"platform": platform.platform(), "python": platform.python_version(), "cpu": cpu,
-            "cores": os.cpu_count(), "ram_gib": ram_gib,
+            "vector_extensions": vector, "cores": os.cpu_count(), "ram_gib": ram_gib,
             "load_average": [round(x, 2) for x in load] if load else None}
 
 

@@ -13,7 +13,7 @@ from airpose_lib.process_guard import die_with_parent
 
 from .config import load_train_config
 from .evaluate import evaluate_checkpoint
-from .loop import TrainResult, default_out_dir, prepare_data, train
+from .loop import StaleRunError, TrainResult, default_out_dir, prepare_data, train
 from .pretrain import profile_backbone_key
 
 __all__ = ["AblationRun", "run_ablation", "trained_checkpoint"]
@@ -107,10 +107,19 @@ def trained_checkpoint(profile: str, variant: str, seed: int, out_root: str | Pa
     """The final checkpoint of a profile's run of ``variant`` (trained, or resumed, first if needed).
 
     Same run folders as :func:`run_ablation`, so the real-data notebooks reuse Table I's networks.
+    A run left there with other settings (e.g. from the backbone the profile asked for before a
+    new one was committed) is stale: it is trained afresh, with a line saying so, instead of
+    stopping the reproduction.
     """
     out = _run_dir(profile, variant, seed, out_root)
-    run = _finished_run(out, profile, variant, seed) or train(
-        variant, profile, seed=seed, out_dir=out, resume=True, overrides={"progress": progress})
+    run = _finished_run(out, profile, variant, seed)
+    if run is None:
+        kw = dict(seed=seed, out_dir=out, overrides={"progress": progress})
+        try:
+            run = train(variant, profile, resume=True, **kw)
+        except StaleRunError as e:
+            print(f"{out}: trained with other {', '.join(e.fields)} than the profile asks for now; training it afresh")
+            run = train(variant, profile, resume=False, **kw)
     if run.checkpoint is None:
         raise RuntimeError(f"training {variant} (seed {seed}) wrote no checkpoint in {out}")
     return Path(run.checkpoint)

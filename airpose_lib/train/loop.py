@@ -60,6 +60,7 @@ from .features import FeatureDataset, ensure_features, load_backbone_file
 from .sampling import ResumableBatchSampler, SeededDataset, _mix, seed_everything, worker_init_fn
 
 __all__ = [
+    "StaleRunError",
     "TrainResult",
     "train",
     "run_training",
@@ -392,14 +393,22 @@ def _param_groups(model: nn.Module, cfg: TrainConfig) -> list[dict]:
     return [{"params": rest}, {"params": trunk, "lr_scale": cfg.backbone_lr_scale}]
 
 
+class StaleRunError(ValueError):
+    """A run folder's checkpoint was trained with other settings (``fields``) than asked for now."""
+
+    def __init__(self, fields: list[str]):
+        self.fields = fields
+        super().__init__(f"cannot resume: the checkpoint was trained with different {fields}; use another "
+                         "out_dir or resume=False")
+
+
 def _check_resume(saved: dict, cfg: TrainConfig) -> None:
     now = cfg.to_dict()
     strip = lambda d: {k: v for k, v in (d or {}).items() if k != "root"}  # noqa: E731 - may move
     diff = [k for k in TrainConfig.RESUME_KEYS
             if (strip(saved.get(k)) != strip(now.get(k)) if k == "data" else saved.get(k) != now.get(k))]
     if diff:
-        raise ValueError(f"cannot resume: the checkpoint was trained with different {diff}; use another "
-                         "out_dir or resume=False")
+        raise StaleRunError(diff)
 
 
 def run_training(cfg: TrainConfig, out_dir: Path, resume: bool, model_factory: Callable,

@@ -6,6 +6,7 @@ The lowest training layer: it imports nothing of the kit but ``folder_lock``, ``
 
 from .checkpoint import (
     FORMAT_VERSION,
+    StaleRunError,
     capture_rng_state,
     checkpoint_dir,
     kit_version,
@@ -19,6 +20,6 @@ from .loop import EngineResult, EngineRun, Schedule, TrainingTask, process_rank,
 
 __all__ = [
     "run_engine", "run_folder", "process_rank", "Schedule", "TrainingTask", "EngineRun", "EngineResult",
-    "FORMAT_VERSION", "kit_version", "capture_rng_state", "restore_rng_state", "save_checkpoint",
+    "FORMAT_VERSION", "StaleRunError", "kit_version", "capture_rng_state", "restore_rng_state", "save_checkpoint",
     "load_checkpoint", "checkpoint_dir", "last_checkpoint", "RunLogger", "read_log",
 ]

@@ -31,6 +31,7 @@ from airpose_lib.atomic import atomic_path
 from airpose_lib.errors import reading
 
 __all__ = [
+    "StaleRunError",
     "kit_version",
     "capture_rng_state",
     "restore_rng_state",
@@ -41,6 +42,17 @@ __all__ = [
 ]
 
 FORMAT_VERSION = 1
+
+
+class StaleRunError(ValueError):
+    """A run folder's checkpoint was made with other settings (``fields``) than asked for now, so
+    it cannot be resumed (raised by the trainings' resume checks, caught by callers that may
+    start such a run afresh)."""
+
+    def __init__(self, fields: list[str], made: str = "trained"):
+        self.fields = fields
+        super().__init__(f"cannot resume: the checkpoint was {made} with different {fields}; use another "
+                         "out_dir or resume=False")
 
 
 def kit_version() -> str:

@@ -46,7 +46,7 @@ from airpose_lib.body.joint_sets import BODY_25_FROM_SMPLX
 from airpose_lib.data.official_layout import load_sequence
 from airpose_lib.data.official_real import load_official_real
 from airpose_lib.data.sequences import ensure_sequences
-from airpose_lib.engine.checkpoint import last_checkpoint, load_checkpoint
+from airpose_lib.engine.checkpoint import StaleRunError, last_checkpoint, load_checkpoint
 from airpose_lib.eval import metrics as M
 from airpose_lib.eval.oracle import ORACLE_LABEL, oracle_recording_estimate
 from airpose_lib.eval.recordings import body_joints, paper_claims, per_view_params, recording_table
@@ -398,9 +398,7 @@ def _kit_networks(profile: str, seed: int, tuning, tests: dict, prior, prior_inf
         kw = dict(progress=progress, prior=prior, diagnostic=diagnostic if diagnostics else None)
         try:
             res = finetune(pre, tuning.root, run_dir, ft_cfg, **kw)
-        except ValueError as e:
-            if "cannot resume" not in str(e):
-                raise
+        except StaleRunError:
             res = finetune(pre, tuning.root, run_dir, ft_cfg, resume=False, **kw)  # settings changed: afresh
         checkpoints[label] = Path(res.best_checkpoint or res.checkpoint)
         finetune_info[label] = {"steps": res.step, "frames": res.num_frames, "heldout_frames": res.heldout_frames,

@@ -68,6 +68,7 @@ from airpose_lib.engine import (
     FORMAT_VERSION as CHECKPOINT_FORMAT,
     EngineRun,
     Schedule,
+    StaleRunError,
     TrainingTask,
     capture_rng_state,
     checkpoint_dir,
@@ -393,8 +394,7 @@ def _check_resume(saved: Mapping, cfg: FineTuneConfig, base_fp: str) -> None:
     if saved.get("base_fingerprint") != base_fp:
         diff.append("base checkpoint")
     if diff:
-        raise ValueError(f"cannot resume: the checkpoint was fine-tuned with different {diff}; use another "
-                         "out_dir or resume=False")
+        raise StaleRunError(diff, made="fine-tuned")
 
 
 def _history(log_path: Path) -> dict[str, list]:

@@ -8,12 +8,13 @@ from pathlib import Path
 
 import pandas as pd
 
+from airpose_lib.engine import StaleRunError
 from airpose_lib.eval.ablation import VARIANT_LABELS
 from airpose_lib.process_guard import die_with_parent
 
 from .config import load_train_config
 from .evaluate import evaluate_checkpoint
-from .loop import StaleRunError, TrainResult, default_out_dir, prepare_data, train
+from .loop import TrainResult, default_out_dir, prepare_data, train
 from .pretrain import profile_backbone_key
 
 __all__ = ["AblationRun", "run_ablation", "trained_checkpoint"]

@@ -47,7 +47,7 @@ from airpose_lib.data.generate import ensure_still_dataset
 from airpose_lib.data.manifest import load_manifest
 from airpose_lib.data.official_synthetic import OfficialSyntheticDataset
 from airpose_lib.data.training_input import training_input
-from airpose_lib.engine import EngineRun, Schedule, TrainingTask, process_rank, run_engine, run_folder
+from airpose_lib.engine import EngineRun, Schedule, StaleRunError, TrainingTask, process_rank, run_engine, run_folder
 from airpose_lib.losses import SupervisedLoss, loss_config
 from airpose_lib.losses.pretrain import PretrainLoss, PretrainLossConfig
 from airpose_lib.model import build_model, to_smplx_params
@@ -60,7 +60,6 @@ from .features import FeatureDataset, ensure_features, load_backbone_file
 from .sampling import ResumableBatchSampler, SeededDataset, _mix, seed_everything, worker_init_fn
 
 __all__ = [
-    "StaleRunError",
     "TrainResult",
     "train",
     "run_training",
@@ -391,15 +390,6 @@ def _param_groups(model: nn.Module, cfg: TrainConfig) -> list[dict]:
     if not trunk or cfg.backbone_lr_scale == 1.0:
         return [{"params": params}]  # one group: the optimiser state of earlier checkpoints still loads
     return [{"params": rest}, {"params": trunk, "lr_scale": cfg.backbone_lr_scale}]
-
-
-class StaleRunError(ValueError):
-    """A run folder's checkpoint was trained with other settings (``fields``) than asked for now."""
-
-    def __init__(self, fields: list[str]):
-        self.fields = fields
-        super().__init__(f"cannot resume: the checkpoint was trained with different {fields}; use another "
-                         "out_dir or resume=False")
 
 
 def _check_resume(saved: dict, cfg: TrainConfig) -> None:

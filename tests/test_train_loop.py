@@ -357,3 +357,21 @@ def test_a_resumed_cosine_run_follows_the_schedule(tmp_path, open_model_files):
     train("airpose", config=cfg, out_dir=tmp_path / "b", **FAKES, stop_at=2)
     resumed = train("airpose", config=cfg, out_dir=tmp_path / "b", **FAKES)
     _assert_same_state(_weights(straight.checkpoint), _weights(resumed.checkpoint))
+
+
+def test_a_cosine_run_is_not_extended_by_resuming(tmp_path, open_model_files):
+    """More steps on a cosine run would restart its decay midway (a straight run of the new
+    length never sees a rate of 0 there): the folder is stale. A constant rate extends."""
+    from airpose_lib.engine import StaleRunError
+
+    cosine = tiny_config(lr=1e-3, lr_schedule="cosine", warmup_steps=1, steps=2)
+    train("airpose", config=cosine, out_dir=tmp_path / "cos", **FAKES)
+    with pytest.raises(StaleRunError, match="steps") as stale:
+        train("airpose", config=cosine.replace(steps=4), out_dir=tmp_path / "cos", **FAKES)
+    assert stale.value.fields == ["steps"]
+    constant = tiny_config(lr=1e-3, steps=2)
+    train("airpose", config=constant, out_dir=tmp_path / "const", **FAKES)
+    longer = train("airpose", config=constant.replace(steps=4), out_dir=tmp_path / "const", **FAKES)
+    straight = train("airpose", config=constant.replace(steps=4), out_dir=tmp_path / "straight", **FAKES)
+    assert longer.step == 4
+    _assert_same_state(_weights(straight.checkpoint), _weights(longer.checkpoint))

@@ -157,6 +157,13 @@ class TrainConfig:
                    "model", "freeze_backbone", "loss", "official_loss", "body_source", "data", "train_split",
                    "task", "pretrained", "trainable_from", "backbone_lr_scale")
 
+    def resume_keys(self) -> tuple[str, ...]:
+        """:attr:`RESUME_KEYS`, and ``steps`` when the rate schedule depends on the total: a
+        cosine run of 2,000 steps resumed to 6,000 would restart its decay at step 2,000 (rate 0
+        back to 0.75 of the peak), which a straight 6,000-step run never does. A constant-rate run
+        may still be extended by resuming."""
+        return self.RESUME_KEYS + (("steps",) if self.lr_schedule != "constant" else ())
+
 
 def load_train_config(profile: str | Path | None, variant: str, seed: int | None = None,
                       section: str = "train", **overrides: Any) -> TrainConfig:

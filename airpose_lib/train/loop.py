@@ -395,7 +395,7 @@ def _param_groups(model: nn.Module, cfg: TrainConfig) -> list[dict]:
 def _check_resume(saved: dict, cfg: TrainConfig) -> None:
     now = cfg.to_dict()
     strip = lambda d: {k: v for k, v in (d or {}).items() if k != "root"}  # noqa: E731 - may move
-    diff = [k for k in TrainConfig.RESUME_KEYS
+    diff = [k for k in cfg.resume_keys()
             if (strip(saved.get(k)) != strip(now.get(k)) if k == "data" else saved.get(k) != now.get(k))]
     if diff:
         raise StaleRunError(diff)

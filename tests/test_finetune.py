@@ -418,6 +418,24 @@ def test_resume_matches_an_uninterrupted_run(tiny_ckpt, smoke_root, tmp_path, bo
         finetune(tiny_ckpt, smoke_root, tmp_path / "b", _cfg(steps=8, lr=5e-5, **sel), **kw)
 
 
+def test_a_finished_run_from_another_network_is_not_done(tiny_ckpt, smoke_root, tmp_path, body32, tiny_prior):
+    """The recordings experiment computes the test person's diagnostics only for runs it will
+    train: a finished run from another base network (the profile's networks retrained) is one."""
+    from airpose_lib.engine.checkpoint import load_checkpoint, save_checkpoint
+    from airpose_lib.experiments.recordings import _finetune_done
+    from airpose_lib.finetune.train import base_fingerprint
+
+    cfg = _cfg(steps=2)
+    finetune(tiny_ckpt, smoke_root, tmp_path / "ft", cfg, prior=tiny_prior, body_model=body32)
+    assert _finetune_done(tmp_path / "ft", cfg, tiny_ckpt)
+    state = load_checkpoint(tiny_ckpt)
+    state["model"]["regressor.fc1.bias"] = state["model"]["regressor.fc1.bias"] + 1.0
+    other = save_checkpoint(tmp_path / "other", state, keep=0)
+    assert base_fingerprint(other) != base_fingerprint(tiny_ckpt)
+    assert not _finetune_done(tmp_path / "ft", cfg, other)
+    assert not _finetune_done(tmp_path / "ft", _cfg(steps=3), tiny_ckpt)
+
+
 def test_finetune_bad_input(tiny_ckpt, smoke_root, tmp_path, body32, tiny_prior):
     kw = dict(prior=tiny_prior, body_model=body32)
     with pytest.raises(ValueError, match="fewer than one batch"):

@@ -54,7 +54,7 @@ from airpose_lib.finetune.keypoints import resolution_scales
 from airpose_lib.finetune.network import load_network
 from airpose_lib.finetune.predict import (image_sizes, network_camera_of, predict_sequence, regress_features,
                                           sequence_features)
-from airpose_lib.finetune.train import FineTuneConfig, finetune, finetune_config
+from airpose_lib.finetune.train import FineTuneConfig, base_fingerprint, finetune, finetune_config
 from airpose_lib.fitting import airpose_plus, fitting_profile
 from airpose_lib.folder_lock import folder_lock
 from airpose_lib.model import posed_joints_and_vertices, to_smplx_params
@@ -356,18 +356,20 @@ def recordings_for(source, profile: str) -> dict | None:
     return official_recordings(source.roots["official_real"])
 
 
-def _finetune_done(run_dir: Path, cfg) -> bool:
-    """A finished fine-tuning run with these settings in ``run_dir`` (it will be loaded, not
-    trained: no diagnostics needed)."""
+def _finetune_done(run_dir: Path, cfg, base: Path) -> bool:
+    """A finished fine-tuning run with these settings from the network ``base`` in ``run_dir``
+    (it will be loaded, not trained: no diagnostics needed). A run from another network, e.g.
+    after the profile's networks were retrained, is trained afresh, and needs them."""
     last = last_checkpoint(run_dir)
     try:
         state = load_checkpoint(last) if last is not None else None
-        saved = (state or {}).get("finetune", {}).get("config", {})
+        info = (state or {}).get("finetune", {})
     except (OSError, ValueError, KeyError, RuntimeError):
         return False
-    now = cfg.to_dict()
+    saved, now = info.get("config", {}), cfg.to_dict()
     return (state is not None and int(state["step"]) >= cfg.steps
-            and all(saved.get(k) == now.get(k) for k in FineTuneConfig.RESUME_KEYS))
+            and all(saved.get(k) == now.get(k) for k in FineTuneConfig.RESUME_KEYS)
+            and info.get("base_fingerprint") == base_fingerprint(base))
 
 
 def _kit_networks(profile: str, seed: int, tuning, tests: dict, prior, prior_info: dict, out: Path,
@@ -386,7 +388,7 @@ def _kit_networks(profile: str, seed: int, tuning, tests: dict, prior, prior_inf
         checkpoints[f"{label} (pre-trained)"] = pre
         run_dir = out / "finetune" / variant
         diagnostics = {}
-        if tests and not _finetune_done(run_dir, ft_cfg):
+        if tests and not _finetune_done(run_dir, ft_cfg, pre):
             net, _, size = load_network(pre)
             for name, seq in tests.items():  # the frozen backbone's features, once per network
                 feats = sequence_features(net, seq, input_size=size)

@@ -89,7 +89,7 @@ from .loss import FineTuneLoss, finetune_loss_config
 from .network import load_network
 from .predict import frames_in_range, image_sizes, regress_features, sequence_features
 
-__all__ = ["FineTuneConfig", "FineTuneResult", "finetune_config", "finetune", "evaluate_finetune_loss",
+__all__ = ["FineTuneConfig", "FineTuneResult", "finetune_config", "finetune", "base_fingerprint", "evaluate_finetune_loss",
            "heldout_split"]
 
 
@@ -265,6 +265,13 @@ def _tensor_digest(tensors: Mapping[str, torch.Tensor]) -> str:
         h.update(str(t.dtype).encode())
         h.update(t.reshape(-1).view(torch.uint8).numpy().tobytes() if t.numel() else b"")
     return h.hexdigest()
+
+
+def base_fingerprint(checkpoint: str | Path) -> str:
+    """The digest of a network's weights that a fine-tuning run records of its starting point
+    (``base_fingerprint`` in its checkpoint): a run from another network cannot be resumed."""
+    model, _, _ = load_network(checkpoint)
+    return _tensor_digest(model.state_dict())
 
 
 def _feature_fingerprint(model, seq, cfg: FineTuneConfig, input_size: int, K_net: np.ndarray) -> str:

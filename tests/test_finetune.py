@@ -422,18 +422,18 @@ def test_a_finished_run_from_another_network_is_not_done(tiny_ckpt, smoke_root, 
     """The recordings experiment computes the test person's diagnostics only for runs it will
     train: a finished run from another base network (the profile's networks retrained) is one."""
     from airpose_lib.engine.checkpoint import load_checkpoint, save_checkpoint
-    from airpose_lib.experiments.recordings import _finetune_done
-    from airpose_lib.finetune.train import base_fingerprint
+    from airpose_lib.finetune.train import finetune_done
 
     cfg = _cfg(steps=2)
     finetune(tiny_ckpt, smoke_root, tmp_path / "ft", cfg, prior=tiny_prior, body_model=body32)
-    assert _finetune_done(tmp_path / "ft", cfg, tiny_ckpt)
+    assert finetune_done(tmp_path / "ft", tiny_ckpt, cfg)
     state = load_checkpoint(tiny_ckpt)
     state["model"]["regressor.fc1.bias"] = state["model"]["regressor.fc1.bias"] + 1.0
     other = save_checkpoint(tmp_path / "other", state, keep=0)
-    assert base_fingerprint(other) != base_fingerprint(tiny_ckpt)
-    assert not _finetune_done(tmp_path / "ft", cfg, other)
-    assert not _finetune_done(tmp_path / "ft", _cfg(steps=3), tiny_ckpt)
+    assert not finetune_done(tmp_path / "ft", other, cfg)
+    assert not finetune_done(tmp_path / "ft", tiny_ckpt, _cfg(steps=3))
+    assert not finetune_done(tmp_path / "ft", tiny_ckpt, _cfg(steps=2, lr=5e-5))
+    assert not finetune_done(tmp_path / "empty", tiny_ckpt, cfg)
 
 
 def test_finetune_bad_input(tiny_ckpt, smoke_root, tmp_path, body32, tiny_prior):

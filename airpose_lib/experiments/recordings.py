@@ -46,7 +46,7 @@ from airpose_lib.body.joint_sets import BODY_25_FROM_SMPLX
 from airpose_lib.data.official_layout import load_sequence
 from airpose_lib.data.official_real import load_official_real
 from airpose_lib.data.sequences import ensure_sequences
-from airpose_lib.engine.checkpoint import StaleRunError, last_checkpoint, load_checkpoint
+from airpose_lib.engine.checkpoint import StaleRunError
 from airpose_lib.eval import metrics as M
 from airpose_lib.eval.oracle import ORACLE_LABEL, oracle_recording_estimate
 from airpose_lib.eval.recordings import body_joints, paper_claims, per_view_params, recording_table
@@ -54,7 +54,7 @@ from airpose_lib.finetune.keypoints import resolution_scales
 from airpose_lib.finetune.network import load_network
 from airpose_lib.finetune.predict import (image_sizes, network_camera_of, predict_sequence, regress_features,
                                           sequence_features)
-from airpose_lib.finetune.train import FineTuneConfig, base_fingerprint, finetune, finetune_config
+from airpose_lib.finetune.train import finetune, finetune_config, finetune_done
 from airpose_lib.fitting import airpose_plus, fitting_profile
 from airpose_lib.folder_lock import folder_lock
 from airpose_lib.model import posed_joints_and_vertices, to_smplx_params
@@ -356,22 +356,6 @@ def recordings_for(source, profile: str) -> dict | None:
     return official_recordings(source.roots["official_real"])
 
 
-def _finetune_done(run_dir: Path, cfg, base: Path) -> bool:
-    """A finished fine-tuning run with these settings from the network ``base`` in ``run_dir``
-    (it will be loaded, not trained: no diagnostics needed). A run from another network, e.g.
-    after the profile's networks were retrained, is trained afresh, and needs them."""
-    last = last_checkpoint(run_dir)
-    try:
-        state = load_checkpoint(last) if last is not None else None
-        info = (state or {}).get("finetune", {})
-    except (OSError, ValueError, KeyError, RuntimeError):
-        return False
-    saved, now = info.get("config", {}), cfg.to_dict()
-    return (state is not None and int(state["step"]) >= cfg.steps
-            and all(saved.get(k) == now.get(k) for k in FineTuneConfig.RESUME_KEYS)
-            and info.get("base_fingerprint") == base_fingerprint(base))
-
-
 def _kit_networks(profile: str, seed: int, tuning, tests: dict, prior, prior_info: dict, out: Path,
                   progress: bool) -> tuple[dict, dict]:
     """Table I's Baseline and AirPose of the profile, their fine-tuning on ``tuning`` (model
@@ -388,7 +372,7 @@ def _kit_networks(profile: str, seed: int, tuning, tests: dict, prior, prior_inf
         checkpoints[f"{label} (pre-trained)"] = pre
         run_dir = out / "finetune" / variant
         diagnostics = {}
-        if tests and not _finetune_done(run_dir, ft_cfg, pre):
+        if tests and not finetune_done(run_dir, pre, ft_cfg):
             net, _, size = load_network(pre)
             for name, seq in tests.items():  # the frozen backbone's features, once per network
                 feats = sequence_features(net, seq, input_size=size)

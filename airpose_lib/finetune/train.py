@@ -73,6 +73,8 @@ from airpose_lib.engine import (
     capture_rng_state,
     checkpoint_dir,
     kit_version,
+    last_checkpoint,
+    load_checkpoint,
     read_log,
     restore_rng_state,
     run_engine,
@@ -89,7 +91,7 @@ from .loss import FineTuneLoss, finetune_loss_config
 from .network import load_network
 from .predict import frames_in_range, image_sizes, regress_features, sequence_features
 
-__all__ = ["FineTuneConfig", "FineTuneResult", "finetune_config", "finetune", "base_fingerprint", "evaluate_finetune_loss",
+__all__ = ["FineTuneConfig", "FineTuneResult", "finetune_config", "finetune", "finetune_done", "evaluate_finetune_loss",
            "heldout_split"]
 
 
@@ -267,13 +269,6 @@ def _tensor_digest(tensors: Mapping[str, torch.Tensor]) -> str:
     return h.hexdigest()
 
 
-def base_fingerprint(checkpoint: str | Path) -> str:
-    """The digest of a network's weights that a fine-tuning run records of its starting point
-    (``base_fingerprint`` in its checkpoint): a run from another network cannot be resumed."""
-    model, _, _ = load_network(checkpoint)
-    return _tensor_digest(model.state_dict())
-
-
 def _feature_fingerprint(model, seq, cfg: FineTuneConfig, input_size: int, K_net: np.ndarray) -> str:
     backbone = {k: v for k, v in model.state_dict().items() if k.startswith("backbone.")}
     h = hashlib.sha256(_tensor_digest(backbone).encode())
@@ -402,6 +397,22 @@ def _check_resume(saved: Mapping, cfg: FineTuneConfig, base_fp: str) -> None:
         diff.append("base checkpoint")
     if diff:
         raise StaleRunError(diff, made="fine-tuned")
+
+
+def finetune_done(out_dir: str | Path, checkpoint: str | Path, cfg: FineTuneConfig) -> bool:
+    """Whether ``out_dir`` holds a finished run of ``cfg`` from the network ``checkpoint``, which
+    :func:`finetune` would load rather than train (the resume check of :func:`finetune` itself).
+    A run from another network, e.g. after the profile's networks were retrained, is not."""
+    last = last_checkpoint(out_dir)
+    try:
+        state = load_checkpoint(last) if last is not None else None
+        if state is None or int(state["step"]) < cfg.steps:
+            return False
+        model, _, _ = load_network(checkpoint)
+        _check_resume(state["finetune"], cfg, _tensor_digest(model.state_dict()))
+    except (OSError, ValueError, KeyError, RuntimeError):  # StaleRunError is a ValueError
+        return False
+    return True
 
 
 def _history(log_path: Path) -> dict[str, list]:

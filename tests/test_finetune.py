@@ -28,6 +28,7 @@ from airpose_lib.finetune import (
     regress_features,
     save_predictions,
 )
+from airpose_lib.finetune.selection import Selection, select_step
 from airpose_lib.geometry import axis_angle_to_matrix, matrix_to_axis_angle
 
 S = 64  # crop side of the tiny network
@@ -547,6 +548,49 @@ def test_heldout_split():
     assert heldout_split(3, 0.2)[1].tolist() == [2] and heldout_split(5, 0.0)[1].size == 0
 
 
+def _rows(selection: dict) -> list[dict]:
+    """selection.csv as lists -> one mapping per selection point."""
+    return [dict(zip(selection, values)) for values in zip(*selection.values())]
+
+
+def _weighted_terms(loss: dict) -> list[str]:
+    return [t for t in ("j2d", "beta", "vposer", "theta", "depth") if loss[f"w_{t}"] != 0]
+
+
+def _point(step, **terms):
+    """A selection row from ``term=(heldout, train)`` pairs."""
+    row = {"step": step}
+    for t, (h, tr) in terms.items():
+        row[f"heldout_{t}"], row[f"train_{t}"] = h, tr
+    return row
+
+
+def test_selection_rules_on_hand_made_curves():
+    """first_overfit keeps the point before the first weighted term whose held-out value rises
+    while its training value falls; a term rising on both is a trade-off, not overfitting."""
+    rows = [_point(0, j2d=(300, 310), beta=(1.0, 1.0)),
+            _point(100, j2d=(130, 120), beta=(1.5, 1.6)),   # beta up on both: not overfitting
+            _point(200, j2d=(126, 110), beta=(1.6, 1.7)),
+            _point(300, j2d=(132, 100), beta=(1.6, 1.7)),   # j2d: held-out up, training down
+            _point(400, j2d=(120, 95), beta=(1.6, 1.7))]
+    sel = select_step(rows, "first_overfit", ["j2d", "beta"])
+    assert (sel.step, sel.overfit_step, sel.overfit_terms) == (200, 300, ["j2d"])
+    assert select_step(rows, "min_heldout_j2d", ["j2d"]).step == 400
+    # beta held-out up with training down at 100: that term counts only if weighted
+    rows[1] = _point(100, j2d=(130, 120), beta=(1.5, 0.9))
+    assert select_step(rows, "first_overfit", ["j2d", "beta"]).overfit_step == 100
+    assert select_step(rows, "first_overfit", ["j2d"]).step == 200
+    # no term ever overfits: the last point; ties of the held-out minimum: the earliest
+    flat = [_point(s, j2d=(100 - s / 100, 100 - s / 100)) for s in (0, 100, 200)]
+    assert select_step(flat, "first_overfit", ["j2d"]) == Selection(200)
+    tie = [_point(0, j2d=(5, 5)), _point(100, j2d=(4, 4)), _point(200, j2d=(4, 3))]
+    assert select_step(tie, "min_heldout_j2d", ["j2d"]).step == 100 and select_step([], "first_overfit", []).step is None
+    with pytest.raises(ValueError, match="unknown selection rule"):
+        select_step(tie, "lowest", ["j2d"])
+    with pytest.raises(ValueError, match="unknown selection"):
+        _cfg(selection="lowest")
+
+
 def test_model_selection_never_reads_the_test_person(tiny_ckpt, smoke_root, tmp_path, body32, tiny_prior):
     """Selection on person 1's held-out frames; a test recording's errors are logged per checkpoint.
     With the test recording replaced by NaN the choice, the weights and the held-out losses are the same."""
@@ -573,7 +617,8 @@ def test_model_selection_never_reads_the_test_person(tiny_ckpt, smoke_root, tmp_
     a, b = runs["real"], runs["nan"]
     assert a.selection["step"] == [0, 2, 4, 6, 8] and a.heldout_frames == 3
     assert a.best_step == b.best_step and a.selection["heldout_j2d"] == b.selection["heldout_j2d"]
-    assert a.best_step == a.selection["step"][int(np.argmin(a.selection["heldout_j2d"]))]
+    assert a.best_step == select_step(_rows(a.selection), "first_overfit", _weighted_terms(a.loss)).step
+    assert (a.overfit_step, a.overfit_terms) == (b.overfit_step, b.overfit_terms)
     assert np.isfinite(a.selection["diag_mpjpe_m"]).all() and np.isnan(b.selection["diag_mpjpe_m"]).all()
     assert len(set(a.selection["diag_mpjpe_m"])) > 1  # the diagnostic does see the changing weights
     for which in ("best_checkpoint", "checkpoint"):

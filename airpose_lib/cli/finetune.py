@@ -55,8 +55,10 @@ def _cmd_finetune(args: argparse.Namespace) -> int:
               f"width), total {res.initial['total']:.4g} -> {res.final['total']:.4g} ({res.seconds:.0f} s)")
     print(f"checkpoint {res.checkpoint}")
     if res.best_checkpoint is not None:
-        print(f"selected step {res.best_step} (held-out 2D loss {res.best_heldout_j2d:.4g} on {res.heldout_frames} "
-              f"frames): {res.best_checkpoint}")
+        why = (f"; {', '.join(res.overfit_terms)} started overfitting at step {res.overfit_step}"
+               if res.overfit_step is not None else "")
+        print(f"selected step {res.best_step} by rule {res.config['selection']} (held-out 2D loss "
+              f"{res.best_heldout_j2d:.4g} on {res.heldout_frames} frames{why}): {res.best_checkpoint}")
     return 0
 
 

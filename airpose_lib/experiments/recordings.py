@@ -389,6 +389,8 @@ def _kit_networks(profile: str, seed: int, tuning, tests: dict, prior, prior_inf
         checkpoints[label] = Path(res.best_checkpoint or res.checkpoint)
         finetune_info[label] = {"steps": res.step, "frames": res.num_frames, "heldout_frames": res.heldout_frames,
                                 "selected_step": res.best_step, "heldout_j2d": res.best_heldout_j2d,
+                                "selection_rule": res.config.get("selection"), "overfit_step": res.overfit_step,
+                                "overfit_terms": res.overfit_terms,
                                 "j2d_before": res.initial.get("j2d"), "j2d_after": (res.final or {}).get("j2d"),
                                 "threshold_px": res.pixels.get("threshold_px"), "keypoints": res.keypoints,
                                 "selection": res.selection}
@@ -560,14 +562,16 @@ def airpose_plus_checks(table: pd.DataFrame, person: str | None = None) -> pd.Da
 
 
 def finetune_table(exp: RecordingExperiment) -> pd.DataFrame:
-    """One row per fine-tuned network: steps, the selected step and its held-out 2D loss, the
-    per-view agreement threshold and how many OpenPose keypoints the two-detector filter kept or
+    """One row per fine-tuned network: steps, the selection rule, the selected step and its
+    held-out 2D loss, where a loss term first started overfitting (and which), the per-view agreement threshold and how many OpenPose keypoints the two-detector filter kept or
     dropped (and why)."""
     rows = []
     for label, info in exp.finetune_info.items():
         k = info.get("keypoints") or {}
         seen = sum(k.get(x, 0) for x in ("kept", "disagree", "unconfirmed", "low_confidence"))
-        rows.append({"network": label, "steps": info.get("steps"), "selected_step": info.get("selected_step"),
+        rows.append({"network": label, "steps": info.get("steps"), "selection_rule": info.get("selection_rule"),
+                     "selected_step": info.get("selected_step"), "overfit_step": info.get("overfit_step"),
+                     "overfit_terms": ", ".join(info.get("overfit_terms") or []),
                      "heldout_j2d": info.get("heldout_j2d"), "train_frames": info.get("frames"),
                      "heldout_frames": info.get("heldout_frames"),
                      "threshold_px": ", ".join(f"{t:.0f}" for t in info.get("threshold_px") or []),
@@ -580,8 +584,8 @@ def finetune_table(exp: RecordingExperiment) -> pd.DataFrame:
 
 def selection_table(exp: RecordingExperiment) -> pd.DataFrame:
     """The model-selection log of every fine-tuned network (long format): per checkpoint step the
-    held-out 2D loss on person 1 (the only input of the choice) and the test persons' errors
-    (``diag_*``, diagnostics)."""
+    loss terms on person 1's held-out and training frames (the only inputs of the choice) and the
+    test persons' errors (``diag_*``, diagnostics)."""
     parts = []
     for label, info in exp.finetune_info.items():
         sel = info.get("selection") or {}

@@ -3,7 +3,8 @@ network over a recording.
 
 Modules: ``keypoints`` (the OpenPose/AlphaPose agreement filter -> 2D targets), ``predict``
 (detections -> crops -> per-view SMPL-X parameters; the predictions ``.npz``), ``loss`` (the
-fine-tuning loss), ``network`` (a checkpoint's network and crop size), ``train`` (frozen
+fine-tuning loss), ``network`` (a checkpoint's network and crop size), ``selection`` (which checkpoint is
+kept: the paper's "stop once any loss component starts overfitting"), ``train`` (frozen
 backbone, cached features, regressor training; resumable). The commands (``airpose finetune``,
 ``airpose predict``) are in :mod:`airpose_lib.cli.finetune`.
 
@@ -14,5 +15,5 @@ from __future__ import annotations
 
 from airpose_lib._lazy import lazy_namespace
 
-_MODULES = ("keypoints", "loss", "network", "predict", "train")
+_MODULES = ("keypoints", "loss", "network", "predict", "selection", "train")
 __getattr__, __dir__ = lazy_namespace(__name__, globals(), _MODULES)

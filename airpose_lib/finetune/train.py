@@ -17,11 +17,14 @@ r"""Fine-tuning a trained network on the 2D detections of a recording (paper Sec
    variants exchange messages as in the forward); frames whose targets are all dropped are
    skipped;
 5. selects the model (the paper stops "once the model starts overfitting on any loss
-   component"): the last ``holdout_fraction`` of the selected frames (20 %) never train; their
-   2D loss (``j2d``, eval mode) is measured before training and at every checkpoint, and the
-   checkpoint with the lowest one is kept as ``checkpoints/best.pt`` (``FineTuneResult.best_*``).
-   An optional ``diagnostic(model)`` (e.g. errors on a test person) is logged next to it in
-   ``selection.csv`` and never used for the choice.
+   component"): the last ``holdout_fraction`` of the selected frames (20 %) never train. Before
+   training and at every checkpoint each loss term is measured (eval mode) on them and on the
+   training frames; the rule ``selection`` (:mod:`~airpose_lib.finetune.selection`; default the
+   paper's: the last checkpoint before any weighted term's held-out value rises while its
+   training value falls) picks the checkpoint kept as ``checkpoints/best.pt``
+   (``FineTuneResult.best_*``). Training still runs all ``steps``, so the later checkpoints can
+   be inspected. An optional ``diagnostic(model)`` (e.g. errors on a test person) is logged next
+   to it in ``selection.csv`` and never used for the choice.
 
 Pixel units: ``threshold_px`` and the 2D loss weight are the paper's values for 1920 px wide
 frames (``reference_width``). A view of another width gets them at its own resolution
@@ -43,8 +46,8 @@ thread count). The caller's RNG states and torch thread count are restored on re
 Output folder: ``checkpoints/last.pt`` (+ ``step_<n>.pt``) in the kit checkpoint format (read by
 ``airpose_lib.train.load_trained_model`` and :func:`~airpose_lib.finetune.network.load_network`;
 the base ``config`` is kept and a ``finetune`` entry records this run), ``log.csv``,
-``config.json``, ``result.json``, ``selection.csv`` (held-out 2D loss and diagnostics per
-checkpoint, ``checkpoints/best.pt`` the selected one) and the feature cache.
+``config.json``, ``result.json``, ``selection.csv`` (loss terms, held-out and training, and
+diagnostics per checkpoint, ``checkpoints/best.pt`` the selected one) and the feature cache.
 """
 from __future__ import annotations
 
@@ -90,6 +93,7 @@ from .keypoints import agreement_masks, agreement_summary, agreement_targets, pi
 from .loss import FineTuneLoss, finetune_loss_config
 from .network import load_network
 from .predict import frames_in_range, image_sizes, regress_features, sequence_features
+from .selection import SELECTION_RULES, select_step
 
 __all__ = ["FineTuneConfig", "FineTuneResult", "finetune_config", "finetune", "finetune_done", "evaluate_finetune_loss",
            "heldout_split"]
@@ -113,6 +117,8 @@ class FineTuneConfig:
             weight) refer to: the paper's 1920; each view uses them at its own width.
         holdout_fraction: the last part of the selected frames held out for model selection
             (0: no selection, the last checkpoint is the result).
+        selection: the model-selection rule (:data:`~airpose_lib.finetune.selection.SELECTION_RULES`):
+            ``first_overfit`` (the paper's) or ``min_heldout_j2d``.
         frames: ``[start, stop)`` image numbers to train on (paper: ``[0, 7000]``); None: all.
         input_size: crop side S (default: from the checkpoint).
         detector, box_min_confidence, margin_px: where the crops' boxes come from
@@ -138,6 +144,7 @@ class FineTuneConfig:
     threshold_px: float = 100.0
     reference_width: float = 1920.0
     holdout_fraction: float = 0.2
+    selection: str = "first_overfit"
     min_confidence: float = 0.05
     unmatched: str = "drop"
     frames: list | None = None
@@ -160,7 +167,7 @@ class FineTuneConfig:
 
     # Fields whose change makes a resumed run differ from a straight one.
     RESUME_KEYS = ("batch_size", "lr", "amsgrad", "weight_decay", "seed", "loss", "official_loss", "threshold_px",
-                   "reference_width", "holdout_fraction",
+                   "reference_width", "holdout_fraction", "selection",
                    "min_confidence", "unmatched", "frames", "input_size", "detector", "box_min_confidence",
                    "margin_px", "prior", "prior_path", "prior_tag", "body_source")
 
@@ -171,6 +178,8 @@ class FineTuneConfig:
             raise ValueError("checkpoint_every, log_every and feature_batch_size must be >= 1")
         if not 0 <= self.holdout_fraction < 1:
             raise ValueError(f"holdout_fraction must be in [0, 1), got {self.holdout_fraction}")
+        if self.selection not in SELECTION_RULES:
+            raise ValueError(f"unknown selection {self.selection!r}; use one of {', '.join(SELECTION_RULES)}")
         if not self.reference_width > 0:
             raise ValueError(f"reference_width must be positive, got {self.reference_width}")
         if self.frames is not None:
@@ -219,7 +228,10 @@ class FineTuneResult:
         config: the :class:`FineTuneConfig`; loss: the loss config used; seconds: wall time.
         best_checkpoint, best_step, best_heldout_j2d: the model selection's choice
             (``checkpoints/best.pt``; None without held-out frames).
-        selection: ``selection.csv`` as lists (``step``, ``heldout_j2d``, ..., ``diag_*``).
+        overfit_step, overfit_terms: rule ``first_overfit``: where the first loss term started
+            overfitting and which (None / empty: none did; the last checkpoint is kept).
+        selection: ``selection.csv`` as lists (``step``, ``heldout_<term>``, ``train_<term>``,
+            ``selected``, ``diag_*``).
         pixels: the per-view resolution scale and the derived threshold / 2D weight.
         heldout_frames: frames held out for selection (with kept targets).
     """
@@ -239,6 +251,8 @@ class FineTuneResult:
     best_checkpoint: Path | None = None
     best_step: int | None = None
     best_heldout_j2d: float | None = None
+    overfit_step: int | None = None
+    overfit_terms: list[str] = field(default_factory=list)
     selection: dict[str, list] = field(default_factory=dict)
     pixels: dict = field(default_factory=dict)
     heldout_frames: int = 0
@@ -473,15 +487,17 @@ def finetune(checkpoint: str | Path, sequence_root: str | Path, out_dir: str | P
 
 class _FineTuneTask(TrainingTask):
     """The engine's task for fine-tuning: regressor steps on the cached features of the training
-    frames; model selection (the held-out 2D loss, ``checkpoints/best.pt``) as its validation."""
+    frames; model selection (:mod:`~airpose_lib.finetune.selection`, ``checkpoints/best.pt``) as
+    its validation."""
 
     def __init__(self, *, model, loss_fn, optimizer, cfg: FineTuneConfig, train_cfg, frames: dict, heldout: dict,
                  evaluate: Callable, input_size: int, network: dict, info: dict, out_dir: Path,
-                 diagnostic: Callable | None) -> None:
+                 diagnostic: Callable | None, terms: list[str]) -> None:
         self.model, self.loss_fn, self.optimizer = model, loss_fn, optimizer
         self.cfg, self.train_cfg, self.frames, self.heldout = cfg, train_cfg, frames, heldout
         self.evaluate, self.input_size, self.network = evaluate, input_size, network
         self.info, self.out_dir, self.diagnostic = info, out_dir, diagnostic
+        self.terms = terms  # the weighted loss terms: those the selection rule watches
         self.selection: dict = info["selection"]
         self.best_path = checkpoint_dir(out_dir) / "best.pt"
         self.n = int(frames["features"].shape[0])
@@ -516,25 +532,32 @@ class _FineTuneTask(TrainingTask):
         self.info["selection"] = self.selection
 
     def validate(self, run: EngineRun) -> None:
-        """Held-out 2D loss of the current weights (the only input of the choice), then the
-        diagnostic (logged only); the best weights so far go to best.pt. Not at an interruption:
-        a resumed run selects where a straight one does."""
-        h = self.heldout
+        """Every loss term of the current weights on the held-out and the training frames (the
+        only inputs of the choice), the selection rule over all points so far, then the diagnostic
+        (logged only); the chosen weights go to best.pt when they are the current ones (a rule
+        only ever keeps the current point or one it chose before). Not at an interruption: a
+        resumed run selects where a straight one does."""
+        h, f = self.heldout, self.frames
         if not len(h["features"]):
             return None
-        terms = self.evaluate(h["features"], h["P"], h["targets"])
-        row = {"step": run.step, "heldout_j2d": terms["j2d"], "heldout_total": terms["total"]}
-        best = self.selection["best_heldout_j2d"]
-        if best is None or terms["j2d"] < best:
-            self.selection["best_step"], self.selection["best_heldout_j2d"] = run.step, terms["j2d"]
+        held = self.evaluate(h["features"], h["P"], h["targets"])
+        trained = self.evaluate(f["features"], f["P"], f["targets"])
+        row = {"step": run.step, **{f"heldout_{k}": v for k, v in held.items()},
+               **{f"train_{k}": v for k, v in trained.items()}}
+        rows = [r for r in self.selection["rows"] if r["step"] != run.step] + [row]
+        choice = select_step(rows, self.cfg.selection, self.terms)
+        if choice.step == run.step:
             with atomic_path(self.best_path) as tmp:
                 torch.save({"format_version": CHECKPOINT_FORMAT, "kit_version": kit_version(),
                             **run.checkpoint_state()}, tmp)
+        chosen = next(r for r in rows if r["step"] == choice.step)
+        self.selection.update(best_step=choice.step, best_heldout_j2d=chosen["heldout_j2d"],
+                              overfit_step=choice.overfit_step, overfit_terms=choice.overfit_terms)
         if self.diagnostic is not None:
             row.update(_isolated(self.diagnostic, self.model))
-        row["selected"] = self.selection["best_step"]
-        self.selection["rows"] = [r for r in self.selection["rows"] if r["step"] != run.step] + [row]
-        _write_selection(self.out_dir, self.selection["rows"])
+        row["selected"] = choice.step
+        self.selection["rows"] = rows
+        _write_selection(self.out_dir, rows)
         return None
 
     def checkpoint_state(self) -> dict:
@@ -610,11 +633,13 @@ def _finetune(checkpoint: Path, root: Path, out_dir: Path, cfg: FineTuneConfig, 
             "heldout_frames": [int(seq.frames[held_pos[0]]), int(seq.frames[held_pos[-1]])] if len(held_pos) else [],
             "num_heldout": len(held), "keypoints": agreement_summary(masks), "pixels": pixels,
             "camera_K": K_net_np.tolist(), "initial": None,
-            "selection": {"rows": [], "best_step": None, "best_heldout_j2d": None}}
+            "selection": {"rule": cfg.selection, "rows": [], "best_step": None, "best_heldout_j2d": None,
+                          "overfit_step": None, "overfit_terms": []}}
     network = network_record(train_cfg.variant, train_cfg.backbone, train_cfg.model, input_size, K_net_np)
     task = _FineTuneTask(model=model, loss_fn=loss_fn, optimizer=optimizer, cfg=cfg, train_cfg=train_cfg,
                          frames=frames, heldout=heldout, evaluate=evaluate, input_size=input_size,
-                         network=network, info=info, out_dir=out_dir, diagnostic=diagnostic)
+                         network=network, info=info, out_dir=out_dir, diagnostic=diagnostic,
+                         terms=[k for k, w in loss_cfg.weights.items() if w != 0])
     schedule = Schedule(steps=cfg.steps, log_every=cfg.log_every, checkpoint_every=cfg.checkpoint_every,
                         keep_checkpoints=cfg.keep_checkpoints, val_every=cfg.checkpoint_every, stop_at=stop_at,
                         checkpoint_at_end=True, loss_name="fine-tuning loss", what=f"finetune {train_cfg.variant}",
@@ -630,6 +655,8 @@ def _finetune(checkpoint: Path, root: Path, out_dir: Path, cfg: FineTuneConfig, 
                             stopped_early=run.stopped_early, seconds=time.time() - t0,
                             best_checkpoint=task.best_path if selection["best_step"] is not None else None,
                             best_step=selection["best_step"], best_heldout_j2d=selection["best_heldout_j2d"],
+                            overfit_step=selection.get("overfit_step"),
+                            overfit_terms=list(selection.get("overfit_terms") or []),
                             selection={k: [r.get(k) for r in rows] for k in dict.fromkeys(k for r in rows for k in r)},
                             pixels=pixels, heldout_frames=len(held))
     with atomic_path(out_dir / "result.json") as tmp:

@@ -190,3 +190,30 @@ def test_recording_table_gives_the_median_uav2_errors_beside_the_means():
     assert row["rel_t_err_m"] == pytest.approx(5 / 8)
     assert row["rel_t_median_m"] == pytest.approx(1.0)
     assert row["rel_rot_median_deg"] == pytest.approx(0.0, abs=1e-5)
+
+
+def test_compare_methods_tests_paired_frame_differences():
+    """A is B minus 2 cm on every frame plus noise that averages out: lower, with the shift as the
+    difference; C equals B up to zero-mean noise: not significant. Views are averaged per frame,
+    frames only one method scored drop out."""
+    from airpose_lib.eval.recordings import compare_methods
+
+    rng = np.random.default_rng(3)
+    F = 300
+    base = 0.1 + 0.02 * rng.random((F, 2))
+
+    def table(values):
+        return pd.DataFrame({"frame": np.repeat(np.arange(F), 2), "view": np.tile([0, 1], F),
+                             "mpjpe_m": values.reshape(-1)})
+
+    noise = rng.normal(0, 0.001, (F, 2))
+    noise -= noise.mean()
+    a = base - 0.02 + noise
+    a[5] = np.nan  # frame 5: A has no estimate
+    t = compare_methods({"A": table(a), "B": table(base), "C": table(base + noise)}, [("A", "B"), ("C", "B")],
+                        metrics=["mpjpe_m", "absent"], block=30).set_index("method")
+    assert len(t) == 2 and t.loc["A", "frames"] == F - 1 and t.loc["C", "frames"] == F
+    assert t.loc["A", "difference"] == pytest.approx(-0.02, abs=2e-4) and t.loc["A", "verdict"] == "lower"
+    assert t.loc["A", "low"] < t.loc["A", "difference"] < t.loc["A", "high"] < 0
+    assert t.loc["A", "reference_value"] == pytest.approx(np.delete(base, 5, 0).mean())
+    assert t.loc["C", "verdict"] == "not significant" and t.loc["C", "difference"] == pytest.approx(0, abs=1e-12)

@@ -28,6 +28,7 @@ from airpose_lib.geometry import relative_camera_pose
 from airpose_lib.model.smplx_params import posed_joints_and_vertices
 
 from . import metrics as M
+from .significance import paired_bootstrap
 
 __all__ = [
     "RECORDING_METRICS",
@@ -37,6 +38,8 @@ __all__ = [
     "relative_camera_positions",
     "recording_frame_table",
     "recording_table",
+    "COMPARISON_METRICS",
+    "compare_methods",
     "PAPER_CLAIMS",
     "paper_claims",
 ]
@@ -212,6 +215,52 @@ def recording_table(estimates: Mapping[str, Mapping], ground_truth: Mapping, joi
         row["jitter_mps2"] = M.jitter(jp.transpose(0, 1), fps).mean().item()
         row["jitter_gt_mps2"] = jit_gt
         rows.append(row)
+    return pd.DataFrame(rows)
+
+
+#: Per-frame errors :func:`compare_methods` tests (per-view ones averaged over the views of a frame).
+COMPARISON_METRICS = ("mpjpe_m", "mpe_m", "rel_t_err_m", "rel_rot_deg")
+
+
+def compare_methods(frame_tables: Mapping[str, pd.DataFrame], pairs: Sequence[tuple[str, str]],
+                    metrics: Sequence[str] = COMPARISON_METRICS, block: int = 30, n_resamples: int = 2000,
+                    confidence: float = 0.95, seed: int = 0) -> pd.DataFrame:
+    """Is method A's error on a recording really lower than method B's? A paired block bootstrap.
+
+    Per frame, the difference ``e_A - e_B`` of the two methods' errors (each the mean over the
+    frame's views); the statistic is its mean over the frames both methods scored, and its interval
+    comes from :func:`~airpose_lib.eval.significance.paired_bootstrap` with blocks of ``block``
+    consecutive frames (errors along a recording are correlated in time: a detection, a pose or a
+    depth error lasts many frames).
+
+    Args:
+        frame_tables: method -> :func:`recording_frame_table` rows (``frame``, ``view``, metrics).
+        pairs: ``(A, B)`` methods, A compared against B.
+        metrics: frame-table columns.
+        block: frames per resampled block (e.g. one second).
+
+    Returns:
+        one row per pair and metric: ``method``, ``reference``, ``metric``, ``value`` and
+        ``reference_value`` (means over the common frames), ``difference`` (A - B), ``low``,
+        ``high``, ``frames`` and ``verdict``: ``lower`` (the interval is below zero), ``higher``
+        or ``not significant``.
+    """
+    rows = []
+    for a, b in pairs:
+        for metric in metrics:
+            if metric not in frame_tables[a] or metric not in frame_tables[b]:
+                continue
+            both = pd.concat({"a": frame_tables[a].groupby("frame")[metric].mean(),
+                              "b": frame_tables[b].groupby("frame")[metric].mean()}, axis=1).dropna()
+            if both.empty:
+                continue
+            both = both.sort_index()
+            r = paired_bootstrap(both["a"].to_numpy() - both["b"].to_numpy(), n_resamples, confidence, seed,
+                                 block=block)
+            verdict = "lower" if r.high < 0 else ("higher" if r.low > 0 else "not significant")
+            rows.append({"method": a, "reference": b, "metric": metric, "value": float(both["a"].mean()),
+                         "reference_value": float(both["b"].mean()), "difference": r.mean, "low": r.low,
+                         "high": r.high, "frames": len(both), "verdict": verdict})
     return pd.DataFrame(rows)
 
 

@@ -56,8 +56,8 @@ class BootstrapResult:
 
 
 def paired_bootstrap(diffs: np.ndarray, n_resamples: int = 2000, confidence: float = 0.95,
-                     seed: int = 0, chunk: int = 250) -> BootstrapResult:
-    """Percentile interval of the mean paired difference, resampling images.
+                     seed: int = 0, chunk: int = 250, block: int = 1) -> BootstrapResult:
+    """Percentile interval of the mean paired difference, resampling images (or blocks of them).
 
     Args:
         diffs: ``(S, n)`` differences; column i is the same test image in every seed (a 1-D
@@ -66,6 +66,10 @@ def paired_bootstrap(diffs: np.ndarray, n_resamples: int = 2000, confidence: flo
         confidence: interval mass (0.95: the 2.5 and 97.5 percentiles).
         seed: seed of the resampling generator (fixed: the same data give the same interval).
         chunk: resamples drawn at once (bounds memory to ``chunk x n`` indices).
+        block: images per resampled unit. 1 for independent images (Table I); for the frames of a
+            recording, whose errors are correlated in time, consecutive non-overlapping blocks of
+            ``block`` frames are resampled whole (a block bootstrap; the last block may be shorter),
+            so the interval is not narrowed by counting correlated frames as independent.
     Returns:
         :class:`BootstrapResult`.
     """
@@ -73,15 +77,19 @@ def paired_bootstrap(diffs: np.ndarray, n_resamples: int = 2000, confidence: flo
     S, n = d.shape
     if n == 0 or not np.isfinite(d).all():
         raise ValueError(f"paired_bootstrap needs finite differences on at least one image, got shape {d.shape}")
+    if block < 1:
+        raise ValueError(f"block must be >= 1, got {block}")
     # The statistic mean_{s, i in resample} d_si equals the resample mean of the per-image seed means
     # because every seed uses the same resampled indices.
     d_image = d.mean(axis=0)
+    starts = np.arange(0, n, block)
+    sums, counts = np.add.reduceat(d_image, starts), np.diff(np.append(starts, n)).astype(np.float64)
     rng = np.random.default_rng(seed)
     stats = np.empty(n_resamples)
     for start in range(0, n_resamples, chunk):
         stop = min(start + chunk, n_resamples)
-        idx = rng.integers(0, n, size=(stop - start, n))
-        stats[start:stop] = d_image[idx].mean(axis=1)
+        idx = rng.integers(0, len(starts), size=(stop - start, len(starts)))
+        stats[start:stop] = sums[idx].sum(axis=1) / counts[idx].sum(axis=1)
     alpha = (1.0 - confidence) / 2.0
     low, high = np.quantile(stats, [alpha, 1.0 - alpha])
     return BootstrapResult(float(d_image.mean()), float(low), float(high), d.mean(axis=1), n)

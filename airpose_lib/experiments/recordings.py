@@ -49,7 +49,14 @@ from airpose_lib.data.sequences import ensure_sequences
 from airpose_lib.engine.checkpoint import StaleRunError
 from airpose_lib.eval import metrics as M
 from airpose_lib.eval.oracle import ORACLE_LABEL, oracle_recording_estimate
-from airpose_lib.eval.recordings import body_joints, paper_claims, per_view_params, recording_table
+from airpose_lib.eval.recordings import (
+    body_joints,
+    compare_methods,
+    paper_claims,
+    per_view_params,
+    recording_frame_table,
+    recording_table,
+)
 from airpose_lib.finetune.keypoints import resolution_scales
 from airpose_lib.finetune.network import load_network
 from airpose_lib.finetune.predict import (image_sizes, network_camera_of, predict_sequence, regress_features,
@@ -68,7 +75,7 @@ from airpose_lib.train.official import find_official_checkpoint
 
 __all__ = ["METHODS", "RecordingExperiment", "default_experiment_dir", "run_recording_experiment",
            "body_vertices", "recording_prior", "ground_truth_diagnostic", "finetune_table", "selection_table",
-           "claims_table", "official_recordings", "official_networks", "networks_for", "recordings_for",
+           "COMPARISONS", "comparisons_table", "claims_table", "official_recordings", "official_networks", "networks_for", "recordings_for",
            "depth_summary", "overlay_inputs", "airpose_plus_checks", "markdown_table"]
 
 #: Estimate names in plotting order.
@@ -591,6 +598,36 @@ def selection_table(exp: RecordingExperiment) -> pd.DataFrame:
         sel = info.get("selection") or {}
         if sel:
             parts.append(pd.DataFrame(sel).assign(network=label))
+    return pd.concat(parts, ignore_index=True) if parts else pd.DataFrame()
+
+
+#: The method comparisons of :func:`comparisons_table` (method, reference): what fine-tuning on
+#: person 1 changes for each network, and what AirPose+ adds to AirPose.
+COMPARISONS = (("AirPose", "AirPose (pre-trained)"), ("Baseline", "Baseline (pre-trained)"), ("AirPose+", "AirPose"))
+
+
+def comparisons_table(exp: RecordingExperiment, pairs=COMPARISONS, block_s: float = 1.0) -> pd.DataFrame:
+    """:func:`airpose_lib.eval.recordings.compare_methods` on every recording with ground truth,
+    over the frames every network estimated (as the error table), blocks of ``block_s`` seconds.
+
+    Returns:
+        the comparison rows with a ``sequence`` column first (empty without ground truth).
+    """
+    parts = []
+    for person in exp.persons:
+        seq, est = exp.sequences[person], exp.estimates[person]
+        if seq.ground_truth is None:
+            continue
+        keep = np.flatnonzero(np.all([np.all(e["valid"], axis=1) for m, e in est.items() if m in _NETWORKS], axis=0))
+        methods = [m for m in dict.fromkeys(x for pair in pairs for x in pair) if m in est]
+        frames = {}
+        for m in methods:
+            t = recording_frame_table(est[m], seq.ground_truth, exp.joints[person][m], m)
+            frames[m] = t[t["frame"].isin(keep)]
+        fps = float(seq.ground_truth.get("fps", 30.0))
+        usable = [(a, b) for a, b in pairs if a in frames and b in frames]
+        part = compare_methods(frames, usable, block=max(1, round(block_s * fps)))
+        parts.append(part.assign(sequence=person)[["sequence", *part.columns]])
     return pd.concat(parts, ignore_index=True) if parts else pd.DataFrame()
 
 

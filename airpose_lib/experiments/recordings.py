@@ -75,8 +75,8 @@ from airpose_lib.train.official import find_official_checkpoint
 
 __all__ = ["METHODS", "RecordingExperiment", "default_experiment_dir", "run_recording_experiment",
            "body_vertices", "recording_prior", "ground_truth_diagnostic", "finetune_table", "selection_table",
-           "COMPARISONS", "comparisons_table", "claims_table", "official_recordings", "official_networks", "networks_for", "recordings_for",
-           "depth_summary", "overlay_inputs", "airpose_plus_checks", "markdown_table"]
+           "COMPARISONS", "comparisons_table", "claims_table", "official_recordings", "official_networks",
+           "networks_for", "recordings_for", "depth_summary", "overlay_inputs", "airpose_plus_checks", "markdown_table"]
 
 #: Estimate names in plotting order.
 METHODS = ("Baseline (pre-trained)", "AirPose (pre-trained)", "Baseline", "AirPose", "AirPose+")
@@ -427,6 +427,12 @@ def run_recording_experiment(profile: str = "smoke", out_dir: str | Path | None 
         return _run_recording_experiment(profile, out, sequences, seed, fine_tune_on, networks, progress)
 
 
+def _scored_frames(estimates: dict) -> np.ndarray:
+    """``(F,)`` bool: the frames every network estimated in every view, those the errors are
+    averaged over."""
+    return np.all([np.all(e["valid"], axis=1) for m, e in estimates.items() if m in _NETWORKS], axis=0)
+
+
 def _run_recording_experiment(profile: str, out: Path, sequences: dict | None, seed: int | None,
                               fine_tune_on: str, networks: dict | None, progress: bool) -> RecordingExperiment:
     import torch
@@ -469,7 +475,7 @@ def _run_recording_experiment(profile: str, out: Path, sequences: dict | None, s
         estimates[person] = est
         joints[person] = {m: body_joints(e, body) for m, e in est.items()}
         if seq.ground_truth is not None:
-            mask = np.all([np.all(e["valid"], axis=1) for m, e in est.items() if m in _NETWORKS], axis=0)
+            mask = _scored_frames(est)
             fps = float(seq.ground_truth.get("fps", 30.0))
             t = recording_table(est, seq.ground_truth, joints[person], fps=fps, sequence=person, mask=mask)
             # the physical floor: ground-truth pose and 2D joints, mean body (eval/oracle.py)
@@ -570,8 +576,9 @@ def airpose_plus_checks(table: pd.DataFrame, person: str | None = None) -> pd.Da
 
 def finetune_table(exp: RecordingExperiment) -> pd.DataFrame:
     """One row per fine-tuned network: steps, the selection rule, the selected step and its
-    held-out 2D loss, where a loss term first started overfitting (and which), the per-view agreement threshold and how many OpenPose keypoints the two-detector filter kept or
-    dropped (and why)."""
+    held-out 2D loss, where a loss term first started overfitting (and which), the per-view
+    agreement threshold and how many OpenPose keypoints the two-detector filter kept or dropped
+    (and why)."""
     rows = []
     for label, info in exp.finetune_info.items():
         k = info.get("keypoints") or {}
@@ -618,7 +625,7 @@ def comparisons_table(exp: RecordingExperiment, pairs=COMPARISONS, block_s: floa
         seq, est = exp.sequences[person], exp.estimates[person]
         if seq.ground_truth is None:
             continue
-        keep = np.flatnonzero(np.all([np.all(e["valid"], axis=1) for m, e in est.items() if m in _NETWORKS], axis=0))
+        keep = np.flatnonzero(_scored_frames(est))
         methods = [m for m in dict.fromkeys(x for pair in pairs for x in pair) if m in est]
         frames = {}
         for m in methods:

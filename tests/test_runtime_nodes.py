@@ -4,6 +4,7 @@ packets are survived. Every run is bounded (frames, ``max_runtime_s``, launcher 
 from __future__ import annotations
 
 import json
+import socket
 import struct
 import time
 import zlib
@@ -14,6 +15,7 @@ import zmq
 from airpose_lib import cli
 from airpose_lib.runtime import results as R
 from airpose_lib.runtime.backends import BackendSpec, FakeStageModel
+from airpose_lib.runtime import launcher
 from airpose_lib.runtime.launcher import launch
 from airpose_lib.runtime.offline import offline_batched, offline_inputs, offline_staged
 from airpose_lib.runtime.transport import free_ports
@@ -193,6 +195,42 @@ def _listen_to(ctx, keys, me: int, drone: int, port: int):
     sub.connect(f"tcp://127.0.0.1:{port}")
     sub.setsockopt(zmq.SUBSCRIBE, b"")
     return sub
+
+
+def test_a_port_taken_before_the_drone_binds_it_moves_the_fleet(tmp_path, monkeypatch):
+    """free_ports only says a port is free *now*; another process may bind it before the drone
+    does (a CI failure). The launcher then starts the drones again on new ports instead of
+    failing the run. Here the first port handed out is already listening."""
+    squatter = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+    squatter.bind(("127.0.0.1", 0))
+    squatter.listen()
+    taken = squatter.getsockname()[1]
+    real, excluded = launcher.free_ports, []
+
+    def taken_first(n, host="127.0.0.1", exclude=()):
+        excluded.append(set(exclude))
+        return [taken, *real(n - 1, host, exclude)] if len(excluded) == 1 else real(n, host, exclude)
+
+    monkeypatch.setattr(launcher, "free_ports", taken_first)
+    try:
+        summaries, _ = _run(tmp_path, 2, {"backend": "fake", "window_ms": 80, "frames": 6})
+    finally:
+        squatter.close()
+    assert len(excluded) == 2 and taken in excluded[1]  # moved once, never back to the taken port
+    assert set(summaries) == {1, 2} and all(s["valid"] >= 4 for s in summaries.values())
+    log = (tmp_path / "node_1.log").read_text()
+    assert "Address already in use" in log and f"launcher: port {taken} was taken" in log
+
+
+def test_a_drone_that_fails_for_another_reason_is_not_restarted(tmp_path):
+    options = {"backend": "fake", "source": "synthetic:frames=400,size=480x270,seed=1,nonsense=3"}
+    try:
+        launch(1, tmp_path, options)
+    except launcher.LaunchError as e:
+        assert "exited before READY" in str(e)
+    else:
+        raise AssertionError("a drone with a bad source reached READY")
+    assert "was taken" not in (tmp_path / "node_1.log").read_text()
 
 
 def test_malformed_packets_are_logged_not_fatal(tmp_path):

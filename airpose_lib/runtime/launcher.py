@@ -57,6 +57,11 @@ def _last_line(path: Path) -> str:
     return lines[-1][:300] if lines else "empty log"
 
 
+def _port_of(endpoint: str) -> int:
+    """``tcp://127.0.0.1:5555`` -> 5555."""
+    return int(endpoint.rsplit(":", 1)[1])
+
+
 def _reader(stream, q: queue.Queue, drone: int) -> None:
     for line in iter(stream.readline, ""):
         q.put((drone, line.rstrip("\n")))
@@ -113,11 +118,35 @@ class Fleet:
             self.summaries[drone] = json.loads(line[len("SUMMARY "):])
         return True
 
-    def start(self, lead_s: float = 1.0, ready_timeout_s: float = 120.0) -> float:
-        """Wait for every drone's READY, then send the common start time; returns t0."""
+    def _move_to_new_ports(self, dead: list[int]) -> None:
+        """Start every drone again on new ports: a port chosen by :func:`free_ports` was taken by
+        another process before its drone bound it. Only before START, so no schedule is lost."""
+        self.stop()
+        busy = {*self.ports.values(), *map(_port_of, self.extra_peers.values())}
+        old = dict(self.ports)
+        self.ports = dict(zip(self.ports, free_ports(len(self.ports), self.host, exclude=busy)))
+        for d in dead:
+            with open(self.out_dir / f"node_{d}.log", "a") as log:
+                log.write(f"launcher: port {old[d]} was taken; starting the drones again, drone {d} on "
+                          f"port {self.ports[d]}\n")
+        self.lines, self._ready = queue.Queue(), set()  # the old readers keep filling the old queue
+        for d in self.ports:
+            self._spawn(d, "stdin")
+
+    def start(self, lead_s: float = 1.0, ready_timeout_s: float = 120.0, port_retries: int = 3) -> float:
+        """Wait for every drone's READY, then send the common start time; returns t0.
+
+        A drone that exits because its port is already in use (a race of :func:`free_ports` with
+        other processes) makes the whole fleet start again on new ports, up to ``port_retries``
+        times; any other early exit raises :class:`LaunchError`."""
         deadline = time.time() + ready_timeout_s
         while self._ready != set(self.procs):
             dead = [d for d, p in self.procs.items() if p.poll() is not None and d not in self._ready]
+            if dead and port_retries > 0 and all(
+                    "Address already in use" in _last_line(self.out_dir / f"node_{d}.log") for d in dead):
+                port_retries -= 1
+                self._move_to_new_ports(dead)
+                continue
             if dead:
                 self.stop()
                 why = "; ".join(f"drone {d}: {_last_line(self.out_dir / f'node_{d}.log')}" for d in dead)
@@ -192,7 +221,8 @@ def launch(num_drones: int, out_dir: str | Path, options: Mapping | Sequence[str
     """
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    ports = dict(zip(range(1, num_drones + 1), free_ports(num_drones, host)))
+    busy = [_port_of(ep) for ep in (extra_peers or {}).values()]  # the caller binds these itself
+    ports = dict(zip(range(1, num_drones + 1), free_ports(num_drones, host, exclude=busy)))
     if not isinstance(options, (list, tuple)):
         options = dict(options or {})
         src = options.get("source", "synthetic")

@@ -63,15 +63,20 @@ def parse_peers(items: list[str], host: str = "127.0.0.1") -> dict[int, str]:
     return out
 
 
-def free_ports(n: int, host: str = "127.0.0.1") -> list[int]:
-    """n distinct TCP ports that are free on ``host`` right now (bound and released by the OS)."""
+def free_ports(n: int, host: str = "127.0.0.1", exclude: Sequence[int] = ()) -> list[int]:
+    """n distinct TCP ports that are free on ``host`` right now (bound and released by the OS),
+    none of them in ``exclude`` (ports the caller is about to bind itself).
+
+    Another process may still take one before the caller binds it: :meth:`Fleet.start` starts
+    the drones again on new ports when that happens."""
     socks, ports = [], []
     try:
-        for _ in range(n):
+        while len(ports) < n:
             s = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
             s.bind((host, 0))
-            socks.append(s)
-            ports.append(s.getsockname()[1])
+            socks.append(s)  # held until all are chosen, so the OS cannot hand one out twice
+            if s.getsockname()[1] not in exclude:
+                ports.append(s.getsockname()[1])
     finally:
         for s in socks:
             s.close()

@@ -11,7 +11,8 @@ import pytest
 
 from airpose_lib.runtime import results as R
 from airpose_lib.runtime.backends import FakeStageModel, fresh_copy
-from airpose_lib.runtime.source import IMAGENET_MEAN, IMAGENET_STD, SyntheticSource, crop_input, open_source, person_box
+from airpose_lib.runtime.source import (IMAGENET_MEAN, IMAGENET_STD, SyntheticSource, crop_input, network_box_margin,
+                                        network_camera, open_source, person_box)
 from airpose_lib.runtime.sync import CameraReplay, Mailbox, PeerTable, Schedule
 from airpose_lib.runtime.transport import LinkConfig, LinkEmulator, Transport, endpoint, free_ports
 from airpose_lib.runtime.wire import DATA, HELLO, decode_packet, encode_packet
@@ -138,6 +139,33 @@ def test_person_box_from_detections():
     assert person_box(kp, (1000, 700), min_confidence=0.7, min_points=4) is None
     assert person_box(None, (1000, 700)) is None
     assert person_box(np.zeros((25, 3)), (1000, 700)) is None  # OpenPose's "missing" = zeros
+
+
+def test_default_box_margin_frames_the_person_as_the_training_crops():
+    """The default margin is the training boxes' mean (joints +- 20 px, each side out by U(0, 200)
+    px at f = 1475: 120 px), in the image's own pixels; so the same person seen at full and at
+    half resolution gets the same P, with the crop scale of an average training crop."""
+    K = network_camera()
+    assert network_box_margin(K) == pytest.approx(120.0)
+    K_half = K.copy()
+    K_half[:2] *= 0.5  # the same camera at 960x540
+    assert network_box_margin(K_half) == pytest.approx(60.0)
+    K_long = K.copy()
+    K_long[0, 0] = K_long[1, 1] = 2950.0  # twice the focal length, same resolution
+    assert network_box_margin(K_long, K_net=K) == pytest.approx(240.0)
+
+    rng = np.random.default_rng(0)
+    xy = np.column_stack([rng.uniform(900, 1000, 25), rng.uniform(400, 640, 25)])  # a 240 px tall person
+    kp = np.column_stack([xy, np.ones(25)])
+    S = 128
+    P = {}
+    for name, KK, scale in (("full", K, 1.0), ("half", K_half, 0.5)):
+        size = (int(1920 * scale), int(1080 * scale))
+        box = person_box(kp * [scale, scale, 1], size, margin_px=network_box_margin(KK))
+        P[name] = crop_input(np.zeros((size[1], size[0], 3), np.uint8), box, KK, S)[1][0]
+    np.testing.assert_allclose(P["half"], P["full"], atol=1e-6)
+    extent = max(np.ptp(xy[:, 0]), np.ptp(xy[:, 1]))
+    assert P["full"][2] == pytest.approx(S / (extent + 2 * 120.0), rel=1e-6)  # s of P
 
 
 def test_crop_input_geometry_and_padding():

@@ -127,7 +127,9 @@ def add_node_arguments(p: argparse.ArgumentParser) -> None:
                         "size=960x540,seed=0] (default: synthetic)")
     s.add_argument("--detector", default="openpose", help="detections used for the box (default: openpose)")
     s.add_argument("--min-confidence", type=float, default=0.2)
-    s.add_argument("--box-margin-px", type=float, default=20.0)
+    s.add_argument("--box-margin-px", type=float, default=None,
+                   help="person box = keypoints +- this many image pixels (default: the training crops' "
+                        "mean margin, 120 px at the network camera's f = 1475, scaled to this camera)")
     s.add_argument("--preload", action="store_true",
                    help="decode the replayed frames into memory before the start (a camera delivers "
                         "raw frames; without it JPEG decoding counts as acquisition)")

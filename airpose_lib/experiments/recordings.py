@@ -182,7 +182,7 @@ def _sequence_stamp(sequence) -> list[str]:
 
 
 #: Bumped when the estimates of an unchanged network and recording change (e.g. the camera rule).
-_ESTIMATE_VERSION = 2
+_ESTIMATE_VERSION = 3  # 3: the box margin of runtime.source.network_box_margin
 
 
 def _network_estimate(checkpoint: Path, sequence, out: Path) -> dict:

@@ -54,7 +54,7 @@ from airpose_lib.data.official_layout import load_sequence
 from airpose_lib.model import to_smplx_params
 from airpose_lib.progress import progress_bar
 from airpose_lib.runtime.offline import offline_inputs
-from airpose_lib.runtime.source import network_camera, person_box
+from airpose_lib.runtime.source import network_box_margin, network_camera, person_box
 
 __all__ = [
     "PREDICTION_KEYS",
@@ -110,14 +110,15 @@ def regress_features(model: nn.Module, feat: Tensor, P: Tensor | None = None,
 
 # -- detections -> boxes ----------------------------------------------------------------------------
 def detection_boxes(keypoints: np.ndarray, image_sizes: SequenceABC[tuple[int, int]], *,
-                    min_confidence: float = 0.2, margin_px: float = 20.0,
+                    min_confidence: float = 0.2, margin_px: float | SequenceABC[float] = 20.0,
                     where: str = "the sequence") -> tuple[np.ndarray, np.ndarray]:
     """Person boxes of every frame and view from one detector's keypoints.
 
     Args:
         keypoints: ``(F, V, J, 3)`` ``[x, y, confidence]`` full-image pixels.
         image_sizes: ``(W, H)`` of each of the V views.
-        min_confidence, margin_px: as :func:`airpose_lib.runtime.source.person_box`.
+        min_confidence, margin_px: as :func:`airpose_lib.runtime.source.person_box` (the margin
+            may be given per view, e.g. :func:`~airpose_lib.runtime.source.network_box_margin`).
         where: named in the error message (e.g. the sequence folder).
 
     Returns:
@@ -133,12 +134,13 @@ def detection_boxes(keypoints: np.ndarray, image_sizes: SequenceABC[tuple[int, i
     F, V = kp.shape[:2]
     if len(image_sizes) != V:
         raise ValueError(f"{len(image_sizes)} image sizes for {V} views")
+    margins = np.broadcast_to(np.asarray(margin_px, np.float64), (V,))
     boxes = np.zeros((F, V, 4))
     valid = np.zeros((F, V), bool)
     for v in range(V):
         last = None
         for f in range(F):
-            box = person_box(kp[f, v], image_sizes[v], min_confidence, margin_px)
+            box = person_box(kp[f, v], image_sizes[v], min_confidence, float(margins[v]))
             if box is not None:
                 valid[f, v] = True
                 last = box
@@ -251,7 +253,7 @@ def _resolve_input_size(model: nn.Module, input_size: int | None) -> int:
 @torch.no_grad()
 def sequence_features(model: nn.Module, sequence, *, input_size: int, detector: str = "openpose",
                       frames=None, batch_size: int = 16, box_min_confidence: float = 0.2,
-                      margin_px: float = 20.0, K_net=None, progress: bool = False) -> dict[str, np.ndarray]:
+                      margin_px: float | None = None, K_net=None, progress: bool = False) -> dict[str, np.ndarray]:
     """Backbone features of every frame and view (eval mode, no gradients).
 
     Args: as :func:`predict_sequence`; the crops and P are formed in the virtual camera
@@ -260,7 +262,7 @@ def sequence_features(model: nn.Module, sequence, *, input_size: int, detector: 
     Returns:
         ``features (F, V, C)`` float32, ``P (F, V, 3)`` float32, ``boxes (F, V, 4)`` float32,
         ``valid (F, V)`` bool, ``frames (F,)`` int64 image numbers, ``positions (F,)`` int64 rows
-        of ``sequence``.
+        of ``sequence``, ``margin_px (V,)`` float64 the box margin of each view.
     """
     if detector not in sequence.keypoints:
         raise ValueError(f"{sequence.root}: no {detector!r} detections loaded (have {sorted(sequence.keypoints)})")
@@ -272,15 +274,17 @@ def sequence_features(model: nn.Module, sequence, *, input_size: int, detector: 
     for v in range(V):
         h, w = sequence.image(int(pos[0]), v).shape[:2]
         sizes.append((w, h))
+    K_net = network_camera_of(model, K_net)
+    margins = (np.array([network_box_margin(K, K_net) for K in np.asarray(sequence.K)]) if margin_px is None
+               else np.full(V, float(margin_px)))
     boxes, valid = detection_boxes(np.asarray(sequence.keypoints[detector])[pos], sizes,
-                                   min_confidence=box_min_confidence, margin_px=margin_px,
+                                   min_confidence=box_min_confidence, margin_px=margins,
                                    where=f"{sequence.root} ({detector})")
     was_training = model.training
     model.eval()
     device = _model_device(model)
     dtype = model.init_beta.dtype
     source = _Views(sequence)
-    K_net = network_camera_of(model, K_net)
     feats, Ps = [], []
     chunks = range(0, len(pos), batch_size)
     if progress:
@@ -298,13 +302,13 @@ def sequence_features(model: nn.Module, sequence, *, input_size: int, detector: 
         model.train(was_training)
     return {"features": torch.cat(feats).numpy(), "P": torch.cat(Ps).numpy().astype(np.float32),
             "boxes": boxes.astype(np.float32), "valid": valid,
-            "frames": np.asarray(sequence.frames, np.int64)[pos], "positions": pos}
+            "frames": np.asarray(sequence.frames, np.int64)[pos], "positions": pos, "margin_px": margins}
 
 
 @torch.no_grad()
 def predict_sequence(model: nn.Module, sequence, *, input_size: int | None = None, detector: str = "openpose",
                      frames=None, batch_size: int = 16, features_only: bool = False,
-                     box_min_confidence: float = 0.2, margin_px: float = 20.0, K_net=None,
+                     box_min_confidence: float = 0.2, margin_px: float | None = None, K_net=None,
                      provenance: Mapping | None = None, progress: bool = False) -> dict:
     """Run a network over a recording.
 
@@ -319,7 +323,8 @@ def predict_sequence(model: nn.Module, sequence, *, input_size: int | None = Non
         features_only: return the backbone features instead of parameters (see
             :func:`sequence_features`; what fine-tuning caches).
         box_min_confidence, margin_px: :func:`airpose_lib.runtime.source.person_box` settings
-            (the runtime's defaults: 0.2 and 20 px).
+            (the runtime's defaults: 0.2, and a margin of None is
+            :func:`~airpose_lib.runtime.source.network_box_margin`, in each view's pixels).
         K_net: ``(3, 3)`` the network's training camera (default :func:`network_camera_of`).
         provenance: extra JSON-able facts stored in the ``provenance`` string (e.g. the checkpoint).
         progress: tqdm bar over the batches.
@@ -359,7 +364,7 @@ def predict_sequence(model: nn.Module, sequence, *, input_size: int | None = Non
             "variant": getattr(model, "variant", None), "num_frames": F,
             "frames": [int(cache["frames"][0]), int(cache["frames"][-1])],
             "views_without_detection": int((~cache["valid"]).sum()),
-            "box": {"min_confidence": box_min_confidence, "margin_px": margin_px,
+            "box": {"min_confidence": box_min_confidence, "margin_px": cache["margin_px"].round(2).tolist(),
                     "missing": "previous box (leading frames: the first box), valid=False"},
             **camera_rule(K_net, np.asarray(sequence.K)),
             **dict(provenance or {})}

@@ -122,7 +122,8 @@ class FineTuneConfig:
         frames: ``[start, stop)`` image numbers to train on (paper: ``[0, 7000]``); None: all.
         input_size: crop side S (default: from the checkpoint).
         detector, box_min_confidence, margin_px: where the crops' boxes come from
-            (``predict_sequence``; the runtime's defaults).
+            (``predict_sequence``; the runtime's defaults: a margin of None frames the person as
+            the training crops do, ``runtime.source.network_box_margin``).
         feature_batch_size: frames per backbone batch when caching the features.
         checkpoint_every, keep_checkpoints, log_every: as ``TrainConfig``.
         prior, prior_path, prior_tag: the pose prior (``airpose_lib.prior.load_prior``).
@@ -151,7 +152,7 @@ class FineTuneConfig:
     input_size: int | None = None
     detector: str = "openpose"
     box_min_confidence: float = 0.2
-    margin_px: float = 20.0
+    margin_px: float | None = None
     feature_batch_size: int = 16
     checkpoint_every: int = 100
     keep_checkpoints: int = 2

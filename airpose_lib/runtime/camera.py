@@ -8,7 +8,7 @@ import time
 import numpy as np
 
 from . import results as R
-from .source import ViewSource, crop_input, person_box
+from .source import ViewSource, crop_input, network_box_margin, person_box
 from .sync import CameraReplay, Clock
 
 __all__ = ["DroneCamera"]
@@ -23,17 +23,18 @@ class DroneCamera:
         view: the drone's view of the source.
         clock: the drone's clock.
         input_size: crop side S, pixels.
-        min_confidence, box_margin_px: the person box rule (:func:`~.source.person_box`).
+        min_confidence, box_margin_px: the person box rule (:func:`~.source.person_box`); a
+            margin of None is :func:`~.source.network_box_margin` of the view's K.
     """
 
     def __init__(self, view: ViewSource, clock: Clock, input_size: int, min_confidence: float,
-                 box_margin_px: float) -> None:
+                 box_margin_px: float | None) -> None:
         self.view = view
         self.K = np.asarray(view.K, np.float64)
         self.clock = clock
         self.input_size = input_size
         self.min_confidence = min_confidence
-        self.box_margin_px = box_margin_px
+        self.box_margin_px = network_box_margin(self.K) if box_margin_px is None else float(box_margin_px)
         self.replay: CameraReplay | None = None  # from start()
         self._preloaded: dict[int, np.ndarray] = {}
         self._last_box: np.ndarray | None = None

@@ -45,7 +45,7 @@ class NodeConfig:
     max_runtime_s: float | None = None
     detector: str = "openpose"
     min_confidence: float = 0.2
-    box_margin_px: float = 20.0
+    box_margin_px: float | None = None  # None: source.network_box_margin of the view's K
     preload: bool = False  # decode the replayed frames into memory before the start
     keys: str | None = None  # folder of the swarm's CURVE keys (runtime.keys); None: $AIRPOSE_SWARM_KEYS
     insecure: bool = False  # no authentication (trusted networks only)

@@ -18,13 +18,13 @@ import numpy as np
 from .backends import BackendSpec, StageModel, build_torch_model, fresh_copy, to_numpy
 from .networks import make_stage_model
 from .results import PARAM_KEYS, mask_to_ids
-from .source import crop_input, open_source, person_box
+from .source import crop_input, network_box_margin, open_source, person_box
 
 __all__ = ["offline_inputs", "offline_staged", "offline_batched", "max_abs_difference"]
 
 
 def offline_inputs(source, frame_index: np.ndarray, input_size: int, boxes: np.ndarray | None = None,
-                   min_confidence: float = 0.2, margin_px: float = 20.0,
+                   min_confidence: float = 0.2, margin_px: float | None = None,
                    K_net: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Crops and crop vectors of the given frames.
 
@@ -34,6 +34,8 @@ def offline_inputs(source, frame_index: np.ndarray, input_size: int, boxes: np.n
         input_size: S.
         boxes: optional ``(F, V, 4)`` boxes to use (e.g. the drones' records); default: from the
             detections of each frame (a frame without one keeps the previous row's box).
+        min_confidence, margin_px: the person box rule (:func:`~.source.person_box`); a margin
+            of None is :func:`~.source.network_box_margin` of each view's K (as a drone's).
         K_net: the network's camera (:func:`~.source.crop_input`; default ``network_camera()``).
 
     Returns:
@@ -46,12 +48,13 @@ def offline_inputs(source, frame_index: np.ndarray, input_size: int, boxes: np.n
     out_boxes = np.zeros((F, V, 4), np.float64)
     for v in range(V):
         view = src.view(v)
+        margin = network_box_margin(view.K, K_net) if margin_px is None else margin_px
         last = None
         for f in range(F):
             i = int(frame_index[f, v])
             image = view.image(i)
             H, W = image.shape[:2]
-            box = boxes[f, v] if boxes is not None else person_box(view.keypoints(i), (W, H), min_confidence, margin_px)
+            box = boxes[f, v] if boxes is not None else person_box(view.keypoints(i), (W, H), min_confidence, margin)
             box = last if box is None else box  # no detection: the previous box, as a drone does
             if box is None:
                 raise ValueError(f"view {v} frame {i}: no detection and no earlier box; pass the boxes")

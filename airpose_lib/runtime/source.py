@@ -10,7 +10,8 @@ the views of
   moving in front of a gradient, BODY_25-like keypoints inside it) for tests and benchmarks that
   need no data on disk.
 
-:func:`person_box` turns detections into the person box and :func:`crop_input` turns the image
+:func:`person_box` turns detections into the person box (by default grown by
+:func:`network_box_margin`, so that the crop frames the person as the training crops did) and :func:`crop_input` turns the image
 and the box into the normalised ``(1, 3, S, S)`` crop and ``P (1, 3)``, the same preprocessing as
 the still-frame training samples (aspect-preserving, black padding), formed in the network's
 virtual camera (``geometry.virtual_crop``): any camera gives the input a training camera
@@ -35,6 +36,7 @@ __all__ = [
     "person_box",
     "crop_input",
     "network_camera",
+    "network_box_margin",
     "IMAGENET_MEAN",
     "IMAGENET_STD",
 ]
@@ -289,6 +291,35 @@ def network_camera() -> np.ndarray:
     from airpose_lib.data.scene import SceneConfig  # lazy: see _SequenceSource
 
     return SceneConfig().K
+
+
+def network_box_margin(K: np.ndarray, K_net: np.ndarray | None = None) -> float:
+    """The person-box margin, in pixels of an image with intrinsics ``K (3, 3)``, that frames the
+    person as the training crops do on average.
+
+    A training box is the joints +- ``bbox_margin_px`` with each side moved out by
+    ``U(0, bbox_jitter_px)`` (``data.scene.SceneConfig``: 20 + U(0, 200) px at f = 1475, as
+    ``copenet/dsets/aerialpeople.py`` for both of its splits): 120 px on average in the network
+    camera. A box much tighter than that puts the crop scale s of P outside the training range
+    (Table I's tight-box column: AirPose MPJPE 0.143 vs 0.106 m on the same samples). The
+    official real-data loader (``copenet_real/dsets/copenet_real.py``) uses OpenPose +- 50 px at
+    1920x1080 and then fine-tunes on those crops; pass that as an explicit margin to follow it.
+
+    Args:
+        K: ``(3, 3)`` intrinsics of the image the box is drawn in.
+        K_net: ``(3, 3)`` the network's camera (default :func:`network_camera`).
+
+    Returns:
+        the margin in the image's pixels: 120 px scaled by ``f / f_net`` (mean of fx and fy), the
+        same margin in the virtual camera whatever the image's resolution.
+    """
+    from airpose_lib.data.scene import SceneConfig  # lazy: see _SequenceSource
+
+    sc = SceneConfig()
+    K = np.asarray(K, np.float64)
+    K_net = np.asarray(network_camera() if K_net is None else K_net, np.float64)
+    f_ratio = (K[0, 0] + K[1, 1]) / (K_net[0, 0] + K_net[1, 1])
+    return float((sc.bbox_margin_px + sc.bbox_jitter_px / 2.0) * f_ratio)
 
 
 def crop_input(image: np.ndarray, bbox: np.ndarray, K: np.ndarray, input_size: int,

@@ -54,7 +54,7 @@ from airpose_lib.data.official_layout import load_sequence
 from airpose_lib.model import to_smplx_params
 from airpose_lib.progress import progress_bar
 from airpose_lib.runtime.offline import offline_inputs
-from airpose_lib.runtime.source import network_box_margin, network_camera, person_box
+from airpose_lib.runtime.source import box_margin, network_camera, person_box
 
 __all__ = [
     "PREDICTION_KEYS",
@@ -275,8 +275,7 @@ def sequence_features(model: nn.Module, sequence, *, input_size: int, detector: 
         h, w = sequence.image(int(pos[0]), v).shape[:2]
         sizes.append((w, h))
     K_net = network_camera_of(model, K_net)
-    margins = (np.array([network_box_margin(K, K_net) for K in np.asarray(sequence.K)]) if margin_px is None
-               else np.full(V, float(margin_px)))
+    margins = np.array([box_margin(margin_px, K, K_net) for K in np.asarray(sequence.K)])
     boxes, valid = detection_boxes(np.asarray(sequence.keypoints[detector])[pos], sizes,
                                    min_confidence=box_min_confidence, margin_px=margins,
                                    where=f"{sequence.root} ({detector})")

@@ -8,7 +8,7 @@ import time
 import numpy as np
 
 from . import results as R
-from .source import ViewSource, crop_input, network_box_margin, person_box
+from .source import ViewSource, box_margin, crop_input, person_box
 from .sync import CameraReplay, Clock
 
 __all__ = ["DroneCamera"]
@@ -34,7 +34,7 @@ class DroneCamera:
         self.clock = clock
         self.input_size = input_size
         self.min_confidence = min_confidence
-        self.box_margin_px = network_box_margin(self.K) if box_margin_px is None else float(box_margin_px)
+        self.box_margin_px = box_margin(box_margin_px, self.K)
         self.replay: CameraReplay | None = None  # from start()
         self._preloaded: dict[int, np.ndarray] = {}
         self._last_box: np.ndarray | None = None

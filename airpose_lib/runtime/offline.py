@@ -18,7 +18,7 @@ import numpy as np
 from .backends import BackendSpec, StageModel, build_torch_model, fresh_copy, to_numpy
 from .networks import make_stage_model
 from .results import PARAM_KEYS, mask_to_ids
-from .source import crop_input, network_box_margin, open_source, person_box
+from .source import box_margin, crop_input, open_source, person_box
 
 __all__ = ["offline_inputs", "offline_staged", "offline_batched", "max_abs_difference"]
 
@@ -48,7 +48,7 @@ def offline_inputs(source, frame_index: np.ndarray, input_size: int, boxes: np.n
     out_boxes = np.zeros((F, V, 4), np.float64)
     for v in range(V):
         view = src.view(v)
-        margin = network_box_margin(view.K, K_net) if margin_px is None else margin_px
+        margin = box_margin(margin_px, view.K, K_net)
         last = None
         for f in range(F):
             i = int(frame_index[f, v])

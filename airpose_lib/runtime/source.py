@@ -37,6 +37,7 @@ __all__ = [
     "crop_input",
     "network_camera",
     "network_box_margin",
+    "box_margin",
     "IMAGENET_MEAN",
     "IMAGENET_STD",
 ]
@@ -320,6 +321,13 @@ def network_box_margin(K: np.ndarray, K_net: np.ndarray | None = None) -> float:
     K_net = np.asarray(network_camera() if K_net is None else K_net, np.float64)
     f_ratio = (K[0, 0] + K[1, 1]) / (K_net[0, 0] + K_net[1, 1])
     return float((sc.bbox_margin_px + sc.bbox_jitter_px / 2.0) * f_ratio)
+
+
+def box_margin(margin_px: float | None, K: np.ndarray, K_net: np.ndarray | None = None) -> float:
+    """The person-box margin to use in an image with intrinsics ``K (3, 3)``: ``margin_px`` when
+    given, else :func:`network_box_margin` (the default of the drones, the offline inputs and the
+    recordings' predictions)."""
+    return network_box_margin(K, K_net) if margin_px is None else float(margin_px)
 
 
 def crop_input(image: np.ndarray, bbox: np.ndarray, K: np.ndarray, input_size: int,

@@ -80,3 +80,25 @@ def test_recording_prior_uses_vposer_when_installed(tmp_path, monkeypatch):
     monkeypatch.setenv("AIRPOSE_VPOSER_DIR", str(tmp_path / "absent"))
     prior, info = recording_prior("smoke")
     assert info["source"] == "kit" and "not installed" in info["message"]
+
+
+def test_transfer_table_reads_the_selection_logs():
+    from airpose_lib.experiments.recordings import CONTROL_LABEL, RecordingExperiment, transfer_table
+
+    def info(targets, selected, mpjpe, heldout):
+        return {"targets": targets, "selected_step": selected,
+                "selection": {"step": [0, 100, 200], "heldout_j2d": heldout,
+                              "diag_person2_mpjpe_m": mpjpe, "diag_person2_j2d_px": [16.0, 19.0, 15.0]}}
+
+    exp = RecordingExperiment("cpu", None, {}, {}, {}, None, {}, finetune_info={
+        "AirPose": info("detections", 0, [0.073, 0.080, 0.082], [173.0, 117.0, 119.0]),
+        CONTROL_LABEL: info("ground_truth", 200, [0.073, 0.078, 0.070], [219.0, 98.0, 116.0]),
+        "Baseline": {"targets": "detections", "selection": {}}})  # no selection log: no row
+    t = transfer_table(exp).set_index("network")
+    assert list(t.index) == ["AirPose", CONTROL_LABEL] and set(t["test"]) == {"person2"}
+    a, c = t.loc["AirPose"], t.loc[CONTROL_LABEL]
+    assert (a["test_mpjpe_before_m"], a["test_mpjpe_kept_m"]) == (0.073, 0.073)
+    assert (a["test_mpjpe_later_min_m"], a["test_mpjpe_later_max_m"]) == (0.080, 0.082) and not a["helps_test"]
+    assert (a["tuning_heldout_j2d_before"], a["tuning_heldout_j2d_best_later"]) == (173.0, 117.0)
+    assert c["targets"] == "ground_truth" and c["test_mpjpe_kept_m"] == 0.070 and c["helps_test"]
+    assert (c["test_j2d_px_before"], c["test_j2d_px_later_min"]) == (16.0, 15.0)

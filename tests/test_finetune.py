@@ -629,3 +629,56 @@ def test_model_selection_never_reads_the_test_person(tiny_ckpt, smoke_root, tmp_
     best = load_checkpoint(a.best_checkpoint)
     assert best["step"] == a.best_step and load_network(a.best_checkpoint)[2] == S
     assert (tmp_path / "real" / "selection.csv").is_file()
+
+
+# -- the true-keypoint control ----------------------------------------------------------------------
+def test_true_targets_keep_what_a_perfect_detector_sees():
+    from airpose_lib.finetune.keypoints import true_targets
+
+    kp = np.array([[[[10.0, 20.0], [959.0, 539.0], [960.0, 5.0], [-1.0, 5.0], [np.nan, 3.0], [4.0, 4.0]],
+                    [[10.0, 20.0], [959.0, 539.0], [960.0, 5.0], [-1.0, 5.0], [1.0, 3.0], [4.0, 4.0]]]])
+    z = np.array([[[5.0, 5.0, 5.0, 5.0, 5.0, -0.5], [5.0, 5.0, 5.0, 5.0, 5.0, 5.0]]])
+    out = true_targets(kp, z, np.array([[960, 540], [1920, 1080]]))
+    assert out.shape == (1, 2, 6, 3) and out.dtype == np.float32
+    # view 0 (960x540): inside, on the last pixel, right of it, left of it, NaN, behind the camera
+    np.testing.assert_array_equal(out[0, 0, :, 2], [1, 1, 0, 0, 0, 0])
+    np.testing.assert_array_equal(out[0, 1, :, 2], [1, 1, 1, 0, 1, 1])  # the 1920 px view sees x = 960
+    np.testing.assert_array_equal(out[0, 0, 1], [959.0, 539.0, 1.0])
+    np.testing.assert_array_equal(out[0, 0, 2], [0.0, 0.0, 0.0])  # unseen: exactly OpenPose's "missed"
+    with pytest.raises(ValueError, match="kp2d"):
+        true_targets(kp, z[..., :3], np.array([[960, 540], [1920, 1080]]))
+
+
+def test_finetune_on_true_keypoints_uses_the_ground_truth(tiny_ckpt, smoke_root, tmp_path, body32, tiny_prior):
+    from airpose_lib.data.official_layout import load_sequence
+    from airpose_lib.finetune.keypoints import true_targets
+    from airpose_lib.finetune.predict import image_sizes
+    from airpose_lib.finetune.train import finetune_done
+
+    kw = dict(prior=tiny_prior, body_model=body32)
+    det = finetune(tiny_ckpt, smoke_root, tmp_path / "det", _cfg(steps=0), **kw)
+    true = finetune(tiny_ckpt, smoke_root, tmp_path / "true", _cfg(steps=0, targets="ground_truth"), **kw)
+    seq = load_sequence(smoke_root, frames=np.arange(6))
+    gt = seq.ground_truth
+    want = true_targets(gt["kp2d_body25"], gt["kp_depth_body25"], np.asarray(image_sizes(seq)))
+    assert true.keypoints == {"targets": "ground_truth", "kept": int((want[..., 2] > 0).sum())}
+    assert true.config["targets"] == "ground_truth" and "disagree" in det.keypoints
+    # same network, frames and crops: only the targets differ, and the true ones are not the detections
+    assert true.initial["j2d"] != det.initial["j2d"] and true.initial["beta"] == det.initial["beta"]
+    # a changed target source is a different run, never a resumed one
+    assert not finetune_done(tmp_path / "true", tiny_ckpt, _cfg(steps=0))
+    with pytest.raises(ValueError, match="unknown targets"):
+        _cfg(targets="openpose")
+
+
+def test_a_run_saved_before_an_option_existed_resumes_with_its_default():
+    from airpose_lib.engine import StaleRunError
+    from airpose_lib.finetune.train import _check_resume
+
+    cfg = _cfg()
+    old = {k: v for k, v in cfg.to_dict().items() if k != "targets"}  # written before `targets` existed
+    _check_resume({"config": old, "base_fingerprint": "f"}, cfg, "f")  # the default: same run
+    with pytest.raises(StaleRunError, match="targets"):
+        _check_resume({"config": old, "base_fingerprint": "f"}, cfg.replace(targets="ground_truth"), "f")
+    with pytest.raises(StaleRunError, match="base checkpoint"):
+        _check_resume({"config": old, "base_fingerprint": "f"}, cfg, "g")

@@ -331,7 +331,7 @@ def reference_report(bundle: str | Path, profile: str, write: bool = False, comm
 # -- the recordings (notebooks 03-05) -------------------------------------------------------------
 #: The files notebook 05 writes into its output folder that make the recordings' reference.
 RECORDING_FILES = ("recording_errors.csv", "recording_errors.md", "comparisons.csv", "comparisons.md",
-                   "paper_claims.csv", "paper_claims.md")
+                   "paper_claims.csv", "paper_claims.md", "finetune_transfer.csv", "finetune_transfer.md")
 
 
 def install_recordings_reference(notebook_dir: str | Path, profile: str, command: str,

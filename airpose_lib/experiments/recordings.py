@@ -7,7 +7,8 @@ Steps (each cached under ``out_dir``, so notebooks 03, 04 and 05 share one run):
 2. Table I's Baseline and AirPose networks of the profile (:func:`~airpose_lib.train.ablation.trained_checkpoint`);
 3. fine-tuning of both on person 1's 2D detections (:mod:`airpose_lib.finetune`), the model
    selected on person 1's held-out last 20 % of frames; the test persons' 2D and 3D errors per
-   checkpoint are logged next to it as a diagnostic, never used for the choice;
+   checkpoint are logged next to it as a diagnostic, never used for the choice; on generated
+   recordings a control tunes AirPose on person 1's true 2D keypoints (:data:`CONTROL_LABEL`);
 4. per-frame estimates on every person, before and after fine-tuning;
 5. AirPose+ on every person, initialised from the fine-tuned AirPose;
 6. camera-frame joints of every estimate and, where ground truth exists, the error tables.
@@ -75,6 +76,7 @@ from airpose_lib.train.official import find_official_checkpoint
 
 __all__ = ["METHODS", "RecordingExperiment", "default_experiment_dir", "run_recording_experiment",
            "body_vertices", "recording_prior", "ground_truth_diagnostic", "finetune_table", "selection_table",
+           "CONTROL_LABEL", "transfer_table",
            "COMPARISONS", "comparisons_table", "claims_table", "official_recordings", "official_networks",
            "networks_for", "recordings_for", "depth_summary", "overlay_inputs", "airpose_plus_checks", "markdown_table"]
 
@@ -363,10 +365,49 @@ def recordings_for(source, profile: str) -> dict | None:
     return official_recordings(source.roots["official_real"])
 
 
+#: The control fine-tuning of :func:`_kit_networks` (generated recordings only): AirPose tuned on
+#: person 1's true 2D keypoints instead of the detections; never an estimate, only its log.
+CONTROL_LABEL = "AirPose (control: true 2D targets)"
+
+
+def _finetune_logged(pre: Path, tuning, tests: dict, ft_cfg, run_dir: Path, prior, progress: bool):
+    """Fine-tune ``pre`` on ``tuning`` into ``run_dir`` (resumed, or afresh when its settings
+    changed), the ``tests`` recordings' errors logged per checkpoint; returns the result and the
+    summary row of :attr:`RecordingExperiment.finetune_info`."""
+    diagnostics = {}
+    if tests and not finetune_done(run_dir, pre, ft_cfg):
+        net, _, size = load_network(pre)
+        for name, seq in tests.items():  # the frozen backbone's features, once per network
+            feats = sequence_features(net, seq, input_size=size)
+            diagnostics[name] = ground_truth_diagnostic(net, seq, input_size=size, features=feats)
+
+    def diagnostic(model, _d=diagnostics):
+        return {f"{name}_{k}": v for name, d in _d.items() for k, v in d(model).items()}
+
+    kw = dict(progress=progress, prior=prior, diagnostic=diagnostic if diagnostics else None)
+    try:
+        res = finetune(pre, tuning.root, run_dir, ft_cfg, **kw)
+    except StaleRunError:
+        res = finetune(pre, tuning.root, run_dir, ft_cfg, resume=False, **kw)  # settings changed: afresh
+    info = {"steps": res.step, "frames": res.num_frames, "heldout_frames": res.heldout_frames,
+            "selected_step": res.best_step, "heldout_j2d": res.best_heldout_j2d,
+            "selection_rule": res.config.get("selection"), "overfit_step": res.overfit_step,
+            "overfit_terms": res.overfit_terms, "targets": res.config.get("targets", "detections"),
+            "j2d_before": res.initial.get("j2d"), "j2d_after": (res.final or {}).get("j2d"),
+            "threshold_px": res.pixels.get("threshold_px"), "keypoints": res.keypoints,
+            "selection": res.selection}
+    return res, info
+
+
 def _kit_networks(profile: str, seed: int, tuning, tests: dict, prior, prior_info: dict, out: Path,
                   progress: bool) -> tuple[dict, dict]:
     """Table I's Baseline and AirPose of the profile, their fine-tuning on ``tuning`` (model
-    selected on its held-out frames) with the ``tests`` recordings' errors logged per checkpoint."""
+    selected on its held-out frames) with the ``tests`` recordings' errors logged per checkpoint.
+
+    On a generated ``tuning`` recording with test persons, AirPose is also fine-tuned on the true
+    2D keypoints (:data:`CONTROL_LABEL`, ``FineTuneConfig.targets="ground_truth"``): if the test
+    person's errors grow with perfect targets too, the cause is fitting one person, not the
+    detectors."""
     import dataclasses
 
     checkpoints, finetune_info = {}, {}
@@ -377,30 +418,14 @@ def _kit_networks(profile: str, seed: int, tuning, tests: dict, prior, prior_inf
     for variant, label in (("baseline", "Baseline"), ("airpose", "AirPose")):
         pre = trained_checkpoint(profile, variant, seed, progress=progress)
         checkpoints[f"{label} (pre-trained)"] = pre
-        run_dir = out / "finetune" / variant
-        diagnostics = {}
-        if tests and not finetune_done(run_dir, pre, ft_cfg):
-            net, _, size = load_network(pre)
-            for name, seq in tests.items():  # the frozen backbone's features, once per network
-                feats = sequence_features(net, seq, input_size=size)
-                diagnostics[name] = ground_truth_diagnostic(net, seq, input_size=size, features=feats)
-
-        def diagnostic(model, _d=diagnostics):
-            return {f"{name}_{k}": v for name, d in _d.items() for k, v in d(model).items()}
-
-        kw = dict(progress=progress, prior=prior, diagnostic=diagnostic if diagnostics else None)
-        try:
-            res = finetune(pre, tuning.root, run_dir, ft_cfg, **kw)
-        except StaleRunError:
-            res = finetune(pre, tuning.root, run_dir, ft_cfg, resume=False, **kw)  # settings changed: afresh
+        res, finetune_info[label] = _finetune_logged(pre, tuning, tests, ft_cfg, out / "finetune" / variant, prior,
+                                                     progress)
         checkpoints[label] = Path(res.best_checkpoint or res.checkpoint)
-        finetune_info[label] = {"steps": res.step, "frames": res.num_frames, "heldout_frames": res.heldout_frames,
-                                "selected_step": res.best_step, "heldout_j2d": res.best_heldout_j2d,
-                                "selection_rule": res.config.get("selection"), "overfit_step": res.overfit_step,
-                                "overfit_terms": res.overfit_terms,
-                                "j2d_before": res.initial.get("j2d"), "j2d_after": (res.final or {}).get("j2d"),
-                                "threshold_px": res.pixels.get("threshold_px"), "keypoints": res.keypoints,
-                                "selection": res.selection}
+    if tests and tuning.ground_truth is not None and "kp2d_body25" in tuning.ground_truth:
+        control = dataclasses.replace(ft_cfg, targets="ground_truth")
+        _, finetune_info[CONTROL_LABEL] = _finetune_logged(checkpoints["AirPose (pre-trained)"], tuning, tests,
+                                                           control, out / "finetune" / "airpose_true2d", prior,
+                                                           progress)
     return checkpoints, finetune_info
 
 
@@ -583,7 +608,8 @@ def finetune_table(exp: RecordingExperiment) -> pd.DataFrame:
     for label, info in exp.finetune_info.items():
         k = info.get("keypoints") or {}
         seen = sum(k.get(x, 0) for x in ("kept", "disagree", "unconfirmed", "low_confidence"))
-        rows.append({"network": label, "steps": info.get("steps"), "selection_rule": info.get("selection_rule"),
+        rows.append({"network": label, "targets": info.get("targets", "detections"), "steps": info.get("steps"),
+                     "selection_rule": info.get("selection_rule"),
                      "selected_step": info.get("selected_step"), "overfit_step": info.get("overfit_step"),
                      "overfit_terms": ", ".join(info.get("overfit_terms") or []),
                      "heldout_j2d": info.get("heldout_j2d"), "train_frames": info.get("frames"),
@@ -606,6 +632,39 @@ def selection_table(exp: RecordingExperiment) -> pd.DataFrame:
         if sel:
             parts.append(pd.DataFrame(sel).assign(network=label))
     return pd.concat(parts, ignore_index=True) if parts else pd.DataFrame()
+
+
+def transfer_table(exp: RecordingExperiment) -> pd.DataFrame:
+    """Does fine-tuning on the tuning person help the test persons? From the selection logs.
+
+    One row per fine-tuned network and test person: the 2D targets it was tuned on, the tuning
+    person's held-out 2D loss before tuning and at its best later checkpoint (fitting works), and
+    the test person's MPJPE and 2D error (diagnostics, px at 1920 wide) before tuning, at the kept
+    checkpoint and over all later checkpoints (min, max). ``helps_test`` is True when some later
+    checkpoint has a lower test MPJPE than the network before tuning.
+    """
+    rows = []
+    for label, info in exp.finetune_info.items():
+        sel = pd.DataFrame(info.get("selection") or {})
+        if sel.empty or "step" not in sel:
+            continue
+        first, later = sel[sel["step"] == sel["step"].min()].iloc[0], sel[sel["step"] > sel["step"].min()]
+        kept = sel[sel["step"] == info.get("selected_step")]
+        tests = sorted({c[len("diag_"):-len("_mpjpe_m")] for c in sel
+                        if c.startswith("diag_") and c.endswith("_mpjpe_m")})
+        for test in tests:
+            mp, px = f"diag_{test}_mpjpe_m", f"diag_{test}_j2d_px"
+            rows.append({"network": label, "targets": info.get("targets", "detections"), "test": test,
+                         "tuning_heldout_j2d_before": first["heldout_j2d"],
+                         "tuning_heldout_j2d_best_later": later["heldout_j2d"].min() if len(later) else np.nan,
+                         "test_mpjpe_before_m": first[mp],
+                         "test_mpjpe_kept_m": kept[mp].iloc[0] if len(kept) else np.nan,
+                         "test_mpjpe_later_min_m": later[mp].min() if len(later) else np.nan,
+                         "test_mpjpe_later_max_m": later[mp].max() if len(later) else np.nan,
+                         "test_j2d_px_before": first[px] if px in sel else np.nan,
+                         "test_j2d_px_later_min": later[px].min() if px in sel and len(later) else np.nan,
+                         "helps_test": bool(len(later) and later[mp].min() < first[mp])})
+    return pd.DataFrame(rows)
 
 
 #: The method comparisons of :func:`comparisons_table` (method, reference): what fine-tuning on

@@ -58,6 +58,7 @@ __all__ = [
     "agreement_masks",
     "agreement_targets",
     "agreement_summary",
+    "true_targets",
     "REFERENCE_WIDTH",
     "resolution_scales",
     "pixel_settings",
@@ -187,6 +188,33 @@ def agreement_targets(openpose: np.ndarray, alphapose: np.ndarray, *, threshold_
                         unmatched=unmatched)
     op = np.asarray(openpose, np.float64)
     out = np.where(m.kept[..., None], op, 0.0)
+    return out.astype(np.float32)
+
+
+def true_targets(kp2d: np.ndarray, depth: np.ndarray, image_size: np.ndarray) -> np.ndarray:
+    """2D targets from a recording's ground truth: what a perfect detector would report.
+
+    A control for fine-tuning (``FineTuneConfig.targets="ground_truth"``): the same frames and
+    crops as the detector targets, but targets without noise, swaps or misses, so a change in the
+    test person's errors cannot come from the detectors.
+
+    Args:
+        kp2d: ``(F, V, 25, 2)`` projected BODY_25 keypoints (``ground_truth.npz`` ``kp2d_body25``).
+        depth: ``(F, V, 25)`` their depth along the optical axis (``kp_depth_body25``), metres.
+        image_size: ``(V, 2)`` width, height of each view's image.
+
+    Returns:
+        ``(F, V, 25, 3)`` float32 ``[x, y, w]``: ``w = 1`` for a keypoint in front of the camera and
+        inside the image, else ``(0, 0, 0)`` (a detector cannot see it either).
+    """
+    kp = np.asarray(kp2d, np.float64)
+    z = np.asarray(depth, np.float64)
+    wh = np.asarray(image_size, np.float64).reshape(1, -1, 1, 2)
+    if kp.ndim != 4 or kp.shape[-1] != 2 or z.shape != kp.shape[:-1] or wh.shape[1] != kp.shape[1]:
+        raise ValueError(f"true_targets: kp2d (F, V, 25, 2), depth (F, V, 25) and image_size (V, 2) expected, "
+                         f"got {kp.shape}, {z.shape}, {np.shape(image_size)}")
+    seen = np.isfinite(kp).all(-1) & np.isfinite(z) & (z > 0) & ((kp >= 0) & (kp <= wh - 1)).all(-1)
+    out = np.where(seen[..., None], np.concatenate([kp, np.ones_like(kp[..., :1])], -1), 0.0)
     return out.astype(np.float32)
 
 

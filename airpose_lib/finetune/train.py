@@ -5,7 +5,8 @@ r"""Fine-tuning a trained network on the 2D detections of a recording (paper Sec
 1. loads the network of a kit checkpoint and the recording (``data.load_sequence``), optionally
    restricted to a range of image numbers (the paper trains on frames 0-6999 of its real data);
 2. builds the 2D targets with the two-detector agreement filter
-   (:func:`~airpose_lib.finetune.keypoints.agreement_targets`);
+   (:func:`~airpose_lib.finetune.keypoints.agreement_targets`); ``targets="ground_truth"`` uses a
+   generated recording's true keypoints instead (a control: same frames, crops and loss);
 3. runs the **frozen** backbone once over every frame and view, crops made from the detections as
    the drones make them, and caches the features (``<out>/feature_cache.pt``, reused while the
    backbone, crop settings and recording are unchanged). The backbone is never run again and
@@ -89,14 +90,18 @@ from airpose_lib.prior import load_prior
 from airpose_lib.profiles import profile_path, profile_section
 from airpose_lib.train.sampling import epoch_permutation, seed_everything
 
-from .keypoints import agreement_masks, agreement_summary, agreement_targets, pixel_settings, resolution_scales
+from .keypoints import (agreement_masks, agreement_summary, agreement_targets, pixel_settings, resolution_scales,
+                        true_targets)
 from .loss import FineTuneLoss, finetune_loss_config
 from .network import load_network
 from .predict import frames_in_range, image_sizes, regress_features, sequence_features
 from .selection import SELECTION_RULES, select_step
 
-__all__ = ["FineTuneConfig", "FineTuneResult", "finetune_config", "finetune", "finetune_done", "evaluate_finetune_loss",
-           "heldout_split"]
+__all__ = ["TARGET_SOURCES", "FineTuneConfig", "FineTuneResult", "finetune_config", "finetune", "finetune_done",
+           "evaluate_finetune_loss", "heldout_split"]
+
+#: Where the 2D targets come from (``FineTuneConfig.targets``).
+TARGET_SOURCES = ("detections", "ground_truth")
 
 
 @dataclass
@@ -113,6 +118,10 @@ class FineTuneConfig:
             paper weights; ``official_loss`` applies the official code's x60 and depth term first.
         threshold_px, min_confidence, unmatched: the agreement filter (``agreement_targets``);
             ``threshold_px`` at ``reference_width``.
+        targets: ``detections`` (the paper: OpenPose keypoints that AlphaPose confirms) or
+            ``ground_truth``, a control on generated recordings: the true BODY_25 keypoints
+            (:func:`~airpose_lib.finetune.keypoints.true_targets`) with the same frames and crops,
+            to tell what the detectors' errors cost from what fine-tuning on one person does.
         reference_width: image width (px) the pixel quantities (``threshold_px``, the 2D loss
             weight) refer to: the paper's 1920; each view uses them at its own width.
         holdout_fraction: the last part of the selected frames held out for model selection
@@ -143,6 +152,7 @@ class FineTuneConfig:
     loss: dict = field(default_factory=dict)
     official_loss: bool = False
     threshold_px: float = 100.0
+    targets: str = "detections"
     reference_width: float = 1920.0
     holdout_fraction: float = 0.2
     selection: str = "first_overfit"
@@ -168,7 +178,7 @@ class FineTuneConfig:
 
     # Fields whose change makes a resumed run differ from a straight one.
     RESUME_KEYS = ("batch_size", "lr", "amsgrad", "weight_decay", "seed", "loss", "official_loss", "threshold_px",
-                   "reference_width", "holdout_fraction", "selection",
+                   "targets", "reference_width", "holdout_fraction", "selection",
                    "min_confidence", "unmatched", "frames", "input_size", "detector", "box_min_confidence",
                    "margin_px", "prior", "prior_path", "prior_tag", "body_source")
 
@@ -179,6 +189,8 @@ class FineTuneConfig:
             raise ValueError("checkpoint_every, log_every and feature_batch_size must be >= 1")
         if not 0 <= self.holdout_fraction < 1:
             raise ValueError(f"holdout_fraction must be in [0, 1), got {self.holdout_fraction}")
+        if self.targets not in TARGET_SOURCES:
+            raise ValueError(f"unknown targets {self.targets!r}; use one of {', '.join(TARGET_SOURCES)}")
         if self.selection not in SELECTION_RULES:
             raise ValueError(f"unknown selection {self.selection!r}; use one of {', '.join(SELECTION_RULES)}")
         if not self.reference_width > 0:
@@ -270,8 +282,12 @@ class FineTuneResult:
 def _load_frames(root: Path, cfg: FineTuneConfig):
     detectors = tuple(dict.fromkeys(("openpose", "alphapose", cfg.detector)))
     frames = None if cfg.frames is None else frames_in_range(root, cfg.frames[0], cfg.frames[1])
-    return load_sequence(root, frames=frames, detectors=detectors, missing_detections=cfg.missing_detections,
-                         ground_truth=False)
+    seq = load_sequence(root, frames=frames, detectors=detectors, missing_detections=cfg.missing_detections,
+                        ground_truth=cfg.targets == "ground_truth")
+    if cfg.targets == "ground_truth" and (seq.ground_truth is None or "kp2d_body25" not in seq.ground_truth):
+        raise ValueError(f"{root}: targets='ground_truth' needs a generated recording's ground_truth.npz "
+                         "(kp2d_body25); real recordings have none: use targets='detections'")
+    return seq
 
 
 def _tensor_digest(tensors: Mapping[str, torch.Tensor]) -> str:
@@ -406,8 +422,9 @@ def _write_selection(out_dir: Path, rows: list[dict]) -> None:
 
 
 def _check_resume(saved: Mapping, cfg: FineTuneConfig, base_fp: str) -> None:
-    now = cfg.to_dict()
-    diff = [k for k in FineTuneConfig.RESUME_KEYS if saved["config"].get(k) != now.get(k)]
+    now, default = cfg.to_dict(), FineTuneConfig().to_dict()
+    # a key the saved run predates ran with its default (options are added with the old behaviour)
+    diff = [k for k in FineTuneConfig.RESUME_KEYS if saved["config"].get(k, default[k]) != now.get(k)]
     if saved.get("base_fingerprint") != base_fp:
         diff.append("base checkpoint")
     if diff:
@@ -584,9 +601,13 @@ def _finetune(checkpoint: Path, root: Path, out_dir: Path, cfg: FineTuneConfig, 
     threshold = cfg.threshold_px * scales
     masks = agreement_masks(seq.keypoints["openpose"], seq.keypoints["alphapose"], threshold_px=threshold,
                             min_confidence=cfg.min_confidence, unmatched=cfg.unmatched)
-    targets_np = agreement_targets(seq.keypoints["openpose"], seq.keypoints["alphapose"],
-                                   threshold_px=threshold, min_confidence=cfg.min_confidence,
-                                   unmatched=cfg.unmatched)
+    if cfg.targets == "ground_truth":
+        gt = seq.ground_truth
+        targets_np = true_targets(gt["kp2d_body25"], gt["kp_depth_body25"], np.asarray(image_sizes(seq)))
+    else:
+        targets_np = agreement_targets(seq.keypoints["openpose"], seq.keypoints["alphapose"],
+                                       threshold_px=threshold, min_confidence=cfg.min_confidence,
+                                       unmatched=cfg.unmatched)
     out_dir.mkdir(parents=True, exist_ok=True)
     cache = _feature_cache(model, seq, cfg, input_size, K_net_np, out_dir, progress)
     train_pos, held_pos = heldout_split(len(seq.frames), cfg.holdout_fraction)
@@ -632,7 +653,9 @@ def _finetune(checkpoint: Path, root: Path, out_dir: Path, cfg: FineTuneConfig, 
             "base_fingerprint": base_fp, "sequence": str(root),
             "frames": [int(seq.frames[0]), int(seq.frames[-1])], "num_frames": n,
             "heldout_frames": [int(seq.frames[held_pos[0]]), int(seq.frames[held_pos[-1]])] if len(held_pos) else [],
-            "num_heldout": len(held), "keypoints": agreement_summary(masks), "pixels": pixels,
+            "num_heldout": len(held), "pixels": pixels,
+            "keypoints": agreement_summary(masks) if cfg.targets == "detections" else
+            {"targets": "ground_truth", "kept": int((targets_np[..., 2] > 0).sum())},
             "camera_K": K_net_np.tolist(), "initial": None,
             "selection": {"rule": cfg.selection, "rows": [], "best_step": None, "best_heldout_j2d": None,
                           "overfit_step": None, "overfit_terms": []}}

@@ -45,6 +45,25 @@ def test_per_view_table_values():
     assert t["mpjpe_m"].sum() == pytest.approx(0.01)
 
 
+def test_true_root_mpjpe_scores_the_body_pose_alone():
+    gt = _gt()
+    gt["joints_zero_beta"] = gt["j3d_cam"] - gt["j3d_cam"][:, :, :1]
+    half_turn = torch.diag(torch.tensor([-1.0, -1.0, 1.0], dtype=torch.float64))  # a root 180 deg off about z
+    pred = dict(tau=gt["tau"], phi=gt["phi"] @ half_turn, joints=gt["j3d_cam"],
+                joints_zero_beta=gt["joints_zero_beta"] @ half_turn.T,
+                joints_zero_beta_true_root=gt["joints_zero_beta"].clone())
+    pred["joints_zero_beta_true_root"][0, 1, 5, 1] += 0.22  # one joint of one view's pose wrong by 22 cm
+    t = per_view_table(pred, gt)
+    xy = gt["joints_zero_beta"][..., :2].norm(dim=-1).mean(-1).reshape(-1).numpy()  # |p - (-p)| = 2 |p_xy|
+    np.testing.assert_allclose(t["mpjpe_m"], 2 * xy)
+    want = np.zeros(6)
+    want[1] = 0.01  # 0.22 m / 22 joints, only in sample 0 view 1
+    np.testing.assert_allclose(t["mpjpe_true_root_m"], want, atol=1e-12)
+    np.testing.assert_allclose(t["root_rot_deg"], 180.0, atol=1e-6)
+    del pred["joints_zero_beta_true_root"]  # not predicted: NaN, never a made-up number
+    assert per_view_table(pred, gt)["mpjpe_true_root_m"].isna().all()
+
+
 def test_per_joint_table():
     gt = _gt(N=2)
     pred = dict(joints=gt["j3d_cam"].clone())
@@ -90,7 +109,9 @@ def test_summarize_and_paper_table():
     assert set(s.columns) == {"method", "metric", "mean", "median", "std", "count"}
     mpe = s[s["metric"] == "mpe_m"].set_index("method")["mean"]
     assert mpe["baseline"] == pytest.approx(0.5) and mpe["airpose"] == pytest.approx(0.1)
-    assert (s["count"] == 8).all()
+    # every metric counts all 8 views; the true-root MPJPE was not predicted here (NaN, not counted)
+    assert (s.loc[s["metric"] != "mpjpe_true_root_m", "count"] == 8).all()
+    assert (s.loc[s["metric"] == "mpjpe_true_root_m", "count"] == 0).all()
     sv = summarize(table, by=("method", "view"), metrics=["mpe_m"])
     assert len(sv) == 4 and (sv["count"] == 4).all()
     long = to_long(table)

@@ -36,8 +36,8 @@ __all__ = [
 ]
 
 #: Metric columns of :func:`per_view_table`.
-PER_VIEW_METRICS = ("mpe_m", "mpjpe_m", "mpjpe_shape_m", "pa_mpjpe_m", "root_rot_deg", "err_x_m", "err_y_m",
-                    "err_z_m")
+PER_VIEW_METRICS = ("mpe_m", "mpjpe_m", "mpjpe_shape_m", "mpjpe_true_root_m", "pa_mpjpe_m", "root_rot_deg",
+                    "err_x_m", "err_y_m", "err_z_m")
 
 
 def _t(x) -> Tensor:
@@ -64,11 +64,15 @@ def per_view_table(pred: Mapping, gt: Mapping, method: str = "", sample_ids=None
     ``mpjpe_m`` is Table I's MPJPE: when both sides have ``joints_zero_beta`` (the official
     evaluation's bodies: zero betas, root rotation, no translation) it is computed on those, and
     ``mpjpe_shape_m`` on ``joints`` (shape-aware); otherwise both are the MPJPE of ``joints``.
-    PA-MPJPE is always on ``joints``.
+    ``mpjpe_true_root_m`` is Table I's MPJPE with the ground-truth root orientation
+    (``pred["joints_zero_beta_true_root"]``: the predicted body pose, zero betas, the true ``phi``;
+    NaN without it): the body pose alone, so ``mpjpe_m - mpjpe_true_root_m`` is what the root
+    orientation error costs. PA-MPJPE is always on ``joints``.
 
     Args:
         pred, gt: ``tau (N, V, 3)``, ``phi (N, V, 3, 3)``, ``joints`` / ``j3d_cam (N, V, 22, 3)``,
-            optionally ``joints_zero_beta (N, V, 22, 3)``. ``phi`` is optional (the column is then NaN).
+            optionally ``joints_zero_beta (N, V, 22, 3)`` (and in ``pred``
+            ``joints_zero_beta_true_root (N, V, 22, 3)``). ``phi`` is optional (the column is then NaN).
         method: value of the ``method`` column.
         sample_ids: ``(N,)`` identifiers (default ``0..N-1``).
 
@@ -84,6 +88,9 @@ def per_view_table(pred: Mapping, gt: Mapping, method: str = "", sample_ids=None
         "mpe_m": M.translation_error(tau_p, tau_g),
         "mpjpe_m": M.mpjpe(_t(pred["joints_zero_beta"]), _t(gt["joints_zero_beta"])) if official else shape_aware,
         "mpjpe_shape_m": shape_aware,
+        "mpjpe_true_root_m": (M.mpjpe(_t(pred["joints_zero_beta_true_root"]), _t(gt["joints_zero_beta"]))
+                              if official and "joints_zero_beta_true_root" in pred
+                              else torch.full((N, V), float("nan"))),
         "pa_mpjpe_m": M.pa_mpjpe(jp, jg),
         "root_rot_deg": (torch.rad2deg(M.rotation_error(_t(pred["phi"]), _t(gt["phi"])))
                          if "phi" in pred and "phi" in gt else torch.full((N, V), float("nan"))),

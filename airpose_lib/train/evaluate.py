@@ -5,7 +5,8 @@ Two sets of joints are scored (:func:`airpose_lib.eval.tables.per_view_table`):
 - Table I's MPJPE as the official evaluation defines it (``test_epoch_end`` of
   ``copenet/copenet_twoview.py``): prediction and ground truth both on the neutral body with
   **zero betas**, their own root rotation, no translation, the first 22 joints; body shape is not
-  scored (``joints_zero_beta``, pelvis-aligned: the official SMPL-X rotates about the pelvis).
+  scored (``joints_zero_beta``, pelvis-aligned: the official SMPL-X rotates about the pelvis);
+  the same with the true root orientation (``joints_zero_beta_true_root``) scores the body pose alone.
 - the kit's shape-aware MPJPE: the predicted neutral body with its predicted betas in the paper's
   convention (``phi J0 + tau``, camera frame) against the sample's ``j3d_cam`` (gendered model).
 """
@@ -49,7 +50,8 @@ def predict(model: nn.Module, dataset, batch_size: int = 8, device: str | torch.
 
     Returns:
         ``pred``: phi (N, V, 3, 3), theta (N, V, 21, 3, 3), beta (N, V, 10), tau (N, V, 3),
-        joints (N, V, 22, 3), joints_zero_beta (N, V, 22, 3); ``gt``: phi, tau, j3d_cam
+        joints (N, V, 22, 3), joints_zero_beta (N, V, 22, 3), joints_zero_beta_true_root
+        (N, V, 22, 3) (the predicted pose with the true root orientation); ``gt``: phi, tau, j3d_cam
         (N, V, 22, 3), joints_zero_beta, index (N,). CPU tensors.
     """
     device = torch.device(device)
@@ -74,6 +76,8 @@ def predict(model: nn.Module, dataset, batch_size: int = 8, device: str | torch.
         p["joints"], _ = body(p["theta"], p["beta"], p["phi"], p["tau"], vertices=False)
         zero = torch.zeros_like(p["beta"])
         p["joints_zero_beta"], _ = body(p["theta"], zero, p["phi"], vertices=False)
+        # the body pose alone: the same body with the true root orientation (Table I's extra column)
+        p["joints_zero_beta_true_root"], _ = body(p["theta"], zero, batch["phi"].to(p["theta"].dtype), vertices=False)
         for k, v in p.items():
             preds.setdefault(k, []).append(v.float().cpu())
         theta_gt = axis_angle_to_matrix(batch["theta"].to(p["theta"].dtype)).unsqueeze(1).expand_as(p["theta"])

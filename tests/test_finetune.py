@@ -682,3 +682,25 @@ def test_a_run_saved_before_an_option_existed_resumes_with_its_default():
         _check_resume({"config": old, "base_fingerprint": "f"}, cfg.replace(targets="ground_truth"), "f")
     with pytest.raises(StaleRunError, match="base checkpoint"):
         _check_resume({"config": old, "base_fingerprint": "f"}, cfg, "g")
+
+
+def test_the_training_frames_are_evaluated_once_per_selection_point(tiny_ckpt, smoke_root, tmp_path, body32,
+                                                                    tiny_prior, monkeypatch):
+    import airpose_lib.finetune.train as T
+
+    calls = []
+    real = T.evaluate_finetune_loss
+
+    def counting(model, loss_fn, features, *args, **kw):
+        calls.append(int(features.shape[0]))
+        return real(model, loss_fn, features, *args, **kw)
+
+    monkeypatch.setattr(T, "evaluate_finetune_loss", counting)
+    cfg = _cfg(frames=[0, 10], steps=4, batch_size=2, checkpoint_every=2, keep_checkpoints=1, holdout_fraction=0.2)
+    res = finetune(tiny_ckpt, smoke_root, tmp_path / "ft", cfg, prior=tiny_prior, body_model=body32)
+    rows = res.selection
+    assert rows["step"] == [0, 2, 4]
+    # selection points 0, 2, 4: held-out + training frames each; `initial` and `final` reuse them
+    assert sorted(calls) == sorted([res.num_frames, res.heldout_frames] * 3)
+    assert res.initial == {k[len("train_"):]: v[0] for k, v in rows.items() if k.startswith("train_")}
+    assert res.final == {k[len("train_"):]: v[-1] for k, v in rows.items() if k.startswith("train_")}

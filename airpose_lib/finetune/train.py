@@ -519,6 +519,7 @@ class _FineTuneTask(TrainingTask):
         self.selection: dict = info["selection"]
         self.best_path = checkpoint_dir(out_dir) / "best.pt"
         self.n = int(frames["features"].shape[0])
+        self._train_eval: tuple[int, dict] | None = None  # (step, loss terms on the training frames)
 
     def batches(self, epoch: int, start: int):
         B = self.cfg.batch_size
@@ -535,8 +536,16 @@ class _FineTuneTask(TrainingTask):
         _set_train_mode(self.model)
         self.loss_fn.train()
 
+    def train_terms(self, step: int) -> dict[str, float]:
+        """The loss terms on the training frames at ``step`` (evaluation is deterministic: eval
+        mode, VPoser mean), computed once per step: the selection, ``initial`` and ``final`` share it."""
+        if self._train_eval is None or self._train_eval[0] != step:
+            f = self.frames
+            self._train_eval = (step, self.evaluate(f["features"], f["P"], f["targets"]))
+        return self._train_eval[1]
+
     def start(self, run: EngineRun) -> None:
-        self.info["initial"] = self.evaluate(self.frames["features"], self.frames["P"], self.frames["targets"])
+        self.info["initial"] = self.train_terms(run.step)  # before validate: best.pt may be saved there
         self.validate(run)  # the network before fine-tuning is a candidate too
         seed_everything(_stream_seed(self.cfg.seed))  # the dropout / VPoser-sample stream
 
@@ -555,11 +564,11 @@ class _FineTuneTask(TrainingTask):
         (logged only); the chosen weights go to best.pt when they are the current ones (a rule
         only ever keeps the current point or one it chose before). Not at an interruption: a
         resumed run selects where a straight one does."""
-        h, f = self.heldout, self.frames
+        h = self.heldout
         if not len(h["features"]):
             return None
         held = self.evaluate(h["features"], h["P"], h["targets"])
-        trained = self.evaluate(f["features"], f["P"], f["targets"])
+        trained = self.train_terms(run.step)
         row = {"step": run.step, **{f"heldout_{k}": v for k, v in held.items()},
                **{f"train_{k}": v for k, v in trained.items()}}
         rows = [r for r in self.selection["rows"] if r["step"] != run.step] + [row]
@@ -670,7 +679,7 @@ def _finetune(checkpoint: Path, root: Path, out_dir: Path, cfg: FineTuneConfig, 
                         progress=progress, tensorboard=False)
     run = run_engine(task, schedule, out_dir, resume, started=t0)
 
-    final = None if run.stopped_early else evaluate(frames["features"], frames["P"], frames["targets"])
+    final = None if run.stopped_early else task.train_terms(run.step)
     selection = task.selection
     rows = selection["rows"]
     result = FineTuneResult(out_dir=out_dir, checkpoint=run.checkpoint, step=run.step, num_frames=n,

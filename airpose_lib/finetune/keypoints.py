@@ -58,6 +58,7 @@ __all__ = [
     "agreement_masks",
     "agreement_targets",
     "agreement_summary",
+    "kept_targets",
     "true_targets",
     "REFERENCE_WIDTH",
     "resolution_scales",
@@ -184,11 +185,22 @@ def agreement_targets(openpose: np.ndarray, alphapose: np.ndarray, *, threshold_
     Raises:
         ValueError: wrong shapes, frame/view counts that differ, negative confidences.
     """
-    m = agreement_masks(openpose, alphapose, threshold_px=threshold_px, min_confidence=min_confidence,
-                        unmatched=unmatched)
-    op = np.asarray(openpose, np.float64)
-    out = np.where(m.kept[..., None], op, 0.0)
-    return out.astype(np.float32)
+    return kept_targets(openpose, agreement_masks(openpose, alphapose, threshold_px=threshold_px,
+                                                  min_confidence=min_confidence, unmatched=unmatched))
+
+
+def kept_targets(openpose: np.ndarray, masks: AgreementMasks) -> np.ndarray:
+    """The targets of :func:`agreement_targets` from masks already computed (the filter once, its
+    counts and its targets from the same :class:`AgreementMasks`).
+
+    Args:
+        openpose: ``(F, V, 25, 3)`` BODY_25 ``[x, y, confidence]``; masks: its
+            :func:`agreement_masks`.
+
+    Returns:
+        ``(F, V, 25, 3)`` float32: OpenPose's ``[x, y, confidence]`` where kept, ``(0, 0, 0)`` elsewhere.
+    """
+    return np.where(masks.kept[..., None], np.asarray(openpose, np.float64), 0.0).astype(np.float32)
 
 
 def true_targets(kp2d: np.ndarray, depth: np.ndarray, image_size: np.ndarray) -> np.ndarray:

@@ -90,7 +90,7 @@ from airpose_lib.prior import load_prior
 from airpose_lib.profiles import profile_path, profile_section
 from airpose_lib.train.sampling import epoch_permutation, seed_everything
 
-from .keypoints import (agreement_masks, agreement_summary, agreement_targets, pixel_settings, resolution_scales,
+from .keypoints import (agreement_masks, agreement_summary, kept_targets, pixel_settings, resolution_scales,
                         true_targets)
 from .loss import FineTuneLoss, finetune_loss_config
 from .network import load_network
@@ -608,15 +608,15 @@ def _finetune(checkpoint: Path, root: Path, out_dir: Path, cfg: FineTuneConfig, 
     seq = _load_frames(root, cfg)
     scales = resolution_scales(image_sizes(seq), cfg.reference_width)  # (V,)
     threshold = cfg.threshold_px * scales
-    masks = agreement_masks(seq.keypoints["openpose"], seq.keypoints["alphapose"], threshold_px=threshold,
-                            min_confidence=cfg.min_confidence, unmatched=cfg.unmatched)
     if cfg.targets == "ground_truth":
         gt = seq.ground_truth
         targets_np = true_targets(gt["kp2d_body25"], gt["kp_depth_body25"], np.asarray(image_sizes(seq)))
+        keypoints = {"targets": "ground_truth", "kept": int((targets_np[..., 2] > 0).sum())}
     else:
-        targets_np = agreement_targets(seq.keypoints["openpose"], seq.keypoints["alphapose"],
-                                       threshold_px=threshold, min_confidence=cfg.min_confidence,
-                                       unmatched=cfg.unmatched)
+        masks = agreement_masks(seq.keypoints["openpose"], seq.keypoints["alphapose"], threshold_px=threshold,
+                                min_confidence=cfg.min_confidence, unmatched=cfg.unmatched)
+        targets_np = kept_targets(seq.keypoints["openpose"], masks)
+        keypoints = agreement_summary(masks)
     out_dir.mkdir(parents=True, exist_ok=True)
     cache = _feature_cache(model, seq, cfg, input_size, K_net_np, out_dir, progress)
     train_pos, held_pos = heldout_split(len(seq.frames), cfg.holdout_fraction)
@@ -662,9 +662,7 @@ def _finetune(checkpoint: Path, root: Path, out_dir: Path, cfg: FineTuneConfig, 
             "base_fingerprint": base_fp, "sequence": str(root),
             "frames": [int(seq.frames[0]), int(seq.frames[-1])], "num_frames": n,
             "heldout_frames": [int(seq.frames[held_pos[0]]), int(seq.frames[held_pos[-1]])] if len(held_pos) else [],
-            "num_heldout": len(held), "pixels": pixels,
-            "keypoints": agreement_summary(masks) if cfg.targets == "detections" else
-            {"targets": "ground_truth", "kept": int((targets_np[..., 2] > 0).sum())},
+            "num_heldout": len(held), "keypoints": keypoints, "pixels": pixels,
             "camera_K": K_net_np.tolist(), "initial": None,
             "selection": {"rule": cfg.selection, "rows": [], "best_step": None, "best_heldout_j2d": None,
                           "overfit_step": None, "overfit_terms": []}}

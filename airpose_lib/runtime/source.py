@@ -10,10 +10,11 @@ the views of
   moving in front of a gradient, BODY_25-like keypoints inside it) for tests and benchmarks that
   need no data on disk.
 
-:func:`person_box` turns detections into the person box (by default grown by
-:func:`network_box_margin`, so that the crop frames the person as the training crops did) and :func:`crop_input` turns the image
-and the box into the normalised ``(1, 3, S, S)`` crop and ``P (1, 3)``, the same preprocessing as
-the still-frame training samples (aspect-preserving, black padding), formed in the network's
+:func:`person_box` turns detections into the person box (its callers' default margin,
+:func:`box_margin` -> :func:`network_box_margin`, frames the person as the training crops did)
+and :func:`crop_input` turns the image and the box into the normalised ``(1, 3, S, S)`` crop
+and ``P (1, 3)``, the same preprocessing as the still-frame training samples
+(aspect-preserving, black padding), formed in the network's
 virtual camera (``geometry.virtual_crop``): any camera gives the input a training camera
 (:func:`network_camera`, f = 1475 px at 1920x1080) would give, and the predicted translation is
 in the real camera's frame.

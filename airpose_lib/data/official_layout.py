@@ -48,6 +48,7 @@ from pathlib import Path
 import numpy as np
 
 from airpose_lib import __version__  # the package root holds only the version
+from airpose_lib import safe_pickle
 from airpose_lib.atomic import atomic_path
 
 __all__ = [
@@ -370,8 +371,7 @@ def _load_detector_file(path: Path):
     try:
         if path.suffix == ".json":
             return json.loads(path.read_text())
-        with open(path, "rb") as fh:
-            return pickle.load(fh, encoding="latin1")  # latin1: the release's Python-2 era pickles
+        return safe_pickle.load(path)  # read-only; plain data only: a detector file never runs code
     except FileNotFoundError:
         raise SequenceFormatError(f"missing detector file {path}; {_DETECTIONS_FIX}") from None
     except (json.JSONDecodeError, UnicodeDecodeError) as e:

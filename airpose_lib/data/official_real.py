@@ -39,12 +39,13 @@ corrected is not in the repository.
 """
 from __future__ import annotations
 
-import pickle
 from collections.abc import Iterable, Mapping, Sequence as SequenceABC
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+
+from airpose_lib import safe_pickle
 
 from .official_layout import Sequence, SequenceFormatError, _frame_name, _image_index, _lookup, _machines, load_sequence
 
@@ -88,8 +89,7 @@ def real_split_frames(split: str | None = None, person: int | None = None) -> ra
 
 def _load_pickle(path: Path):
     try:
-        with open(path, "rb") as fh:  # read-only
-            return pickle.load(fh, encoding="latin1")
+        return safe_pickle.load(path)  # read-only; plain data only: a release file never runs code
     except FileNotFoundError:
         raise SequenceFormatError(f"missing file {path}") from None
     except Exception as e:  # noqa: BLE001 - any broken pickle

@@ -89,6 +89,7 @@ import numpy as np
 import torch
 from torch.utils.data import Dataset
 
+from airpose_lib import safe_pickle
 from airpose_lib.body import BODY_25_FROM_SMPLX, load_body_model
 from airpose_lib.body.forward import rest_body
 from airpose_lib.body.genders import GENDER_CODES
@@ -159,8 +160,7 @@ def subject_of(pkl_path: Path) -> str:
 
 def _load_pickle(path: Path, what: str):
     try:
-        with open(path, "rb") as fh:
-            return pickle.load(fh, encoding="latin1")
+        return safe_pickle.load(path)  # read-only; plain data only: a sample file never runs code
     except FileNotFoundError:
         raise OfficialDataError(f"missing {what} {path}; {_RELEASE_HINT}") from None
     except (EOFError, pickle.UnpicklingError, ValueError, TypeError, AttributeError, ImportError,

@@ -57,7 +57,6 @@ from __future__ import annotations
 
 import io
 import pickle
-import types
 import warnings
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -68,6 +67,7 @@ import torch
 from torch import Tensor
 
 from airpose_lib.atomic import atomic_path
+from airpose_lib.safe_pickle import torch_pickle_module
 
 from .backbone import BACKBONES
 from .variants import BETA_DIM, TAU_INIT, TAU_SCALE, THETA_DIM, WEAK_CAM_INIT, AirPoseNet, _spec
@@ -129,63 +129,6 @@ def official_variant_name(variant: str) -> str:
 
 
 # -- reading the file ---------------------------------------------------------------------------
-class _Placeholder(dict):
-    """Stands in for an object of a class that is not imported (e.g. Lightning's AttributeDict)."""
-
-    _source = "?"
-
-    def __init__(self, *args, **kwargs):
-        super().__init__()
-        if args:
-            self["__args__"] = args
-        self.update(kwargs)
-
-    def __setstate__(self, state):
-        self["__state__"] = state
-
-    def __repr__(self) -> str:
-        return f"<placeholder for {self._source}: {dict.__repr__(self)}>"
-
-
-_PLACEHOLDERS: dict[tuple[str, str], type] = {}
-_SAFE_BUILTINS = {"set", "frozenset", "slice", "complex", "bytearray", "object", "list", "dict", "tuple",
-                  "int", "float", "bool", "str", "bytes"}
-
-
-class _InertUnpickler(pickle.Unpickler):
-    """Resolves only torch's tensor/storage rebuilders, dtypes and plain containers; every other
-    global becomes a :class:`_Placeholder` subclass, so unpickling runs no foreign code."""
-
-    def find_class(self, module: str, name: str):
-        if module == "torch._utils" and name.startswith("_rebuild_"):
-            return getattr(torch._utils, name)
-        if module == "torch" and (name.endswith("Storage") or name in ("Size", "device")
-                                  or isinstance(getattr(torch, name, None), torch.dtype)):
-            return getattr(torch, name)
-        if module == "torch.storage" and name in ("TypedStorage", "UntypedStorage"):
-            return getattr(torch.storage, name)
-        if module == "collections" and name in ("OrderedDict", "defaultdict"):
-            import collections
-
-            return getattr(collections, name)
-        if module in ("builtins", "__builtin__") and name in _SAFE_BUILTINS:
-            import builtins
-
-            return getattr(builtins, name)
-        if module in ("copyreg", "copy_reg") and name == "_reconstructor":
-            import copyreg
-
-            return copyreg._reconstructor
-        key = (module, name)
-        if key not in _PLACEHOLDERS:
-            _PLACEHOLDERS[key] = type(name, (_Placeholder,), {"_source": f"{module}.{name}"})
-        return _PLACEHOLDERS[key]
-
-
-_inert_pickle = types.SimpleNamespace(Unpickler=_InertUnpickler, load=lambda f, **kw: _InertUnpickler(f, **kw).load(),
-                                      __name__="airpose_inert_pickle")
-
-
 def read_official_checkpoint(path: str | Path, map_location: str | torch.device = "cpu") -> dict:
     """Load a checkpoint file (read-only) without importing pytorch_lightning.
 
@@ -210,7 +153,7 @@ def read_official_checkpoint(path: str | Path, map_location: str | torch.device 
                                       f"truncated or not a PyTorch checkpoint, download it again") from None
     try:
         return torch.load(io.BytesIO(data), map_location=map_location, weights_only=False,
-                          pickle_module=_inert_pickle)
+                          pickle_module=torch_pickle_module())
     except Exception as e:  # noqa: BLE001
         raise OfficialCheckpointError(f"cannot read checkpoint {path} ({type(e).__name__}: {e}); the file is "
                                       f"truncated or not a PyTorch checkpoint, download it again") from None

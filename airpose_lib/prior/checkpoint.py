@@ -19,8 +19,8 @@ reads only those.
 from __future__ import annotations
 
 import os
+import pickle
 import re
-import warnings
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -32,6 +32,7 @@ from airpose_lib.atomic import atomic_path
 from airpose_lib.body.loader import _located
 from airpose_lib.errors import reading
 from airpose_lib.paths import cache_dir
+from airpose_lib.safe_pickle import torch_pickle_module
 
 from .vposer import LATENT_DIM, NUM_NEURONS, VPoser
 
@@ -151,17 +152,17 @@ def find_vposer_checkpoint(root: str | Path | None = None) -> Path:
 def vposer_state_dict(ckpt: str | Path) -> dict[str, torch.Tensor]:
     """The VAE's tensors from an official Lightning checkpoint, prefix ``vp_model.`` removed.
 
-    The release pickles non-tensor hyper-parameters next to the weights; if the safe
-    (``weights_only``) unpickler refuses them, the file is read with the full unpickler (a
-    warning says so): only load files you downloaded from the official site.
+    The release pickles non-tensor hyper-parameters next to the weights; if the
+    ``weights_only`` unpickler refuses them, the file is read again with the kit's checkpoint
+    unpickler (:func:`airpose_lib.safe_pickle.torch_pickle_module`): tensors and containers are
+    built, every other object becomes an inert placeholder, and no code of the file runs.
     """
     ckpt = Path(ckpt)
-    try:
-        blob = torch.load(ckpt, map_location="cpu", weights_only=True)
-    except Exception as safe_error:  # noqa: BLE001 - any unpickling refusal
-        warnings.warn(f"{ckpt.name}: safe loading failed ({type(safe_error).__name__}); "
-                      "reading it with the full unpickler", stacklevel=2)
-        blob = torch.load(ckpt, map_location="cpu", weights_only=False)
+    with reading(ckpt, "a VPoser V02_05 checkpoint", "download VPoser v2.0 again (data_manifests/vposer_v02_05.yaml)"):
+        try:
+            blob = torch.load(ckpt, map_location="cpu", weights_only=True)
+        except pickle.UnpicklingError:
+            blob = torch.load(ckpt, map_location="cpu", weights_only=False, pickle_module=torch_pickle_module())
     state = blob.get("state_dict", blob) if isinstance(blob, Mapping) else None
     if not isinstance(state, Mapping):
         raise PriorError(f"{ckpt}: no state_dict in this checkpoint")

@@ -23,16 +23,22 @@ import inspect
 import os
 import sys
 import threading
+import time
 from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 from typing import TypeVar
 
-__all__ = ["LOCK_NAME", "STALE_PATTERNS", "FolderBusyError", "folder_lock", "file_lock_for", "locks_folder",
+__all__ = ["LOCK_NAME", "MAKER_WAIT_S", "STALE_PATTERNS", "FolderBusyError", "folder_lock", "file_lock_for",
+           "locks_folder",
            "lock_holder", "file_lock"]
 
 F = TypeVar("F", bound=Callable)
 
 LOCK_NAME = ".airpose.lock"
+#: How long a command waits for another process that is making what it needs (a dataset, the
+#: recordings): the cpu profile's 32,000 pairs take 11-16 min on two cores, the paper profile's
+#: 30,000 larger ones hours.
+MAKER_WAIT_S = 6 * 3600.0
 # Temp files of the kit's atomic writes, in the folder and one level down (checkpoints/).
 STALE_PATTERNS = (".*.tmp", "*/.*.tmp")
 
@@ -53,7 +59,38 @@ def lock_holder(lock_file: str | Path) -> str:
         return "unknown"
 
 
-def _acquire(lock_file: Path, folder: Path, what: str, stale: Sequence[str]) -> None:
+def _busy_message(what: str, folder: Path, lock_file: Path) -> tuple[str, str]:
+    """(the holder's PID, the sentence that names it) for a lock another process holds."""
+    holder = lock_holder(lock_file)
+    pid = holder.split()[0].removeprefix("pid=") if holder != "unknown" else "unknown"
+    return pid, f"{what} {folder} is in use by another process (PID {pid}; lock {lock_file})"
+
+
+def _flock_waiting(handle, lock_file: Path, folder: Path, what: str, wait: float | None) -> None:
+    """``flock`` ``handle`` exclusively: at once, or (``wait`` seconds) after its holder lets go,
+    with one line on stderr saying whom it waits for. Raises :class:`FolderBusyError`."""
+    try:
+        fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        return
+    except BlockingIOError:
+        pid, busy = _busy_message(what, folder, lock_file)
+    if wait is None:
+        raise FolderBusyError(f"{busy}: wait for it to finish or stop it (kill {pid}), or choose another "
+                              "output folder")
+    print(f"airpose: {busy}; waiting for it to finish (at most {wait:.0f} s)", file=sys.stderr, flush=True)
+    deadline = time.monotonic() + wait
+    while True:
+        try:
+            fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            return
+        except BlockingIOError:
+            if time.monotonic() >= deadline:
+                raise FolderBusyError(f"{busy} and still was after {wait:.0f} s: wait for it to finish or stop "
+                                      f"it (kill {pid}), then run this again") from None
+            time.sleep(min(1.0, max(0.0, deadline - time.monotonic())))
+
+
+def _acquire(lock_file: Path, folder: Path, what: str, stale: Sequence[str], wait: float | None = None) -> None:
     with _guard:
         entry = _held.get(lock_file)
         if entry is not None:  # re-entrant within this process
@@ -62,14 +99,10 @@ def _acquire(lock_file: Path, folder: Path, what: str, stale: Sequence[str]) -> 
         folder.mkdir(parents=True, exist_ok=True)
         handle = open(lock_file, "a+")  # never truncated before we hold it: the holder's PID stays readable
         try:
-            fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
+            _flock_waiting(handle, lock_file, folder, what, wait)
+        except BaseException:
             handle.close()
-            holder = lock_holder(lock_file)
-            pid = holder.split()[0].removeprefix("pid=") if holder != "unknown" else "unknown"
-            raise FolderBusyError(
-                f"{what} {folder} is in use by another process (PID {pid}; lock {lock_file}): wait for "
-                f"it to finish or stop it (kill {pid}), or choose another output folder") from None
+            raise
         handle.seek(0)
         handle.truncate()
         handle.write(f"pid={os.getpid()} cmd={' '.join(sys.argv)[:200]}\n")
@@ -96,19 +129,22 @@ def _release(lock_file: Path) -> None:
 
 @contextlib.contextmanager
 def folder_lock(folder: str | Path, what: str = "run folder",
-                stale: Sequence[str] = STALE_PATTERNS) -> Iterator[Path]:
+                stale: Sequence[str] = STALE_PATTERNS, wait: float | None = None) -> Iterator[Path]:
     """Hold the exclusive lock of ``folder`` (created if needed) for the block; yields the folder.
 
     Args:
         folder: run or data folder.
         what: how the refusal message calls it (``run folder``, ``dataset folder``).
         stale: glob patterns (relative to ``folder``) of temp files to delete once the lock is held.
+        wait: None refuses a second writer at once (two writers of one output are a mistake);
+            seconds to wait for the holder instead (a reader that needs what the holder makes),
+            with one line on stderr.
     Raises:
-        FolderBusyError: another process holds it.
+        FolderBusyError: another process holds it (after ``wait`` seconds, if given).
     """
     folder = Path(folder).absolute()
     lock_file = folder / LOCK_NAME
-    _acquire(lock_file, folder, what, stale)
+    _acquire(lock_file, folder, what, stale, wait)
     try:
         yield folder
     finally:

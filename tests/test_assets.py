@@ -132,7 +132,8 @@ def test_generated_manifest_becomes_shard_layout(tmp_path):
     assert (shard.size, shard.sha256) == (3, sha(b"abc"))
     root = tmp_path / "cache" / "data" / "still_toy"  # where the generator writes it
     root.mkdir(parents=True)
-    (root / "manifest.yaml").write_text("x")
+    # the dataset's own manifest (with this machine's bytes) is what the shards are checked against
+    (root / "manifest.yaml").write_text(yaml.safe_dump(record))
     (root / "shard_00000.npz").write_bytes(b"abc")
     assert verify("generated_toy", manifests=tmp_path / "m").ok
     (root / "shard_00000.npz").write_bytes(b"abd")

@@ -142,6 +142,8 @@ class AssetManifest:
     path: Path | None = None
     profile: str | None = None
     """Generated datasets only: the profile that made it."""
+    fingerprint: str | None = None
+    """Generated datasets only: the hash of the generator's settings and version."""
 
     @property
     def generated(self) -> bool:
@@ -383,14 +385,17 @@ def _parse_generated(data: dict, path: Path) -> AssetManifest:
         raise _fail(path, "profile", "a generated-dataset manifest needs the profile that made it")
     shards = data.get("shards")
     if not isinstance(shards, list):
-        raise _fail(path, "shards", "expected a list of {file, bytes, sha256}")
+        raise _fail(path, "shards", "expected a list of {file, ...}")
     layout = []
     for i, rec in enumerate(shards):
-        if not isinstance(rec, dict) or not {"file", "bytes", "sha256"} <= set(rec):
-            raise _fail(path, f"shards[{i}]", "expected a mapping with file, bytes and sha256")
+        if not isinstance(rec, dict) or "file" not in rec:
+            raise _fail(path, f"shards[{i}]", "expected a mapping with file (bytes and sha256 in a dataset's "
+                                              "own manifest.yaml)")
+        # A dataset's own manifest.yaml has each shard's size and SHA-256 as written on that
+        # machine; the tracked record (record_manifest) has neither: the bytes differ between machines.
         layout.append(LayoutEntry(path=_rel_path(path, f"shards[{i}].file", rec["file"]), required=True,
-                                  size=_opt_int(path, f"shards[{i}].bytes", rec["bytes"]),
-                                  sha256=_opt_sha(path, f"shards[{i}].sha256", rec["sha256"]),
+                                  size=_opt_int(path, f"shards[{i}].bytes", rec.get("bytes")),
+                                  sha256=_opt_sha(path, f"shards[{i}].sha256", rec.get("sha256")),
                                   description="shard"))
     layout.insert(0, LayoutEntry(path="manifest.yaml", required=True, description="the dataset's own manifest"))
     totals = data.get("totals") or {}
@@ -408,7 +413,7 @@ def _parse_generated(data: dict, path: Path) -> AssetManifest:
         registration_required=False, env_var=None, layout=tuple(layout), files=(), used_by=(),
         description=f"generator_version {data.get('generator_version')}, seed {data.get('seed')}, "
                     f"{data.get('num_shards')} shards",
-        path=path, profile=profile)
+        path=path, profile=profile, fingerprint=data.get("fingerprint"))
 
 
 # -- loading by name ------------------------------------------------------------------------------

@@ -16,8 +16,10 @@ import hashlib
 from dataclasses import dataclass
 from pathlib import Path
 
+import yaml
+
 from .locate import AssetLocation, config_path, locate
-from .manifest import AssetManifest, LayoutEntry, load_asset_manifest
+from .manifest import AssetManifest, LayoutEntry, ManifestError, load_asset_manifest, parse_manifest
 
 __all__ = ["PRESENT", "MISSING", "SIZE_MISMATCH", "CHECKSUM_MISMATCH", "EntryResult", "VerifyReport",
            "sha256_file", "verify"]
@@ -189,8 +191,44 @@ def verify(name: str | AssetManifest, root: str | Path | None = None, checksums:
     """
     manifest = load_asset_manifest(name, manifests)
     location = locate(manifest, root=root)
+    if manifest.generated:
+        return _verify_generated(manifest, location, checksums)
     results = tuple(_check_entry(location.path, e, checksums) for e in manifest.layout)
     hint = ""
     if location.path.is_dir() and not all(r.ok for r in results):
         hint = _nested_hint(location.path, manifest, results)
     return VerifyReport(manifest, location, results, checksums, hint)
+
+
+def _verify_generated(record: AssetManifest, location: AssetLocation, checksums: bool) -> VerifyReport:
+    """A kit-generated dataset: its shards against the sizes and SHA-256 that the generator on
+    *this* machine wrote into the dataset's own ``manifest.yaml``, after checking that it was made
+    with the settings of the tracked record (same fingerprint, same shard files).
+
+    The tracked ``data_manifests/generated_<profile>.yaml`` holds no shard bytes: rendering and
+    JPEG encoding differ between machines, so a healthy dataset made elsewhere has other bytes,
+    while a damaged one never matches its own manifest.
+    """
+    own_path = location.path / "manifest.yaml"
+    if not own_path.is_file():
+        results = tuple(_check_entry(location.path, e, checksums=False) for e in record.layout)
+        return VerifyReport(record, location, results, checksums)
+    try:
+        own = parse_manifest(yaml.safe_load(own_path.read_text()), own_path)
+    except (yaml.YAMLError, UnicodeDecodeError, ManifestError) as e:
+        entry = LayoutEntry(path="manifest.yaml", required=True, description="the dataset's own manifest")
+        return VerifyReport(record, location, (EntryResult(entry, CHECKSUM_MISMATCH, (own_path,),
+                                                           f"unreadable ({type(e).__name__})"),), checksums)
+    results = [_check_entry(location.path, e, checksums) for e in own.layout]
+    ours = {e.path for e in own.layout}
+    results += [EntryResult(e, MISSING, (), "listed in the tracked record, not in the dataset's manifest")
+                for e in record.layout if e.path not in ours]
+    hint = ""
+    if record.fingerprint is not None and own.fingerprint != record.fingerprint:
+        entry = LayoutEntry(path="manifest.yaml", required=True, description="the dataset's own manifest")
+        results.insert(0, EntryResult(entry, CHECKSUM_MISMATCH, (own_path,),
+                                      f"made with other settings than {record.path} (fingerprint "
+                                      f"{str(own.fingerprint)[:12]}... instead of {record.fingerprint[:12]}...)"))
+    elif checksums:
+        hint = "shards checked against the SHA-256 this machine's generator recorded in manifest.yaml"
+    return VerifyReport(record, location, tuple(results), checksums, hint)

@@ -25,10 +25,11 @@ from __future__ import annotations
 import multiprocessing as mp
 import os
 import queue as queue_mod
+import sys
 from pathlib import Path
 
 from airpose_lib import __version__
-from airpose_lib.folder_lock import locks_folder
+from airpose_lib.folder_lock import MAKER_WAIT_S, folder_lock, locks_folder
 from airpose_lib.process_guard import die_with_parent
 from airpose_lib.progress import progress_bar
 
@@ -38,6 +39,7 @@ from .manifest import (
     load_manifest,
     record_manifest,
     regenerate_command,
+    shard_problem,
     write_manifest,
 )
 from .shards import sha256_file, shard_name
@@ -180,12 +182,13 @@ def generate_still_dataset(
     records = {r["index"]: r for r in manifest.get("shards") or []}
     for k in range(config.num_shards):
         r = records.get(k)
-        path = root / shard_name(k)
-        if r is not None and path.is_file() and path.stat().st_size == r["bytes"] \
-                and sha256_file(path) == r["sha256"]:
+        problem = shard_problem(root, r) if r is not None else "is not made yet"
+        if problem is None:
             kept.append(r)
         else:
             todo.append(k)
+            if r is not None:  # a finished shard went bad: say so, not only rebuild it
+                print(f"airpose: shard {root / r['file']} {problem}; rebuilding it", file=sys.stderr)
     manifest["shards"] = kept
     _finish_manifest(manifest, config)
     write_manifest(root, manifest)
@@ -273,12 +276,18 @@ def _run_pool(config, root, todo, workers, bar, finished) -> None:
 
 def ensure_still_dataset(profile: str | None = None, *, config: GenerationConfig | None = None,
                          root: Path | str | None = None, workers: int | None = None,
-                         progress: bool = True, record: bool | Path = False) -> Path:
+                         progress: bool = True, record: bool | Path = False,
+                         wait_s: float = MAKER_WAIT_S) -> Path:
     """Make sure a complete, verified dataset exists and return its folder.
 
     Either ``profile`` (settings from the profile file, default folder
-    :func:`default_root`) or an explicit ``config`` and ``root``. Existing shards are verified
-    and kept, so on a finished dataset this only checks checksums.
+    :func:`default_root`) or an explicit ``config`` and ``root``. Every shard is verified once
+    per process; damaged or missing ones are rebuilt (the kit owns this folder), so on a finished
+    dataset this only checks checksums. While another process generates the same folder, this
+    waits for it (a line on stderr says so) for at most ``wait_s`` seconds.
+
+    Raises:
+        FolderBusyError: the other process still holds the folder after ``wait_s``.
     """
     if config is None:
         if profile is None:
@@ -288,16 +297,35 @@ def ensure_still_dataset(profile: str | None = None, *, config: GenerationConfig
         if profile is None:
             raise ValueError("give a root folder for an explicit config")
         root = default_root(profile)
-    done = load_manifest(Path(root))
-    if done is not None and done.get("status") == "complete" and done.get("fingerprint") == config.fingerprint() \
-            and not record:
-        # Finished: readers take no writer's lock (parallel trainings open it at once); the
-        # datasets verify every shard's checksum when they open it.
-        return Path(root)
-    workers = workers if workers is not None else max(1, min(os.cpu_count() or 1, 4))
-    manifest = generate_still_dataset(config, root, workers=workers, profile=profile,
-                                      progress=progress, record=record)
+    root = Path(root)
+    if not record and _finished_and_intact(root, config):
+        # Readers take no writer's lock (parallel trainings open the dataset at once).
+        return root
+    # Another process may be making this very dataset (two trainings or notebooks started side by
+    # side on a fresh cache): wait for it, then look again before generating anything.
+    with folder_lock(root, "dataset folder", wait=wait_s):
+        if not record and _finished_and_intact(root, config):
+            return root
+        workers = workers if workers is not None else max(1, min(os.cpu_count() or 1, 4))
+        manifest = generate_still_dataset(config, root, workers=workers, profile=profile,
+                                          progress=progress, record=record)
     if manifest["status"] != "complete":
         raise DatasetError(f"dataset in {root} is incomplete; resume with "
-                           f"`{regenerate_command(manifest, Path(root))}`")
-    return Path(root)
+                           f"`{regenerate_command(manifest, root)}`")
+    return root
+
+
+def _finished_and_intact(root: Path, config: GenerationConfig) -> bool:
+    """Whether ``root`` holds the complete dataset of ``config`` with every shard as recorded; a
+    damaged shard is named on stderr (the generator then rebuilds it)."""
+    done = load_manifest(root)
+    if done is None or done.get("status") != "complete" or done.get("fingerprint") != config.fingerprint():
+        return False
+    intact = True
+    for rec in done.get("shards") or []:
+        problem = shard_problem(root, rec)
+        if problem is not None:
+            print(f"airpose: shard {root / rec['file']} {problem}; the kit owns this dataset and rebuilds it",
+                  file=sys.stderr)
+            intact = False
+    return intact

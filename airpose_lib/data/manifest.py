@@ -26,7 +26,9 @@ __all__ = [
     "write_manifest",
     "repo_manifest_dir",
     "record_manifest",
+    "machine_independent",
     "regenerate_command",
+    "shard_problem",
     "verify_shard",
     "check_complete",
 ]
@@ -67,9 +69,12 @@ def write_manifest(root: Path, manifest: dict) -> Path:
     return path
 
 
-def _dump(manifest: dict) -> str:
+def _dump(manifest: dict, tracked: bool = False) -> str:
     header = ("# Written by `airpose data generate` (airpose_lib.data.generate); do not edit.\n"
-              "# One entry per finished shard with its SHA-256; readers refuse shards that differ.\n")
+              + ("# The settings and splits of a profile's dataset, the same on every machine; each shard's size\n"
+                 "# and SHA-256 are in the dataset's own manifest.yaml (`airpose data verify` checks them).\n"
+                 if tracked else
+                 "# One entry per finished shard with its SHA-256; readers refuse shards that differ.\n"))
     return header + yaml.safe_dump(manifest, sort_keys=False, default_flow_style=None, width=100)
 
 
@@ -79,16 +84,33 @@ def repo_manifest_dir() -> Path | None:
     return folder if folder.is_dir() else None
 
 
+def machine_independent(manifest: dict) -> dict:
+    """A dataset manifest without what differs between machines for the same settings: each shard's
+    size and SHA-256, the total bytes (off-screen rendering and JPEG encoding give other bytes on
+    another CPU or Mesa build) and the body-model files' SHA-256 (built on each machine). What stays (settings, fingerprint, splits, sample counts) says
+    which data a profile's results were made from; the bytes are checked against the dataset's
+    own ``manifest.yaml``, written by the generator on the machine that holds it."""
+    out = dict(manifest)
+    out["shards"] = [{k: v for k, v in rec.items() if k not in ("bytes", "sha256")}
+                     for rec in manifest.get("shards") or []]
+    if isinstance(out.get("totals"), dict):
+        out["totals"] = {k: v for k, v in out["totals"].items() if k != "bytes"}
+    if isinstance(out.get("body_models"), dict):  # the open body model is built on each machine
+        out["body_models"] = {k: v for k, v in out["body_models"].items() if k != "sha256"}
+    return out
+
+
 def record_manifest(manifest: dict, folder: Path | None = None) -> Path | None:
-    """Copy a complete manifest to ``<folder>/generated_<profile>.yaml`` (default: the checkout's
-    ``data_manifests/``). Returns the path, or None if there is no such folder or no profile."""
+    """Copy a complete manifest, :func:`machine_independent`, to ``<folder>/generated_<profile>.yaml``
+    (default: the checkout's ``data_manifests/``). Returns the path, or None if there is no such
+    folder or no profile."""
     folder = Path(folder) if folder is not None else repo_manifest_dir()
     profile = manifest.get("profile")
     if folder is None or not profile:
         return None
     path = folder / f"generated_{profile}.yaml"
     with atomic_path(path) as tmp:
-        tmp.write_text(_dump(manifest))
+        tmp.write_text(_dump(machine_independent(manifest), tracked=True))
     return path
 
 
@@ -99,6 +121,37 @@ def regenerate_command(manifest: dict | None, root: Path) -> str:
     return f"airpose data generate{prof} --out {root}"
 
 
+# Shards this process has hashed: absolute path -> (size, mtime_ns, SHA-256). A shard is hashed
+# once per process (a training opens its splits several times) and again whenever its size or
+# modification time changes.
+_VERIFIED: dict[str, tuple[int, int, str]] = {}
+
+
+def shard_problem(root: Path, record: dict) -> str | None:
+    """What is wrong with one shard against its manifest record (missing, size, SHA-256), or None.
+
+    The SHA-256 is computed once per process and file version (size and modification time).
+    """
+    path = Path(root) / record["file"]
+    try:
+        st = path.stat()
+    except FileNotFoundError:
+        return "is missing"
+    if st.st_size != record["bytes"]:
+        return f"is damaged: {st.st_size} bytes instead of {record['bytes']} (truncated or altered)"
+    key = str(path.absolute())
+    seen = _VERIFIED.get(key)
+    if seen is not None and seen[:2] == (st.st_size, st.st_mtime_ns):
+        digest = seen[2]
+    else:
+        digest = sha256_file(path)
+        _VERIFIED[key] = (st.st_size, st.st_mtime_ns, digest)
+    if digest != record["sha256"]:
+        return (f"is damaged: SHA-256 {digest[:16]}... does not match the manifest's "
+                f"{record['sha256'][:16]}... (altered or corrupted)")
+    return None
+
+
 def verify_shard(root: Path, record: dict, manifest: dict | None = None) -> Path:
     """Check one shard against its manifest record (size, then SHA-256); returns its path.
 
@@ -106,20 +159,11 @@ def verify_shard(root: Path, record: dict, manifest: dict | None = None) -> Path
         ShardIntegrityError: naming the file, what is wrong and the command that repairs it.
     """
     path = Path(root) / record["file"]
-    fix = (f"regenerate it with `{regenerate_command(manifest, root)}` (finished shards are kept, "
-           f"missing or damaged ones are rebuilt identically)")
-    if not path.is_file():
-        raise ShardIntegrityError(f"shard {path} is missing; {fix}")
-    size = path.stat().st_size
-    if size != record["bytes"]:
+    problem = shard_problem(root, record)
+    if problem is not None:
         raise ShardIntegrityError(
-            f"shard {path} is damaged: {size} bytes instead of {record['bytes']} (truncated or "
-            f"altered); {fix}")
-    digest = sha256_file(path)
-    if digest != record["sha256"]:
-        raise ShardIntegrityError(
-            f"shard {path} is damaged: SHA-256 {digest[:16]}... does not match the manifest's "
-            f"{record['sha256'][:16]}... (altered or corrupted); {fix}")
+            f"shard {path} {problem}; regenerate it with `{regenerate_command(manifest, root)}` (finished "
+            f"shards are kept, missing or damaged ones are rebuilt identically)")
     return path
 
 

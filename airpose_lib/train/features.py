@@ -117,7 +117,9 @@ class FeatureDataset(Dataset):
 
     def __init__(self, data_root: str | Path, split: str, features: np.ndarray | str | Path, *,
                  crops: str = "jittered", augment: bool | None = None) -> None:
-        self.still = StillFrameDataset(data_root, split, augment=False, crops=crops, verify=False)
+        # verified like any read of the shards (once per process): features cached from an intact
+        # copy must never be served with labels read from a damaged one
+        self.still = StillFrameDataset(data_root, split, augment=False, crops=crops)
         self.features = np.load(features, mmap_mode="r") if not isinstance(features, np.ndarray) else features
         if len(self.features) != len(self.still):
             raise ValueError(f"{len(self.features)} feature rows for {len(self.still)} samples of {data_root} "

@@ -7,6 +7,7 @@ import shutil
 from collections.abc import Mapping
 from pathlib import Path
 
+from airpose_lib.folder_lock import MAKER_WAIT_S, folder_lock
 from airpose_lib.paths import cache_dir
 
 from ..detections import DETECTOR_VERSION
@@ -76,18 +77,29 @@ def ensure_sequences(profile: str | None = None, root: str | Path | None = None,
     unknown = [n for n in names if n not in configs]
     if unknown:
         raise ValueError(f"unknown recording(s) {unknown}; available: {list(configs)}")
-    out = {}
-    for name in names:
+    def current(name: str) -> bool:
         folder = root / name
-        if force or not _is_complete(folder, configs[name]):
-            partial = folder.with_name(folder.name + ".partial")
-            if partial.exists():
-                shutil.rmtree(partial)  # left by an interrupted run
-            generate_sequence(configs[name], partial, progress=progress)
-            if folder.exists():
-                shutil.rmtree(folder)  # outdated
-            partial.rename(folder)
-        elif not _detections_current(folder):
-            refresh_detections(folder, configs[name])  # a new detector model: no re-rendering
-        out[name] = folder
-    return out
+        return not force and _is_complete(folder, configs[name]) and _detections_current(folder)
+
+    if all(current(name) for name in names):  # readers take no lock
+        return {name: root / name for name in names}
+    # One writer of the recordings at a time; a second command that needs them (a notebook run
+    # beside another) waits for the first instead of rendering into the same .partial folder.
+    with folder_lock(root, "recordings folder", stale=(), wait=MAKER_WAIT_S):
+        for name in names:
+            folder = root / name
+            if force or not _is_complete(folder, configs[name]):
+                partial = folder.with_name(folder.name + ".partial")
+                if partial.exists():
+                    shutil.rmtree(partial)  # left by an interrupted run
+                try:
+                    generate_sequence(configs[name], partial, progress=progress)
+                except BaseException:  # a full disk, Ctrl-C: leave no half-made recording behind
+                    shutil.rmtree(partial, ignore_errors=True)
+                    raise
+                if folder.exists():
+                    shutil.rmtree(folder)  # outdated
+                partial.rename(folder)
+            elif not _detections_current(folder):
+                refresh_detections(folder, configs[name])  # a new detector model: no re-rendering
+    return {name: root / name for name in names}

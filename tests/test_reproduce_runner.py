@@ -241,3 +241,66 @@ def test_kernels_use_ipc_sockets_outside_the_checkout():
     km = __import__("airpose_lib.reproduce.runner", fromlist=["x"])._ipc_kernel_manager()(kernel_name="python3")
     assert km.transport == "ipc"
     assert not Path(km.ip).resolve().is_relative_to(NOTEBOOKS_DIR.parent)
+
+
+SLEEP_BODY = """
+import os, subprocess, time
+from pathlib import Path
+child = subprocess.Popen(["sleep", "300"])  # a worker of the notebook: must die with its kernel
+(Path(output_dir) / "started").write_text(str(child.pid))
+time.sleep(300)
+"""
+
+STOPPER = """
+import sys
+from airpose_lib.reproduce.runner import run_profile
+root = sys.argv[1]
+try:
+    run_profile("tiny", out_dir=root + "/runs", figures_dir=root + "/figures", notebooks_dir=root + "/notebooks",
+                catalog_path=root + "/catalog.yaml", profiles_dir=root + "/profiles", verbose=False)
+except KeyboardInterrupt:  # as airpose_lib.cli.main
+    print("airpose: interrupted", file=sys.stderr)
+    sys.exit(130)
+"""
+
+
+@pytest.mark.parametrize("signame", ["SIGINT", "SIGTERM"])
+def test_a_signal_stops_the_run_and_its_kernel_at_once_and_quietly(tmp_path, signame):
+    """Issue 33: SIGINT to the process alone was ignored until the notebook ended; Ctrl-C printed a
+    19-line ZMQ traceback. Now either signal kills the kernel's process group within seconds, the
+    run says one line, and the report keeps the finished notebook."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    nbs = tmp_path / "notebooks"
+    nbs.mkdir()
+    _write_nb(nbs / "00_ok.ipynb", OK_BODY)
+    _write_nb(nbs / "01_sleep.ipynb", SLEEP_BODY)
+    (tmp_path / "catalog.yaml").write_text(yaml.safe_dump({"notebooks": [
+        {"name": "00_ok", "file": "00_ok.ipynb", "reproduces": "a", "figures": ["a.png"]},
+        {"name": "01_sleep", "file": "01_sleep.ipynb", "reproduces": "b", "figures": []}]}))
+    (tmp_path / "profiles").mkdir()
+    (tmp_path / "profiles" / "tiny.yaml").write_text(yaml.safe_dump(
+        {"description": "test profile", "cell_timeout_s": 600, "notebooks": {}}))
+    proc = subprocess.Popen([sys.executable, "-c", STOPPER, str(tmp_path)], stderr=subprocess.PIPE, text=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_IGN))  # as `cmd &` does
+    started = tmp_path / "runs" / "tiny" / "01_sleep" / "started"
+    deadline = time.monotonic() + 120
+    while not (started.is_file() and started.read_text()) and time.monotonic() < deadline:
+        assert proc.poll() is None, proc.stderr.read()
+        time.sleep(0.2)
+    child = int(started.read_text())
+    t0 = time.monotonic()
+    proc.send_signal(getattr(signal, signame))
+    err = proc.communicate(timeout=30)[1]
+    assert time.monotonic() - t0 < 10
+    assert proc.returncode == 130
+    assert [line for line in err.splitlines() if line.strip()] == ["airpose: interrupted"], err
+    time.sleep(0.5)
+    with pytest.raises(ProcessLookupError):
+        os.kill(child, 0)
+    report = json.loads((tmp_path / "runs" / "tiny" / "report.json").read_text())
+    assert [r["status"] for r in report["results"]] == ["ok", "interrupted"]

@@ -26,9 +26,13 @@ from __future__ import annotations
 import contextlib
 import datetime as _dt
 import json
+import logging
 import os
 import shutil
+import signal
+import threading
 import time
+import weakref
 from collections.abc import Iterator, Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -50,6 +54,7 @@ __all__ = [
     "NotebookResult",
     "RunReport",
     "ReproductionError",
+    "Interrupted",
     "load_catalog",
     "load_profile",
     "list_profiles",
@@ -98,8 +103,8 @@ class NotebookResult:
     """Outcome of one notebook in a run.
 
     ``status`` is ``ok``, ``failed`` (a cell raised / the kernel died), ``missing_figures``,
-    ``invalid`` (no parameters cell, unknown parameter, missing file) or ``skipped`` (not run
-    because an earlier notebook failed).
+    ``invalid`` (no parameters cell, unknown parameter, missing file), ``interrupted`` (SIGINT or
+    SIGTERM killed its kernel) or ``skipped`` (not run because an earlier notebook failed).
     """
 
     name: str
@@ -301,6 +306,10 @@ def _ipc_kernel_manager():
     from traitlets import default
 
     class IPCKernelManager(AsyncKernelManager):
+        def __init__(self, *args, **kwargs):
+            super().__init__(*args, **kwargs)
+            _LIVE_KERNELS.add(self)  # a stop signal kills their kernels (_stop_on_signals)
+
         @default("transport")
         def _transport_default(self) -> str:
             return "ipc"
@@ -313,6 +322,84 @@ def _ipc_kernel_manager():
 
 
 _SOCKET_DIR: Path | None = None
+_LIVE_KERNELS: "weakref.WeakSet" = weakref.WeakSet()
+
+
+class Interrupted(KeyboardInterrupt):
+    """SIGINT or SIGTERM stopped the run (the notebook's kernel was killed; finished notebooks and
+    checkpoints stay, and the same command resumes). A ``KeyboardInterrupt``: the ``airpose``
+    command prints one line for it."""
+
+
+def _kernel_pids() -> list[int]:
+    pids = []
+    for km in list(_LIVE_KERNELS):
+        process = getattr(getattr(km, "provisioner", None), "process", None)
+        if process is not None and process.poll() is None:
+            pids.append(process.pid)
+    return pids
+
+
+def _in_worker_thread(fn, *args, **kwargs):
+    """``fn(*args, **kwargs)`` in a worker thread, while the main thread waits and keeps handling
+    signals (:func:`_stop_on_signals`). In the main thread nbclient replaces the SIGINT and SIGTERM
+    handlers with its own, which shut the kernel down politely after the running cell (and print
+    a ZMQ traceback); outside it, it leaves them alone."""
+    box: dict = {}
+
+    def target() -> None:
+        try:
+            box["value"] = fn(*args, **kwargs)
+        except BaseException as e:  # noqa: BLE001 - re-raised in the caller's thread
+            box["error"] = e
+
+    worker = threading.Thread(target=target, name="papermill", daemon=True)
+    worker.start()
+    while worker.is_alive():
+        worker.join(0.2)  # returns to the interpreter: a signal's handler runs within 0.2 s
+    if "error" in box:
+        raise box["error"]
+    return box.get("value")
+
+
+@contextlib.contextmanager
+def _stop_on_signals() -> Iterator[list[int]]:
+    """SIGINT and SIGTERM stop the run at once and quietly.
+
+    The signal kills the running notebook's kernel with its whole process group (the kernel is a
+    session leader: its training workers go with it); nbclient, running in a worker thread
+    (:func:`_in_worker_thread`), then finds the kernel dead and papermill returns, and
+    :func:`run_profile` raises :class:`Interrupted`. A run started in the background ignores
+    SIGINT unless the handler is set here. Yields the list that receives the signal's number.
+    """
+    caught: list[int] = []
+    if threading.current_thread() is not threading.main_thread():
+        yield caught
+        return
+
+    def handler(signum, frame):
+        caught.append(signum)
+        pids = _kernel_pids()
+        for pid in pids:
+            with contextlib.suppress(ProcessLookupError, PermissionError):
+                os.killpg(pid, signal.SIGKILL)
+        if not pids:  # between notebooks: stop right here
+            raise Interrupted(signal.Signals(signum).name)
+
+    def after_stop(record) -> bool:  # nbclient's "Kernel died ..." is our doing, not news
+        return not caught
+
+    loggers = [logging.getLogger(name) for name in ("papermill", "traitlets")]
+    previous = {sig: signal.signal(sig, handler) for sig in (signal.SIGINT, signal.SIGTERM)}
+    for log in loggers:
+        log.addFilter(after_stop)
+    try:
+        yield caught
+    finally:
+        for log in loggers:
+            log.removeFilter(after_stop)
+        for sig, old in previous.items():
+            signal.signal(sig, old)
 
 
 def _socket_dir() -> Path:
@@ -391,7 +478,8 @@ def _run_one(entry: CatalogEntry, nb_path: Path, params: dict, run_dir: Path, fi
     result.executed_notebook = str(executed)
     try:
         with kernel_environment():
-            papermill.execute_notebook(
+            _in_worker_thread(
+                papermill.execute_notebook,
                 str(nb_path), str(executed), parameters=params, kernel_name=kernel_name,
                 cwd=str(nb_path.parent), progress_bar=False, log_output=log_output,
                 execution_timeout=cell_timeout_s, kernel_manager_class=_ipc_kernel_manager())
@@ -489,7 +577,7 @@ def run_profile(
                        run_dir=str(run_dir), figures_dir=str(figures_dir))
     report.results = [NotebookResult(e.name, e.file) for e in selected]
     # stale=(): a notebook run by hand may be writing below run_dir; its temp files are not ours
-    with folder_lock(run_dir, "reproduction folder", stale=()):
+    with folder_lock(run_dir, "reproduction folder", stale=()), _stop_on_signals() as caught:
         t_start = time.perf_counter()
         stop = False
         for i, entry in enumerate(selected):
@@ -504,9 +592,13 @@ def run_profile(
                 print(f"[reproduce:{prof['name']}] {entry.name} ...", flush=True)
             result = _run_one(entry, notebooks_dir / entry.file, params, run_dir, figures_dir,
                               kernel_name, prof["cell_timeout_s"], log_output, report)
+            if caught:  # stopped by a signal: the kernel was killed, not the notebook's fault
+                result.status, result.error = "interrupted", f"stopped by {signal.Signals(caught[0]).name}"
             report.results[i] = result
             report.wall_s = time.perf_counter() - t_start
             report.write(run_dir / "report.json")  # after every notebook: a killed run leaves a trace
+            if caught:
+                raise Interrupted(signal.Signals(caught[0]).name)
             if result.status != "ok" and not keep_going:
                 stop = True
         report.wall_s = time.perf_counter() - t_start

@@ -8,6 +8,7 @@ clears after a writer died.
 from __future__ import annotations
 
 import contextlib
+import errno
 import os
 import tempfile
 from collections.abc import Iterator
@@ -20,7 +21,8 @@ __all__ = ["atomic_path"]
 def atomic_path(target: Path) -> Iterator[Path]:
     """Yield a temporary path beside ``target``; move it over ``target`` only if the block succeeds.
 
-    A crash or Ctrl-C leaves the previous file (or none) in place, never a truncated one.
+    A crash or Ctrl-C leaves the previous file (or none) in place, never a truncated one. A full
+    disk raises ``OSError(ENOSPC)`` naming ``target``.
     """
     target = Path(target)
     target.parent.mkdir(parents=True, exist_ok=True)
@@ -33,6 +35,11 @@ def atomic_path(target: Path) -> Iterator[Path]:
         os.umask(umask)
         os.chmod(tmp_path, 0o666 & ~umask)  # mkstemp makes 0600; give the file normal permissions
         os.replace(tmp_path, target)
+    except OSError as e:
+        if e.errno in (errno.ENOSPC, errno.EDQUOT) and e.filename is None:
+            # The writers (zipfile, torch.save, numpy) do not say which file the full disk stopped.
+            raise OSError(e.errno, os.strerror(e.errno), str(target)) from e
+        raise
     finally:
         if tmp_path.exists():
             tmp_path.unlink()

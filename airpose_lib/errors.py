@@ -5,7 +5,9 @@ makes the underlying reader raise (``zipfile.BadZipFile``, ``EOFError``, pickle 
 a ``KeyError`` for a missing entry) becomes one :class:`DamagedFileError` that names the file,
 says what it should have been and how to get a good one. A missing file stays a
 ``FileNotFoundError`` (the ``airpose`` command reports both in one line, exit status 2).
-:class:`ProfileError` is an unknown profile or a profile file without a section it needs.
+:class:`ProfileError` is an unknown profile or a profile file without a section it needs,
+:class:`ConfigError` a configuration value of the wrong type or range; all derive from
+:class:`UserError`, the class the ``airpose`` command reports on one line.
 Imports nothing of the kit.
 """
 from __future__ import annotations
@@ -17,7 +19,7 @@ import zipfile
 from collections.abc import Iterator
 from pathlib import Path
 
-__all__ = ["DamagedFileError", "ProfileError", "reading"]
+__all__ = ["ConfigError", "DamagedFileError", "ProfileError", "UserError", "reading"]
 
 # What readers raise on a truncated, corrupted or foreign file (ImportError / AttributeError: a
 # pickle naming classes that do not exist here; UnicodeDecodeError is a ValueError).
@@ -25,7 +27,18 @@ _CONTENT_ERRORS = (EOFError, KeyError, IndexError, ValueError, RuntimeError, OSE
                    AttributeError, ImportError, pickle.UnpicklingError, zipfile.BadZipFile)
 
 
-class DamagedFileError(ValueError):
+class UserError(Exception):
+    """An error the user can fix: its message names the file or value, what is wrong and the fix.
+    The ``airpose`` command prints it on one line (exit status 2); anything else is a bug and
+    keeps its traceback."""
+
+
+class ConfigError(UserError, ValueError):
+    """A configuration value of the wrong type or range, or an unknown key; the message names the
+    field (and the profile file or flag it came from). A ``ValueError``, as the checks it replaced."""
+
+
+class DamagedFileError(UserError, ValueError):
     """An input file exists but cannot be read as what it should be; the message names it and the fix."""
 
     def __init__(self, path: str | os.PathLike, what: str, fix: str, cause: BaseException | None = None):
@@ -34,7 +47,7 @@ class DamagedFileError(ValueError):
         super().__init__(f"{path} is damaged or not {what}{detail}; {fix}")
 
 
-class ProfileError(ValueError):
+class ProfileError(UserError, ValueError):
     """An unknown profile, or a profile file that lacks (or garbles) a section; the message names
     the file and the fix. A ``ValueError``, as the readers it replaced raised."""
 

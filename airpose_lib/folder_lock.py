@@ -29,8 +29,7 @@ from pathlib import Path
 from typing import TypeVar
 
 __all__ = ["LOCK_NAME", "MAKER_WAIT_S", "STALE_PATTERNS", "FolderBusyError", "folder_lock", "file_lock_for",
-           "locks_folder",
-           "lock_holder", "file_lock"]
+           "locks_folder", "lock_holder", "file_lock"]
 
 F = TypeVar("F", bound=Callable)
 

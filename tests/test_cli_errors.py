@@ -305,3 +305,72 @@ def test_argparse_errors_are_one_line_too(argv, says, capsys):
         cli.main(argv)
     err = capsys.readouterr().err
     assert exc.value.code == 2 and err.count("\n") == 1 and err.startswith("airpose: error: ") and says in err, err
+
+
+# -- issue 33: a full disk, bad values and a refused command -------------------------------------
+def _enospc(*args, **kwargs):
+    raise OSError(28, "No space left on device")
+
+
+@pytest.mark.parametrize("patch, argv", [
+    ("zipfile.ZipFile.writestr", lambda p: ["data", "generate", "--profile", "smoke", "--workers", "1", "--quiet",
+                                           "--out", p["tmp"] / "full"]),
+    ("airpose_lib.data.sequences.recording.generate_sequence",
+     lambda p: ["data", "sequence", "--profile", "smoke", "--quiet", "--out", p["tmp"] / "full_seq"]),
+])
+def test_a_full_disk_is_one_line_naming_the_file(inputs, capsys, monkeypatch, patch, argv):
+    """ENOSPC used to end in three chained tracebacks (zipfile's clean-up raised again)."""
+    module, _, name = patch.rpartition(".")
+    if patch.startswith("zipfile"):
+        import zipfile
+
+        monkeypatch.setattr(zipfile.ZipFile, "writestr", _enospc)
+    else:
+        import airpose_lib.data.sequences.cache as cache
+
+        def full(config, out, progress=False):  # as the renderer would: a frame half written
+            from airpose_lib.atomic import atomic_path
+
+            (Path(out) / "machine_1").mkdir(parents=True, exist_ok=True)
+            with atomic_path(Path(out) / "machine_1" / "000000.jpg") as tmp:
+                tmp.write_bytes(b"x")
+                _enospc()
+
+        monkeypatch.setattr(cache, "generate_sequence", full)
+    code, err = _run(argv(inputs), capsys)
+    lines = [line for line in err.splitlines() if line.strip()]
+    assert code == 2 and len(lines) == 1, err
+    assert lines[0].startswith("airpose: error: no space left on the device while writing ")
+    assert ("shard_" in lines[0] or "000000.jpg" in lines[0]) and "rerun resumes" in lines[0]
+    assert not list((inputs["tmp"] / "full_seq").glob("*.partial"))  # nothing half-made kept
+
+
+@pytest.mark.parametrize("setting, says", [
+    ("lr=inf", "lr must be a finite number > 0"),
+    ("device=tpu", "device must be"),
+    ("model.dropout=abc", "model.dropout: expected float"),
+    ("keep_checkpoints=-1", "keep_checkpoints must be >= 0"),
+    ("val_every=-3", "val_every must be"),
+    ("val_batches=0", "val_batches must be"),
+    ("data.root=/nonexistent", "no dataset in /nonexistent"),
+])
+def test_bad_training_values_are_one_line_before_a_run_folder_exists(inputs, capsys, setting, says):
+    out = inputs["tmp"] / f"never_{abs(hash(setting))}"
+    code, err = _run(["train", "--variant", "airpose", "--out", out, "--set", setting], capsys)
+    lines = [line for line in err.splitlines() if line.strip()]
+    assert code == 2 and len(lines) == 1 and says in lines[0], err
+    assert not out.exists()
+
+
+def test_a_refused_finetune_leaves_no_folder(inputs, capsys):
+    """A damaged detection file used to be found after the --out folder and its lock existed."""
+    from airpose_lib.model import build_model
+
+    ckpt = inputs["tmp"] / "net.pt"
+    if not ckpt.exists():
+        torch.save({"model": build_model("airpose", "resnet18").state_dict(), "step": 0,
+                    "config": {"variant": "airpose", "backbone": "resnet18", "model": {}}}, ckpt)
+    out = inputs["tmp"] / "ft_refused"
+    code, err = _run(["finetune", "--checkpoint", ckpt, "--sequence", inputs["bad_seq"], "--out", out], capsys)
+    assert code == 2, err
+    assert not out.exists()

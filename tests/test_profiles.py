@@ -22,16 +22,44 @@ def by_name_section(name, *keys):
     return value
 
 
-def test_sections_are_copies_and_missing_ones_are_empty(tmp_path):
+def test_sections_are_copies_and_empty_ones_take_the_defaults(tmp_path):
     path = tmp_path / "p.yaml"
-    path.write_text("train:\n  steps: 3\nfitting:\n")
+    path.write_text("train:\n  steps: 3\nfitting:\ndata:\n  still: {}\n")
     section = profile_section(path, "train")
     section["steps"] = 99
     assert profile_section(path, "train") == {"steps": 3}
     assert profile_section(path, "fitting") == {} and profile_section(path, "data.still") == {}
+    assert profile_names(tmp_path) == ["p"] and profile_section("p", "train", folder=tmp_path) == {"steps": 3}
+
+
+def test_an_empty_file_or_a_missing_section_is_an_error_not_the_defaults(tmp_path):
+    """Issue 33: an empty profile file, or one without the section a command reads, used to run
+    silently on the defaults."""
     (tmp_path / "empty.yaml").write_text("")
-    assert read_profile(tmp_path / "empty.yaml") == {}
-    assert profile_names(tmp_path) == ["empty", "p"] and profile_section("p", "train", folder=tmp_path) == {"steps": 3}
+    with pytest.raises(ProfileError, match=r"empty\.yaml is empty"):
+        read_profile(tmp_path / "empty.yaml")
+    path = tmp_path / "p.yaml"
+    path.write_text("train:\n  steps: 3\n")
+    with pytest.raises(ProfileError, match=r"p\.yaml has no `finetune:` section; add one"):
+        profile_section(path, "finetune")
+    with pytest.raises(ProfileError, match=r"p\.yaml has no `data: still:` section"):
+        profile_section(path, "data.still")
+
+
+def test_a_bad_value_or_key_in_a_profile_names_the_file_and_the_field(tmp_path):
+    from airpose_lib.errors import ConfigError
+    from airpose_lib.train import load_train_config
+
+    path = tmp_path / "mine.yaml"
+    path.write_text("train:\n  steps: thirty\n")
+    with pytest.raises(ConfigError, match=r"mine\.yaml, section `train:`: steps: expected int, got 'thirty'"):
+        load_train_config(path, "airpose")
+    path.write_text("train:\n  stepz: 3\n")
+    with pytest.raises(ConfigError, match=r"mine\.yaml, section `train:`: unknown key 'stepz'.*did you mean 'steps'"):
+        load_train_config(path, "airpose")
+    path.write_text("train:\n  lr: .inf\n")
+    with pytest.raises(ConfigError, match=r"mine\.yaml.*lr must be a finite number > 0"):
+        load_train_config(path, "airpose")
 
 
 def test_errors_name_the_file_and_the_fix(tmp_path):

@@ -6,15 +6,14 @@ Only the standard library and pathlib at import time: the parser is built from t
 """
 from __future__ import annotations
 
-import dataclasses
 import difflib
 import errno
 import sys
-import types
 import typing
 from pathlib import Path
 
 from airpose_lib.body.genders import GENDERS  # a leaf of the lazy body package: no torch
+from airpose_lib.errors import UserError  # standard library only
 from airpose_lib.profiles import profile_names  # yaml only
 
 __all__ = [
@@ -62,7 +61,6 @@ _OS_FIXES = {
     errno.EACCES: "permission denied; choose a place you can read/write (e.g. another --out) or fix its permissions",
     errno.EPERM: "operation not permitted; choose another place (e.g. another --out) or fix its permissions",
     errno.EROFS: "read-only file system; choose another place (e.g. another --out)",
-    errno.ENOSPC: "no space left on the device; free some space or choose another --out",
     errno.EEXIST: "already exists; remove it or choose another path",
     errno.ENAMETOOLONG: "name too long; choose a shorter path",
 }
@@ -70,13 +68,31 @@ _OS_FIXES = {
 
 def user_error_message(exc: BaseException) -> str | None:
     """The one-line message for an error the user can fix, None for anything else (a bug)."""
-    if isinstance(exc, CLIError) or any(
+    no_space = _no_space(exc)
+    if no_space is not None:
+        return no_space
+    if isinstance(exc, (CLIError, UserError)) or any(
             isinstance(exc, cls) for cls in (_class(spec) for spec in _USER_ERRORS) if cls is not None):
         return " ".join(str(exc).split()) or type(exc).__name__
     if isinstance(exc, OSError) and exc.filename is not None and exc.errno in _OS_FIXES:
         return f"{exc.filename}: {_OS_FIXES[exc.errno]}"
     if isinstance(exc, FileNotFoundError):  # raised by the kit with its own message
         return " ".join(str(exc).split())
+    return None
+
+
+def _no_space(exc: BaseException) -> str | None:
+    """A full disk anywhere in the chain of ``exc`` (a writer's ENOSPC often surfaces as another
+    error raised while the writer cleans up): the one-line message, else None."""
+    seen = set()
+    while exc is not None and id(exc) not in seen:
+        seen.add(id(exc))
+        if isinstance(exc, OSError) and exc.errno in (errno.ENOSPC, errno.EDQUOT):
+            where = f" while writing {exc.filename}" if exc.filename else ""
+            return (f"no space left on the device{where}; free some space (or point $AIRPOSE_CACHE / "
+                    "$AIRPOSE_RUNS / --out at a larger disk) and run the command again: what was finished is "
+                    "kept and the rerun resumes")
+        exc = exc.__cause__ or exc.__context__
     return None
 
 
@@ -128,30 +144,14 @@ def require_path(path: Path | str | None, flag: str, what: str) -> Path | None:
     return None if path is None else Path(path)
 
 
-def _type_name(tp) -> str:
-    return getattr(tp, "__name__", str(tp).replace("typing.", ""))
-
-
 def _check_value(item: str, value, annotation) -> object:
     """``value`` if it fits the field type ``annotation`` (ints widen to floats), else CLIError."""
-    options = typing.get_args(annotation) if typing.get_origin(annotation) in (typing.Union, types.UnionType) \
-        else (annotation,)
-    if value is None and type(None) in options:
-        return None
-    for tp in options:
-        base = typing.get_origin(tp) or tp
-        if base is typing.Any:
-            return value
-        if base is float and isinstance(value, (int, float)) and not isinstance(value, bool):
-            return float(value)
-        if base is int and isinstance(value, int) and not isinstance(value, bool):
-            return value
-        if base in (bool, str, dict, list) and isinstance(value, base):
-            return value
-        if base is tuple and isinstance(value, list):
-            return tuple(value)
-    wanted = " or ".join(_type_name(t) for t in options)
-    raise CLIError(f"--set {item}: expected {wanted}, got {value!r} ({type(value).__name__})")
+    from airpose_lib.config_fields import ConfigError, check_type  # standard library only
+
+    try:
+        return check_type(f"--set {item}", value, annotation)
+    except ConfigError as e:
+        raise CLIError(str(e)) from None
 
 
 def parse_sets(items, config_cls=None, nested: dict | None = None) -> dict:
@@ -165,9 +165,7 @@ def parse_sets(items, config_cls=None, nested: dict | None = None) -> dict:
     """
     import yaml  # only when --set is given: the parser is built on every call, --help included
 
-    def fields_of(cls) -> dict:
-        hints = typing.get_type_hints(cls)
-        return {f.name: hints.get(f.name, typing.Any) for f in dataclasses.fields(cls)}
+    from airpose_lib.config_fields import field_types as fields_of
 
     def unknown(item: str, key: str, known: dict, where: str) -> CLIError:
         close = difflib.get_close_matches(key, list(known), n=1)

@@ -21,6 +21,7 @@ __all__ = ['add_pretrain', 'add_train']
 def _cmd_train(args: argparse.Namespace) -> int:
     from airpose_lib.losses import LossConfig
     from airpose_lib.train import TrainConfig, default_out_dir, load_train_config
+    from airpose_lib.train.loop import check_data_root
 
     overrides = parse_sets(args.set, TrainConfig, {"loss": LossConfig})
     if args.quiet:
@@ -36,6 +37,7 @@ def _cmd_train(args: argparse.Namespace) -> int:
     for k, v in overrides.items():  # dict fields: merge into the profile's dicts
         if isinstance(v, dict):
             cfg = cfg.replace(**{k: {**getattr(cfg, k), **v}})
+    check_data_root(cfg)  # inputs before the run folder exists
     # The run folder and the checkpoint to resume from are checked before any data is prepared.
     out = args.out if args.out is not None else default_out_dir(args.profile, cfg.variant, cfg.seed)
     out.mkdir(parents=True, exist_ok=True)

@@ -5,6 +5,7 @@ The lowest training layer: it imports nothing of the kit but ``folder_lock``, ``
 ``errors`` and the atomic writer, so ``train``, ``finetune`` and ``prior`` all build on it."""
 
 from .checkpoint import (
+    AFRESH_HINT,
     FORMAT_VERSION,
     StaleRunError,
     capture_rng_state,
@@ -20,6 +21,6 @@ from .loop import EngineResult, EngineRun, Schedule, TrainingTask, process_rank,
 
 __all__ = [
     "run_engine", "run_folder", "process_rank", "Schedule", "TrainingTask", "EngineRun", "EngineResult",
-    "FORMAT_VERSION", "StaleRunError", "kit_version", "capture_rng_state", "restore_rng_state", "save_checkpoint",
-    "load_checkpoint", "checkpoint_dir", "last_checkpoint", "RunLogger", "read_log",
+    "AFRESH_HINT", "FORMAT_VERSION", "StaleRunError", "kit_version", "capture_rng_state", "restore_rng_state",
+    "save_checkpoint", "load_checkpoint", "checkpoint_dir", "last_checkpoint", "RunLogger", "read_log",
 ]

@@ -28,10 +28,11 @@ import numpy as np
 import torch
 
 from airpose_lib.atomic import atomic_path
-from airpose_lib.errors import reading
+from airpose_lib.errors import UserError, reading
 
 __all__ = [
     "StaleRunError",
+    "AFRESH_HINT",
     "kit_version",
     "capture_rng_state",
     "restore_rng_state",
@@ -44,15 +45,20 @@ __all__ = [
 FORMAT_VERSION = 1
 
 
-class StaleRunError(ValueError):
+#: The two ways out of a run folder that cannot be resumed, for a command-line and a Python user.
+AFRESH_HINT = ("start afresh in it (`--no-resume`; resume=False in Python) or choose another folder "
+               "(`--out`; out_dir=)")
+
+
+class StaleRunError(UserError, ValueError):
     """A run folder's checkpoint was made with other settings (``fields``) than asked for now, so
     it cannot be resumed (raised by the trainings' resume checks, caught by callers that may
     start such a run afresh)."""
 
     def __init__(self, fields: list[str], made: str = "trained"):
         self.fields = fields
-        super().__init__(f"cannot resume: the checkpoint was {made} with different {fields}; use another "
-                         "out_dir or resume=False")
+        super().__init__(f"cannot resume: the checkpoint was {made} with different {', '.join(fields)}; "
+                         f"{AFRESH_HINT}")
 
 
 def kit_version() -> str:

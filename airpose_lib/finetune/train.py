@@ -69,6 +69,7 @@ from airpose_lib.atomic import atomic_path
 from airpose_lib.body import load_body_model
 from airpose_lib.data.official_layout import load_sequence
 from airpose_lib.engine import (
+    AFRESH_HINT,
     FORMAT_VERSION as CHECKPOINT_FORMAT,
     EngineRun,
     Schedule,
@@ -495,8 +496,9 @@ def finetune(checkpoint: str | Path, sequence_root: str | Path, out_dir: str | P
     if cfg.num_threads:
         torch.set_num_threads(cfg.num_threads)
     try:
+        inputs = _read_inputs(Path(checkpoint), Path(sequence_root), cfg)
         with folder_lock(out_dir):  # one writer per run folder
-            return _finetune(Path(checkpoint), Path(sequence_root), Path(out_dir), cfg, resume, progress, prior,
+            return _finetune(inputs, Path(checkpoint), Path(sequence_root), Path(out_dir), cfg, resume, progress, prior,
                              body_model, stop_at, diagnostic)
     finally:
         torch.set_num_threads(threads)
@@ -551,8 +553,8 @@ class _FineTuneTask(TrainingTask):
 
     def resume(self, state: Mapping) -> None:
         if "finetune" not in state:
-            raise ValueError(f"{checkpoint_dir(self.out_dir) / 'last.pt'} is not a fine-tuning checkpoint; use "
-                             "another out_dir or resume=False")
+            raise ValueError(f"{checkpoint_dir(self.out_dir) / 'last.pt'} is not a fine-tuning checkpoint; "
+                             f"{AFRESH_HINT}")
         _check_resume(state["finetune"], self.cfg, self.info["base_fingerprint"])
         self.info["initial"] = state["finetune"]["initial"]
         self.selection = dict(state["finetune"].get("selection") or self.selection)
@@ -594,17 +596,19 @@ class _FineTuneTask(TrainingTask):
         return self.cfg.to_dict()
 
 
-def _finetune(checkpoint: Path, root: Path, out_dir: Path, cfg: FineTuneConfig, resume: bool, progress: bool,
-              prior, body_model, stop_at, diagnostic) -> FineTuneResult:
-    t0 = time.time()
+def _read_inputs(checkpoint: Path, root: Path, cfg: FineTuneConfig) -> tuple:
+    """The network, the recording and its 2D targets, read (and so checked) before the run folder
+    is created or locked: a refused command leaves no trace.
+
+    Returns:
+        ``(device, model, train_cfg, input_size, seq, scales, targets_np (F, V, 25, 3), keypoints)``.
+    """
     if cfg.device == "auto":
         device = torch.device("cuda" if torch.cuda.is_available() else "cpu")
     else:
         device = torch.device(cfg.device)
-    seed_everything(cfg.seed)
+    seed_everything(cfg.seed)  # first, as before the split: the network's build draws from it
     model, train_cfg, input_size = load_network(checkpoint, device, cfg.input_size)
-    K_net_np = np.asarray(model.camera_K, np.float64)
-    base_fp = _tensor_digest(model.state_dict())
     seq = _load_frames(root, cfg)
     scales = resolution_scales(image_sizes(seq), cfg.reference_width)  # (V,)
     threshold = cfg.threshold_px * scales
@@ -617,6 +621,15 @@ def _finetune(checkpoint: Path, root: Path, out_dir: Path, cfg: FineTuneConfig, 
                                 min_confidence=cfg.min_confidence, unmatched=cfg.unmatched)
         targets_np = kept_targets(seq.keypoints["openpose"], masks)
         keypoints = agreement_summary(masks)
+    return device, model, train_cfg, input_size, seq, scales, targets_np, keypoints
+
+
+def _finetune(inputs: tuple, checkpoint: Path, root: Path, out_dir: Path, cfg: FineTuneConfig, resume: bool,
+              progress: bool, prior, body_model, stop_at, diagnostic) -> FineTuneResult:
+    t0 = time.time()
+    device, model, train_cfg, input_size, seq, scales, targets_np, keypoints = inputs
+    K_net_np = np.asarray(model.camera_K, np.float64)
+    base_fp = _tensor_digest(model.state_dict())
     out_dir.mkdir(parents=True, exist_ok=True)
     cache = _feature_cache(model, seq, cfg, input_size, K_net_np, out_dir, progress)
     train_pos, held_pos = heldout_split(len(seq.frames), cfg.holdout_fraction)

@@ -51,10 +51,10 @@ def profile_path(profile: str | Path, folder: str | Path = PROFILES_DIR) -> Path
 
 
 def read_profile(profile: str | Path, folder: str | Path = PROFILES_DIR) -> dict:
-    """A profile file's content: ``{section: settings}`` (``{}`` for an empty file).
+    """A profile file's content: ``{section: settings}``.
 
     Raises:
-        ProfileError: no such profile, invalid YAML, or not a mapping of sections.
+        ProfileError: no such profile, an empty file, invalid YAML, or not a mapping of sections.
     """
     path = profile_path(profile, folder)
     try:
@@ -63,7 +63,8 @@ def read_profile(profile: str | Path, folder: str | Path = PROFILES_DIR) -> dict
         raise ProfileError(f"{path} is not valid YAML ({type(e).__name__}: {' '.join(str(e).split())}); "
                            "fix the file") from None
     if raw is None:
-        return {}
+        raise ProfileError(f"{path} is empty; a profile is a YAML mapping of sections (train:, data: ...), "
+                           f"see the kit's profiles in {PROFILES_DIR}")
     if not isinstance(raw, dict):
         raise ProfileError(f"{path} must be a YAML mapping of sections (train:, data: ...), "
                            f"not a {type(raw).__name__}; fix the file")
@@ -72,26 +73,34 @@ def read_profile(profile: str | Path, folder: str | Path = PROFILES_DIR) -> dict
 
 def profile_section(profile: str | Path, section: str, *, required: str | None = None,
                     folder: str | Path = PROFILES_DIR) -> dict:
-    """One section of a profile, as a new dict (``{}`` when the profile has none).
+    """One section of a profile, as a new dict.
+
+    A section written empty (``finetune:`` or ``finetune: {}``) gives ``{}``: the defaults, as the
+    file says. A section that is not in the file at all is a mistake (a user's profile that lacks
+    what the command reads would otherwise run silently on the defaults) and raises.
 
     Args:
         profile: a profile name or the path of a profile YAML file.
         section: the section's key; dots go deeper (``"data.still"`` is ``data: still:``).
-        required: what the section holds (``"the still-frame dataset sizes"``): a missing or
-            empty section then raises, naming the file, the section and what it is for.
+        required: what the section holds (``"the still-frame dataset sizes"``): an empty section
+            then raises too, naming the file, the section and what it is for.
         folder: where named profiles live.
-
     Raises:
-        ProfileError: no such profile, a required section missing, or a section that is not a mapping.
+        ProfileError: no such profile, a missing section (or an empty required one), or a section
+            that is not a mapping.
     """
     path = profile_path(profile, folder)
     value = read_profile(path)
-    for key in section.split("."):
-        value = value.get(key) if isinstance(value, dict) else None
     label = ": ".join(section.split(".")) + ":"
+    for key in section.split("."):
+        if not isinstance(value, dict) or key not in value:
+            what = f" ({required})" if required is not None else ""
+            raise ProfileError(f"{path} has no `{label}` section{what}; add one (the kit's profiles in "
+                               f"{PROFILES_DIR} have it; an empty `{label}` takes the defaults)")
+        value = value[key]
     if not value:
         if required is not None:
-            raise ProfileError(f"{path} has no `{label}` section ({required}); add one "
+            raise ProfileError(f"{path} has an empty `{label}` section ({required}); fill it in "
                                f"(the kit's profiles in {PROFILES_DIR} have it)")
         return {}
     if not isinstance(value, dict):

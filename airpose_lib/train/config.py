@@ -23,7 +23,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from airpose_lib.profiles import profile_section
+from airpose_lib.config_fields import ConfigError, check_fields, check_keys, check_type, finite, require
+from airpose_lib.profiles import profile_path, profile_section
 
 __all__ = ["TrainConfig", "load_train_config"]
 
@@ -119,22 +120,43 @@ class TrainConfig:
     backbone_lr_scale: float = 1.0
 
     def __post_init__(self) -> None:
-        if self.task not in ("supervised", "regressor", "pretrain"):
-            raise ValueError(f"task must be 'supervised', 'regressor' or 'pretrain', got {self.task!r}")
-        if self.lr_schedule not in ("constant", "cosine"):
-            raise ValueError(f"lr_schedule must be 'constant' or 'cosine', got {self.lr_schedule!r}")
+        # Types first (a profile's `steps: thirty`), then each field's range, before anything runs.
+        check_fields(self)
+        variants, backbones = _model_choices()
+        require(self.variant in variants, "variant", f"one of {', '.join(variants)}", self.variant)
+        require(self.task in ("supervised", "regressor", "pretrain"), "task",
+                "'supervised', 'regressor' or 'pretrain'", self.task)
+        require(self.lr_schedule in ("constant", "cosine"), "lr_schedule", "'constant' or 'cosine'", self.lr_schedule)
+        require(self.backbone in backbones, "backbone", f"one of {', '.join(backbones)}", self.backbone)
+        require(self.body_source in ("open", "smplx"), "body_source", "'open' or 'smplx'", self.body_source)
+        require(_device_ok(self.device), "device", "'auto', 'cpu', 'cuda' or 'cuda:N'", self.device)
         if self.trainable_from is not None and self.task != "regressor":
-            raise ValueError("trainable_from applies to the regressor task only")
-        if self.backbone_lr_scale <= 0:
-            raise ValueError("backbone_lr_scale must be > 0")
-        if self.warmup_steps < 0:
-            raise ValueError("warmup_steps must be >= 0")
-        if self.steps < 0 or self.batch_size < 1:
-            raise ValueError("steps must be >= 0 and batch_size >= 1")
-        if self.world_size < 1 or self.batch_size % self.world_size:
-            raise ValueError(f"batch_size {self.batch_size} must be a multiple of world_size {self.world_size}")
-        if self.checkpoint_every < 1 or self.log_every < 1:
-            raise ValueError("checkpoint_every and log_every must be >= 1")
+            raise ConfigError("trainable_from applies to the regressor task only")
+        require(finite(self.lr) and self.lr > 0, "lr", "a finite number > 0", self.lr)
+        require(finite(self.weight_decay) and self.weight_decay >= 0, "weight_decay", "a finite number >= 0",
+                self.weight_decay)
+        require(self.grad_clip is None or finite(self.grad_clip) and self.grad_clip > 0, "grad_clip",
+                "null or a finite number > 0", self.grad_clip)
+        require(finite(self.backbone_lr_scale) and self.backbone_lr_scale > 0, "backbone_lr_scale",
+                "a finite number > 0", self.backbone_lr_scale)
+        require(self.warmup_steps >= 0, "warmup_steps", ">= 0", self.warmup_steps)
+        require(self.steps >= 0, "steps", ">= 0", self.steps)
+        require(self.batch_size >= 1, "batch_size", ">= 1", self.batch_size)
+        require(self.world_size >= 1, "world_size", ">= 1", self.world_size)
+        if self.batch_size % self.world_size:
+            raise ConfigError(f"batch_size {self.batch_size} must be a multiple of world_size {self.world_size}")
+        require(self.checkpoint_every >= 1, "checkpoint_every", ">= 1", self.checkpoint_every)
+        require(self.log_every >= 1, "log_every", ">= 1", self.log_every)
+        require(self.keep_checkpoints >= 0, "keep_checkpoints", ">= 0 (0: only last.pt)", self.keep_checkpoints)
+        require(self.val_every is None or self.val_every >= 0, "val_every", "null (never) or >= 0 (0: at the end)",
+                self.val_every)
+        require(self.val_batches is None or self.val_batches >= 1, "val_batches", "null (all) or >= 1",
+                self.val_batches)
+        require(self.val_batch_size is None or self.val_batch_size >= 1, "val_batch_size", "null or >= 1",
+                self.val_batch_size)
+        require(self.num_workers >= 0, "num_workers", ">= 0", self.num_workers)
+        require(self.num_threads is None or self.num_threads >= 1, "num_threads", "null or >= 1", self.num_threads)
+        _check_model_options(self.model)
 
     def lr_at(self, step: int) -> float:
         """The learning rate of optimiser step ``step + 1`` (``step`` steps done)."""
@@ -165,6 +187,36 @@ class TrainConfig:
         return self.RESUME_KEYS + (("steps",) if self.lr_schedule != "constant" else ())
 
 
+def _model_choices() -> tuple[tuple[str, ...], tuple[str, ...]]:
+    """The variant and backbone names the model package knows."""
+    from airpose_lib.model.backbone import BACKBONES  # lazy: model imports torch
+    from airpose_lib.model.variants import VARIANTS
+
+    return tuple(VARIANTS), tuple(BACKBONES)
+
+
+def _check_model_options(model: dict) -> None:
+    """``model:`` holds keyword arguments of :class:`~airpose_lib.model.variants.AirPoseNet`: each
+    key one of its parameters, each value of the parameter's annotated type."""
+    import inspect
+    import typing
+
+    from airpose_lib.model.variants import AirPoseNet  # lazy: model imports torch
+
+    hints = typing.get_type_hints(AirPoseNet.__init__)
+    params = [p for p in inspect.signature(AirPoseNet.__init__).parameters if p not in ("self", "variant", "backbone")]
+    for key, value in model.items():
+        if key not in params:
+            raise ConfigError(f"model: unknown option {key!r}; AirPoseNet takes {', '.join(params)}")
+        model[key] = check_type(f"model.{key}", value, hints.get(key, typing.Any))
+
+
+def _device_ok(device: str) -> bool:
+    """``auto``, ``cpu``, ``cuda`` or ``cuda:N`` (whether CUDA is there is checked when a run starts)."""
+    head, _, index = device.partition(":")
+    return device in ("auto", "cpu", "cuda") or head == "cuda" and index.isdigit()
+
+
 def load_train_config(profile: str | Path | None, variant: str, seed: int | None = None,
                       section: str = "train", **overrides: Any) -> TrainConfig:
     """The profile's ``train`` section (or ``section``), then its ``variants[variant]`` entry, then
@@ -177,16 +229,22 @@ def load_train_config(profile: str | Path | None, variant: str, seed: int | None
     if profile is not None:
         settings = profile_section(profile, section)
         per_variant = settings.pop("variants", None) or {}
+        where = f"{profile_path(profile)}, section `{section}:`"
+        check_keys(settings, TrainConfig, where)
+        if not isinstance(per_variant, dict) or not isinstance(per_variant.get(variant) or {}, dict):
+            raise ConfigError(f"{where}: `variants:` must map a variant name to its settings")
+        check_keys(per_variant.get(variant) or {}, TrainConfig, f"{where} `variants: {variant}:`")
         values.update(settings)
         values.update(per_variant.get(variant) or {})
+        try:  # the profile's values alone first, so that a bad one is blamed on the file
+            TrainConfig(**{**values, "variant": variant})
+        except ConfigError as e:
+            raise ConfigError(f"{where}: {e}; fix the file") from None
     values["variant"] = variant
     if profile is not None:
         values.setdefault("profile", Path(str(profile)).stem)
     if seed is not None:
         values["seed"] = seed
     values.update(overrides)
-    known = {f.name for f in dataclasses.fields(TrainConfig)}
-    unknown = sorted(set(values) - known)
-    if unknown:
-        raise ValueError(f"unknown training option(s) {unknown}; known: {sorted(known)}")
+    check_keys(values, TrainConfig, "training options")
     return TrainConfig(**values)

@@ -44,7 +44,7 @@ from torch.utils.data import DataLoader
 from airpose_lib.assets import locate
 from airpose_lib.data.dataset import StillFrameDataset
 from airpose_lib.data.generate import ensure_still_dataset
-from airpose_lib.data.manifest import load_manifest
+from airpose_lib.data.manifest import check_complete, load_manifest
 from airpose_lib.data.official_synthetic import OfficialSyntheticDataset
 from airpose_lib.data.training_input import training_input
 from airpose_lib.engine import EngineRun, Schedule, StaleRunError, TrainingTask, process_rank, run_engine, run_folder
@@ -104,6 +104,14 @@ def default_model_factory(cfg: TrainConfig) -> nn.Module:
     return model
 
 
+def check_data_root(cfg: TrainConfig) -> None:
+    """A dataset folder the user named (``data.root``) must hold a finished dataset: the kit makes
+    data only in its own folders. Cheap (the manifest only): callers run it before they create
+    anything. Raises :class:`~airpose_lib.data.manifest.DatasetError`."""
+    if cfg.data.get("root") is not None and cfg.data.get("source", "generated") == "generated":
+        check_complete(Path(cfg.data["root"]))
+
+
 def prepare_data(cfg: TrainConfig, progress: bool | None = None) -> TrainConfig:
     """Resolve the dataset folder: ``cfg.data["root"]``, or the ``data: still:`` dataset of
     ``cfg.data["profile"]`` / ``cfg.profile``, generated (``airpose_lib.data``) if missing.
@@ -128,6 +136,8 @@ def prepare_data(cfg: TrainConfig, progress: bool | None = None) -> TrainConfig:
                              "`data: still:` section")
 
         data["root"] = str(ensure_still_dataset(source, progress=show))
+    else:
+        check_data_root(cfg)
     cfg = cfg.replace(data=data)
     if cfg.pretrained == "profile":
         # lazy: the pretraining module runs this engine itself

@@ -51,6 +51,7 @@ def inputs(tmp_path_factory) -> dict[str, Path]:
     ckpt = tmp / "last.pt"
     torch.save({"model": {"w": torch.zeros(1000)}, "step": 3}, ckpt)
     _truncate(ckpt)
+    good_ckpt = _good_checkpoint(tmp / "good")
     good_npz = tmp / "good_pred.npz"
     np.savez(good_npz, phi=np.zeros((3, 2, 3, 3)), tau=np.zeros((3, 2, 3)), theta=np.zeros((3, 2, 21, 3, 3)),
              beta=np.zeros((3, 2, 10)))
@@ -65,8 +66,21 @@ def inputs(tmp_path_factory) -> dict[str, Path]:
     data = tmp / "data"  # a dataset folder whose manifest was cut short
     data.mkdir()
     (data / "manifest.yaml").write_text("kind: airpose-still-frames\nshards: [{index: 0, file: ")
-    return {"seq": seq, "bad_seq": bad_seq, "short_seq": short_seq, "ckpt": ckpt, "npz": npz, "good_npz": good_npz, "missing": tmp / "does_not_exist",
+    return {"seq": seq, "bad_seq": bad_seq, "short_seq": short_seq, "ckpt": ckpt, "good_ckpt": good_ckpt, "npz": npz, "good_npz": good_npz, "missing": tmp / "does_not_exist",
             "uncreatable": a_file / "sub", "run": run, "data": data, "tmp": tmp}
+
+
+def _good_checkpoint(folder: Path) -> Path:
+    """An untrained AirPose checkpoint in the engine's format (what `airpose train` writes)."""
+    from airpose_lib.engine.checkpoint import save_checkpoint
+    from airpose_lib.model import build_model
+    from airpose_lib.train import TrainConfig
+
+    torch.manual_seed(0)
+    cfg = TrainConfig(variant="airpose", backbone="resnet18", steps=0)
+    return save_checkpoint(folder, {"model": build_model("airpose", "resnet18").state_dict(), "optimizer": {},
+                                    "rng": [], "step": 0, "epoch": 0, "batch_in_epoch": 0, "config": cfg.to_dict(),
+                                    "world_size": 1, "input_size": 64}, keep=0)
 
 
 def _node(*extra: str) -> list[str]:
@@ -104,7 +118,7 @@ MISSING = [
     ("prior train --out", lambda p: ["prior", "train", "--profile", "smoke", "--out",
                                      p["uncreatable"] / "prior.pt"], "uncreatable"),
     ("reproduce --out", lambda p: ["reproduce", "--only", "00", "--out", p["uncreatable"]], "uncreatable"),
-    ("finetune --out", lambda p: ["finetune", "--checkpoint", p["ckpt"], "--sequence", p["seq"],
+    ("finetune --out", lambda p: ["finetune", "--checkpoint", p["good_ckpt"], "--sequence", p["seq"],
                                   "--out", p["uncreatable"]], "uncreatable"),
 ]
 
@@ -364,13 +378,8 @@ def test_bad_training_values_are_one_line_before_a_run_folder_exists(inputs, cap
 
 def test_a_refused_finetune_leaves_no_folder(inputs, capsys):
     """A damaged detection file used to be found after the --out folder and its lock existed."""
-    from airpose_lib.model import build_model
-
-    ckpt = inputs["tmp"] / "net.pt"
-    if not ckpt.exists():
-        torch.save({"model": build_model("airpose", "resnet18").state_dict(), "step": 0,
-                    "config": {"variant": "airpose", "backbone": "resnet18", "model": {}}}, ckpt)
     out = inputs["tmp"] / "ft_refused"
-    code, err = _run(["finetune", "--checkpoint", ckpt, "--sequence", inputs["bad_seq"], "--out", out], capsys)
-    assert code == 2, err
+    code, err = _run(["finetune", "--checkpoint", inputs["good_ckpt"], "--sequence", inputs["bad_seq"], "--out", out],
+                     capsys)
+    assert code == 2 and "openpose_res.pkl" in err, err
     assert not out.exists()

@@ -589,7 +589,7 @@ def test_selection_rules_on_hand_made_curves():
     assert select_step(tie, "min_heldout_j2d", ["j2d"]).step == 100 and select_step([], "first_overfit", []).step is None
     with pytest.raises(ValueError, match="unknown selection rule"):
         select_step(tie, "lowest", ["j2d"])
-    with pytest.raises(ValueError, match="unknown selection"):
+    with pytest.raises(ValueError, match="selection must be one of"):
         _cfg(selection="lowest")
 
 
@@ -667,7 +667,7 @@ def test_finetune_on_true_keypoints_uses_the_ground_truth(tiny_ckpt, smoke_root,
     assert true.initial["j2d"] != det.initial["j2d"] and true.initial["beta"] == det.initial["beta"]
     # a changed target source is a different run, never a resumed one
     assert not finetune_done(tmp_path / "true", tiny_ckpt, _cfg(steps=0))
-    with pytest.raises(ValueError, match="unknown targets"):
+    with pytest.raises(ValueError, match="targets must be one of"):
         _cfg(targets="openpose")
 
 

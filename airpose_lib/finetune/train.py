@@ -67,6 +67,7 @@ from torch import nn
 
 from airpose_lib.atomic import atomic_path
 from airpose_lib.body import load_body_model
+from airpose_lib.config_fields import ConfigError, check_fields, config_from, finite, require
 from airpose_lib.data.official_layout import load_sequence
 from airpose_lib.engine import (
     AFRESH_HINT,
@@ -184,22 +185,36 @@ class FineTuneConfig:
                    "margin_px", "prior", "prior_path", "prior_tag", "body_source")
 
     def __post_init__(self) -> None:
-        if self.steps < 0 or self.batch_size < 1:
-            raise ValueError("steps must be >= 0 and batch_size >= 1")
-        if self.checkpoint_every < 1 or self.log_every < 1 or self.feature_batch_size < 1:
-            raise ValueError("checkpoint_every, log_every and feature_batch_size must be >= 1")
-        if not 0 <= self.holdout_fraction < 1:
-            raise ValueError(f"holdout_fraction must be in [0, 1), got {self.holdout_fraction}")
-        if self.targets not in TARGET_SOURCES:
-            raise ValueError(f"unknown targets {self.targets!r}; use one of {', '.join(TARGET_SOURCES)}")
-        if self.selection not in SELECTION_RULES:
-            raise ValueError(f"unknown selection {self.selection!r}; use one of {', '.join(SELECTION_RULES)}")
-        if not self.reference_width > 0:
-            raise ValueError(f"reference_width must be positive, got {self.reference_width}")
+        check_fields(self)  # types first (`--set lr=abc`, a profile's `steps: ten`), then ranges
+        require(self.steps >= 0, "steps", ">= 0", self.steps)
+        require(self.batch_size >= 1, "batch_size", ">= 1", self.batch_size)
+        for name in ("checkpoint_every", "log_every", "feature_batch_size", "eval_batch_size"):
+            require(getattr(self, name) >= 1, name, ">= 1", getattr(self, name))
+        require(self.keep_checkpoints >= 0, "keep_checkpoints", ">= 0 (0: only last.pt)", self.keep_checkpoints)
+        require(finite(self.lr) and self.lr > 0, "lr", "a finite number > 0", self.lr)
+        require(finite(self.weight_decay) and self.weight_decay >= 0, "weight_decay", "a finite number >= 0",
+                self.weight_decay)
+        require(finite(self.threshold_px) and self.threshold_px > 0, "threshold_px", "a finite number > 0",
+                self.threshold_px)
+        require(0 <= self.min_confidence <= 1, "min_confidence", "in [0, 1]", self.min_confidence)
+        require(0 <= self.box_min_confidence <= 1, "box_min_confidence", "in [0, 1]", self.box_min_confidence)
+        require(self.margin_px is None or finite(self.margin_px) and self.margin_px >= 0, "margin_px",
+                "null or a finite number >= 0", self.margin_px)
+        require(self.input_size is None or self.input_size >= 32, "input_size", "null or >= 32", self.input_size)
+        require(self.num_threads is None or self.num_threads >= 1, "num_threads", "null or >= 1", self.num_threads)
+        require(self.body_source in ("open", "smplx"), "body_source", "'open' or 'smplx'", self.body_source)
+        require(self.device in ("auto", "cpu", "cuda") or self.device.startswith("cuda:"), "device",
+                "'auto', 'cpu', 'cuda' or 'cuda:N'", self.device)
+        require(0 <= self.holdout_fraction < 1, "holdout_fraction", "in [0, 1)", self.holdout_fraction)
+        require(self.targets in TARGET_SOURCES, "targets", f"one of {', '.join(TARGET_SOURCES)}", self.targets)
+        require(self.selection in SELECTION_RULES, "selection", f"one of {', '.join(SELECTION_RULES)}",
+                self.selection)
+        require(finite(self.reference_width) and self.reference_width > 0, "reference_width", "a finite number > 0",
+                self.reference_width)
         if self.frames is not None:
             frames = list(self.frames)
             if len(frames) != 2 or not all(isinstance(x, (int, np.integer)) for x in frames) or frames[0] >= frames[1]:
-                raise ValueError(f"frames must be [start, stop) image numbers with start < stop, got {self.frames!r}")
+                raise ConfigError(f"frames must be [start, stop) image numbers with start < stop, got {self.frames!r}")
             self.frames = [int(frames[0]), int(frames[1])]
         self.loss = dict(self.loss or {})
 
@@ -212,19 +227,15 @@ class FineTuneConfig:
 
 def finetune_config(profile: str | Path | None, **overrides: Any) -> FineTuneConfig:
     """:class:`FineTuneConfig` from a profile's ``finetune:`` section (defaults where the profile
-    has none), then ``overrides``. Unknown keys raise ``ValueError`` naming the file."""
+    has none), then ``overrides``. An unknown key or a bad value raises
+    :class:`~airpose_lib.errors.ConfigError` naming the file (or the options) and the field."""
     values: dict[str, Any] = {}
     if profile is not None:
-        values.update(profile_section(profile, "finetune"))
-        where = f"{profile_path(profile)} `finetune:`"
-    else:
-        where = "fine-tuning options"
+        section = profile_section(profile, "finetune")
+        config_from(FineTuneConfig, section, f"{profile_path(profile)}, section `finetune:`")  # blame the file
+        values.update(section)
     values.update(overrides)
-    known = {f.name for f in dataclasses.fields(FineTuneConfig)}
-    unknown = sorted(set(values) - known)
-    if unknown:
-        raise ValueError(f"{where}: unknown key(s) {unknown}; known: {sorted(known)}")
-    return FineTuneConfig(**values)
+    return config_from(FineTuneConfig, values, "fine-tuning options")
 
 
 @dataclass

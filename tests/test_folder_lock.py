@@ -84,6 +84,29 @@ def test_the_lock_is_reentrant_in_one_process(tmp_path):
     assert res.stdout.strip() == "LOCKED", res.stderr  # released
 
 
+def _finetune_inputs(tmp_path):
+    """A loadable (untrained) checkpoint and a three-frame recording."""
+    import numpy as np
+    import torch
+
+    from airpose_lib.data.official_layout import OfficialLayoutWriter
+    from airpose_lib.engine.checkpoint import save_checkpoint
+    from airpose_lib.model import build_model
+    from airpose_lib.train import TrainConfig
+
+    cfg = TrainConfig(variant="airpose", backbone="resnet18", steps=0)
+    ckpt = save_checkpoint(tmp_path / "net", {"model": build_model("airpose", "resnet18").state_dict(),
+                                              "optimizer": {}, "rng": [], "step": 0, "epoch": 0, "batch_in_epoch": 0,
+                                              "config": cfg.to_dict(), "world_size": 1, "input_size": 64}, keep=0)
+    w = OfficialLayoutWriter(tmp_path / "seq", num_views=2)
+    for i in range(3):
+        w.write_frame(i, [np.zeros((64, 96, 3), np.uint8)] * 2)
+    w.finish(np.array([[[100.0, 0, 48], [0, 100.0, 32], [0, 0, 1]]] * 2),
+             {"openpose": np.full((3, 2, 25, 3), 0.5), "alphapose": np.full((3, 2, 18, 3), 0.5)})
+    torch.manual_seed(0)
+    return ckpt, tmp_path / "seq"
+
+
 @pytest.mark.parametrize("argv", [
     ["train", "--variant", "airpose", "--out", "{run}"],
     ["data", "generate", "--out", "{run}"],
@@ -92,10 +115,8 @@ def test_the_lock_is_reentrant_in_one_process(tmp_path):
 ], ids=["train", "data generate", "finetune", "launch"])
 def test_commands_refuse_a_folder_in_use(argv, holder, tmp_path, capsys):
     folder, proc = holder
-    ckpt = tmp_path / "x.pt"
-    ckpt.write_bytes(b"x")
-    (tmp_path / "seq").mkdir()
-    code = cli.main([a.format(run=folder, ckpt=ckpt, seq=tmp_path / "seq") for a in argv])
+    ckpt, seq = _finetune_inputs(tmp_path)  # finetune reads its inputs before it locks --out
+    code = cli.main([a.format(run=folder, ckpt=ckpt, seq=seq) for a in argv])
     err = capsys.readouterr().err
     assert code == 2 and f"PID {proc.pid}" in err and str(folder) in err and len(err.strip().splitlines()) == 1
 

@@ -264,6 +264,22 @@ except KeyboardInterrupt:  # as airpose_lib.cli.main
 """
 
 
+def _gone(pid: int, within_s: float) -> bool:
+    """Whether process ``pid`` has ended (a zombie counts: in a container nobody may reap an orphan)."""
+    import time
+
+    deadline = time.monotonic() + within_s
+    while time.monotonic() < deadline:
+        try:
+            state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+        except (FileNotFoundError, ProcessLookupError):
+            return True
+        if state in ("Z", "X"):
+            return True
+        time.sleep(0.1)
+    return False
+
+
 @pytest.mark.parametrize("signame", ["SIGINT", "SIGTERM"])
 def test_a_signal_stops_the_run_and_its_kernel_at_once_and_quietly(tmp_path, signame):
     """Issue 33: SIGINT to the process alone was ignored until the notebook ended; Ctrl-C printed a
@@ -299,8 +315,6 @@ def test_a_signal_stops_the_run_and_its_kernel_at_once_and_quietly(tmp_path, sig
     assert time.monotonic() - t0 < 10
     assert proc.returncode == 130
     assert [line for line in err.splitlines() if line.strip()] == ["airpose: interrupted"], err
-    time.sleep(0.5)
-    with pytest.raises(ProcessLookupError):
-        os.kill(child, 0)
+    assert _gone(child, within_s=5.0)
     report = json.loads((tmp_path / "runs" / "tiny" / "report.json").read_text())
     assert [r["status"] for r in report["results"]] == ["ok", "interrupted"]

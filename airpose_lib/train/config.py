@@ -123,6 +123,7 @@ class TrainConfig:
         # Types first (a profile's `steps: thirty`), then each field's range, before anything runs.
         check_fields(self)
         variants, backbones = _model_choices()
+        variants += ("pretrain",) if self.task == "pretrain" else ()  # the shared backbone's own objective
         require(self.variant in variants, "variant", f"one of {', '.join(variants)}", self.variant)
         require(self.task in ("supervised", "regressor", "pretrain"), "task",
                 "'supervised', 'regressor' or 'pretrain'", self.task)
@@ -156,7 +157,7 @@ class TrainConfig:
                 self.val_batch_size)
         require(self.num_workers >= 0, "num_workers", ">= 0", self.num_workers)
         require(self.num_threads is None or self.num_threads >= 1, "num_threads", "null or >= 1", self.num_threads)
-        _check_model_options(self.model)
+        _check_model_options(self.model, self.task)
 
     def lr_at(self, step: int) -> float:
         """The learning rate of optimiser step ``step + 1`` (``step`` steps done)."""
@@ -195,19 +196,23 @@ def _model_choices() -> tuple[tuple[str, ...], tuple[str, ...]]:
     return tuple(VARIANTS), tuple(BACKBONES)
 
 
-def _check_model_options(model: dict) -> None:
-    """``model:`` holds keyword arguments of :class:`~airpose_lib.model.variants.AirPoseNet`: each
-    key one of its parameters, each value of the parameter's annotated type."""
+def _check_model_options(model: dict, task: str) -> None:
+    """``model:`` holds keyword arguments of the task's network (:class:`~airpose_lib.model.variants.AirPoseNet`,
+    or :class:`~airpose_lib.model.pretrain.PretrainNet` for ``pretrain``): each key one of its
+    parameters, each value of the parameter's annotated type."""
     import inspect
     import typing
 
-    from airpose_lib.model.variants import AirPoseNet  # lazy: model imports torch
+    # lazy: model imports torch
+    from airpose_lib.model.pretrain import PretrainNet
+    from airpose_lib.model.variants import AirPoseNet
 
-    hints = typing.get_type_hints(AirPoseNet.__init__)
-    params = [p for p in inspect.signature(AirPoseNet.__init__).parameters if p not in ("self", "variant", "backbone")]
+    net = PretrainNet if task == "pretrain" else AirPoseNet
+    hints = typing.get_type_hints(net.__init__)
+    params = [p for p in inspect.signature(net.__init__).parameters if p not in ("self", "variant", "backbone")]
     for key, value in model.items():
         if key not in params:
-            raise ConfigError(f"model: unknown option {key!r}; AirPoseNet takes {', '.join(params)}")
+            raise ConfigError(f"model: unknown option {key!r}; {net.__name__} takes {', '.join(params)}")
         model[key] = check_type(f"model.{key}", value, hints.get(key, typing.Any))
 
 

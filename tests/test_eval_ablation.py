@@ -141,7 +141,8 @@ def test_findings_are_written_from_the_tables():
     runs = {("baseline", 1): _per_view(0.9, 0.12), ("airpose", 1): _per_view(0.75, 0.10)}
     oracle = pd.DataFrame({"mpe_m": [0.5, 0.7]})  # floor 0.6 m
     claims = pd.DataFrame({"claim": ["MPE: Baseline > AirPose", "MPJPE: Baseline > AirPose"],
-                           "difference [m]": [0.15, -0.002], "verdict": ["holds", "not significant"]})
+                           "difference [m]": [0.15, -0.002],
+                           "verdict": ["holds", "not significant"]}).set_index("claim")  # as claims_table
     text = ablation_findings(ablation_table(runs, oracle=oracle), claims)
     assert "MPE 0.750 m (the paper's 0.150 m)" in text and "MPJPE 0.100 m (the paper's 0.072 m)" in text
     assert "oracle floor of this data is MPE 0.600 m" in text and "1.25 x the floor" in text  # 0.75 / 0.6

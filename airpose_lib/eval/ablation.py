@@ -172,8 +172,8 @@ def ablation_findings(table: pd.DataFrame, claims: pd.DataFrame | None = None) -
     Args:
         table: :func:`ablation_table` (variant rows in Table I order, optional oracle row and
             extra columns; a column that is absent or NaN is left out of the text).
-        claims: :func:`airpose_lib.eval.significance.claims_table` (``claim``, ``difference [m]``,
-            ``verdict``), or None.
+        claims: :func:`airpose_lib.eval.significance.claims_table` (index ``claim``, columns
+            ``difference [m]`` and ``verdict``; or ``claim`` as a column, as in ``claims.csv``), or None.
     Returns:
         a bulleted Markdown paragraph: AirPose against the paper and the oracle floor, the claims'
         verdicts, what the root orientation adds to MPJPE, and the seed count's caveat.
@@ -194,6 +194,7 @@ def ablation_findings(table: pd.DataFrame, claims: pd.DataFrame | None = None) -
                  f"{'below' if r['MPE paper [m]'] < floor else 'above'} it")
     lines = [head + "."]
     if claims is not None and len(claims):
+        claims = claims if "claim" in claims.columns else claims.reset_index()  # claims_table's index
         verdicts = claims["verdict"]
         lines.append(f"* **Claims**: {int((verdicts == 'holds').sum())} of the paper's {len(claims)} orderings "
                      f"hold with significance. Not significant: {_listed(claims[verdicts == 'not significant'])}. "

@@ -139,3 +139,29 @@ def test_the_readme_captions_every_catalogue_figure():
     assert missing == []
     assert "Table I" in captions["table1_ablation.png"]["paper"]
 
+
+def test_write_reference_builds_the_capped_report_only_after_a_whole_run(run, capsys, monkeypatch, tmp_path):
+    """`airpose reproduce --write-reference`: results/<profile>/report/ from this run, size-capped."""
+    import airpose_lib.eval.reference as reference
+    import airpose_lib.reproduce as reproduce
+    import airpose_lib.reproduce.report as report
+    from airpose_lib.cli.reproduce import _write_reference_report
+    from airpose_lib.reproduce import NotebookResult, RunReport, load_catalog
+
+    catalog = load_catalog(run["kw"]["catalog_path"])
+    monkeypatch.setattr(reproduce, "load_catalog", lambda: catalog)
+    monkeypatch.setattr(report, "CATALOG_PATH", run["kw"]["catalog_path"])
+    monkeypatch.setattr(report, "FIGURES_README", run["kw"]["readme"])
+    monkeypatch.setattr(reference, "reference_dir", lambda profile: tmp_path / "results" / profile)
+    done = RunReport("smoke", "", "0.1.0", "python3", "", str(run["run_dir"]), str(run["figures"]),
+                     results=[NotebookResult("01_second", "01_second.ipynb", status="ok")])
+    assert _write_reference_report(done) == 0
+    assert "not written" in capsys.readouterr().out and not (tmp_path / "results").exists()
+    done.results.insert(0, NotebookResult("00_first", "00_first.ipynb", status="ok"))
+    assert _write_reference_report(done) == 0
+    out = tmp_path / "results" / "smoke" / "report"
+    assert (out / "index.html").is_file()
+    assert max(Image.open(out / "figures" / "a.png").size) == report.REFERENCE_MAX_IMAGE_PX
+    monkeypatch.setattr(report, "REFERENCE_MAX_BYTES", 1000)
+    assert _write_reference_report(done) == 1
+    assert "over the cap of 0.0 MB" in capsys.readouterr().err

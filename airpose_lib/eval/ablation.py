@@ -157,12 +157,13 @@ def paper_gaps(table: pd.DataFrame) -> pd.DataFrame:
     return out
 
 
-def _mm(x_m: float) -> str:
-    return f"{x_m * 1000:+.1f} mm"
+def _signed_length(x_m: float) -> str:
+    """A paired difference: millimetres below a metre, metres above."""
+    return f"{x_m * 1000:+.1f} mm" if abs(x_m) < 1 else f"{x_m:+.3f} m"
 
 
 def _listed(rows: pd.DataFrame) -> str:
-    return "; ".join(f"{r['claim']} ({_mm(r['difference [m]'])})" for _, r in rows.iterrows()) or "none"
+    return "; ".join(f"{r['claim']} ({_signed_length(r['difference [m]'])})" for _, r in rows.iterrows()) or "none"
 
 
 def ablation_findings(table: pd.DataFrame, claims: pd.DataFrame | None = None) -> str:

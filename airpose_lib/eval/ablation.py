@@ -183,8 +183,8 @@ def ablation_findings(table: pd.DataFrame, claims: pd.DataFrame | None = None) -
     best = "AirPose" if "AirPose" in rows else rows[-1]
     r = table.loc[best]
 
-    def has(column: str, row=r) -> bool:
-        return column in table.columns and pd.notna(row.get(column))
+    def has(column: str) -> bool:
+        return column in table.columns and pd.notna(r.get(column))
 
     head = (f"* **{best}**: MPE {r['MPE [m]']:.3f} m (the paper's {r['MPE paper [m]']:.3f} m), "
             f"MPJPE {r['MPJPE [m]']:.3f} m (the paper's {r['MPJPE paper [m]']:.3f} m)")

@@ -2,7 +2,7 @@
 VENV ?= .venv
 PROFILE ?= smoke
 
-.PHONY: setup smoke reproduce test test-all test-browser bench
+.PHONY: setup smoke reproduce report test test-all test-browser bench
 
 setup:
 	bash scripts/setup.sh
@@ -12,6 +12,11 @@ smoke: setup
 	$(VENV)/bin/airpose reproduce --profile $(PROFILE)
 
 reproduce: smoke
+
+# the last reproduction of the profile as static HTML: runs/<profile>/report/index.html
+# (fails if a notebook has an error output or a catalogue figure is missing)
+report: setup
+	$(VENV)/bin/airpose report --profile $(PROFILE)
 
 # the test suite without the slow end-to-end runs (CI's smoke reproduction runs those)
 test: setup

@@ -194,3 +194,35 @@ def test_posing_bends_the_knee_backwards(open_model):
         j = open_model(body_pose=body_pose).joints[0]
     assert j[J("left_ankle"), 2] < j[J("left_knee"), 2] - 0.2  # shank swings behind
     assert j[J("right_ankle"), 2] == pytest.approx(_rest(open_model)[1][J("right_ankle"), 2], abs=1e-9)
+
+
+# -- quiet start-up (issue 32): anny's warp prints a no-driver warning on every CPU-only machine ---
+def test_loading_anny_and_the_body_model_prints_nothing(open_model_files):
+    """A fresh process that imports the body package, loads the model and imports anny (what the
+    first build does) writes nothing on stdout or stderr: before the fix, warp's banner went to
+    stdout and 'Warp CUDA warning: Could not find or load the NVIDIA CUDA driver' to stderr."""
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    code = ("import airpose_lib.body as body\n"
+            "body.load_body_model()\n"
+            "from airpose_lib.body.open_model import _load_anny\n"
+            "_load_anny()\n")
+    root = Path(__file__).resolve().parents[1]
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(root), os.environ.get("PYTHONPATH", "")])}
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=300)
+    assert done.returncode == 0, done.stderr
+    assert done.stderr == "" and done.stdout == ""
+
+
+def test_the_stderr_filter_drops_only_its_line(capfd):
+    """Only lines starting with the prefix go; whatever else C code writes on fd 2 stays, in order."""
+    import os
+
+    from airpose_lib.body.open_model import _without_native_stderr_line
+
+    with _without_native_stderr_line("Warp CUDA warning:"):
+        os.write(2, b"first\nWarp CUDA warning: no driver\nlast error\n")
+    assert capfd.readouterr().err == "first\nlast error\n"

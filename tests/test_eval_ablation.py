@@ -5,6 +5,7 @@ import pytest
 
 from airpose_lib.eval.ablation import (
     PAPER_TABLE_I,
+    ablation_findings,
     ablation_table,
     per_seed_table,
     table_to_latex,
@@ -133,3 +134,27 @@ def test_paper_gaps_are_ratios_to_the_paper_and_the_oracle():
     assert g.loc["AirPose", "MPJPE kit / paper"] == pytest.approx(2.0)
     assert g.loc["AirPose", "MPE kit / oracle"] == pytest.approx(1.5)
     assert "MPE kit / oracle" not in paper_gaps(ablation_table({("airpose", 1): _per_view(0.3, 0.1)}))
+
+
+def test_findings_are_written_from_the_tables():
+    """Notebook 02's summary (issue 32): every number comes from the tables passed in."""
+    runs = {("baseline", 1): _per_view(0.9, 0.12), ("airpose", 1): _per_view(0.75, 0.10)}
+    oracle = pd.DataFrame({"mpe_m": [0.5, 0.7]})  # floor 0.6 m
+    claims = pd.DataFrame({"claim": ["MPE: Baseline > AirPose", "MPJPE: Baseline > AirPose"],
+                           "difference [m]": [0.15, -0.002],
+                           "verdict": ["holds", "not significant"]}).set_index("claim")  # as claims_table
+    text = ablation_findings(ablation_table(runs, oracle=oracle), claims)
+    assert "MPE 0.750 m (the paper's 0.150 m)" in text and "MPJPE 0.100 m (the paper's 0.072 m)" in text
+    assert "oracle floor of this data is MPE 0.600 m" in text and "1.25 x the floor" in text  # 0.75 / 0.6
+    assert "1 of the paper's 2 orderings hold" in text
+    assert "Not significant: MPJPE: Baseline > AirPose (-2.0 mm)" in text and "Reversed: none" in text
+    assert "PA-MPJPE, which aligns rotation and scale away, is 0.050 m" in text
+    assert "One seed" in text
+    assert "true root" not in text  # no such column: nothing said about it
+
+
+def test_findings_without_oracle_claims_or_extra_columns():
+    runs = {("airpose", 1): _per_view(0.3, 0.08), ("airpose", 2): _per_view(0.5, 0.08)}
+    table = ablation_table(runs).drop(columns=["PA-MPJPE [m]"])
+    text = ablation_findings(table)
+    assert text == "* **AirPose**: MPE 0.400 m (the paper's 0.150 m), MPJPE 0.080 m (the paper's 0.072 m)."

@@ -318,3 +318,24 @@ def test_a_signal_stops_the_run_and_its_kernel_at_once_and_quietly(tmp_path, sig
     assert _gone(child, within_s=5.0)
     report = json.loads((tmp_path / "runs" / "tiny" / "report.json").read_text())
     assert [r["status"] for r in report["results"]] == ["ok", "interrupted"]
+
+
+def test_kernels_are_not_interrupted_on_their_way_to_shutdown(monkeypatch):
+    """jupyter_client interrupts before every shutdown, and ipykernel then logs "KeyboardInterrupt
+    caught in kernel" on the terminal (seen after notebook 03); a timeout's interrupt still goes."""
+    import asyncio
+
+    from jupyter_client.manager import AsyncKernelManager
+
+    sent = []
+
+    async def interrupt(self):
+        sent.append(self.shutting_down)
+
+    monkeypatch.setattr(AsyncKernelManager, "_async_interrupt_kernel", interrupt)
+    km = __import__("airpose_lib.reproduce.runner", fromlist=["x"])._ipc_kernel_manager()(kernel_name="python3")
+    km.shutting_down = True
+    asyncio.run(km._async_interrupt_kernel())
+    km.shutting_down = False
+    asyncio.run(km._async_interrupt_kernel())
+    assert sent == [False]

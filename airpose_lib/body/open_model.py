@@ -22,10 +22,13 @@ landmarks; hands use an identity PCA basis with a zero mean (flat hands), as the
 """
 from __future__ import annotations
 
+import contextlib
 import json
 import logging
 import os
 import shutil
+import sys
+import tempfile
 import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -125,9 +128,47 @@ def build_open_model(
 # the build
 
 
+#: What warp's native library prints on stderr when it initialises on a machine without the NVIDIA
+#: driver; anny uses warp on the CPU only, so the line does not concern the kit's user.
+_WARP_NO_DRIVER = "Warp CUDA warning: Could not find or load the NVIDIA CUDA driver"
+
+
+@contextlib.contextmanager
+def _without_native_stderr_line(prefix: str):
+    """Run the block with file descriptor 2 captured, then print what it wrote but lines starting
+    with ``prefix``. The warp line comes from C (``fprintf``), which ``sys.stderr`` never sees;
+    everything else the block writes, an error included, still reaches stderr."""
+    sys.stderr.flush()
+    saved = os.dup(2)
+    with tempfile.TemporaryFile() as captured:
+        os.dup2(captured.fileno(), 2)
+        try:
+            yield
+        finally:
+            os.dup2(saved, 2)
+            os.close(saved)
+            captured.seek(0)
+            lines = captured.read().decode(errors="replace").splitlines(keepends=True)
+            sys.stderr.write("".join(line for line in lines if not line.startswith(prefix)))
+            sys.stderr.flush()
+
+
+def _init_warp_quietly() -> None:
+    """Initialise warp (anny's skinning library) without its start-up chatter: the banner and the
+    per-kernel load times on stdout (below warp's ``LOG_WARNING``), and the no-driver line on stderr
+    that its native library prints on every CPU-only machine. anny's modules call ``wp.init()``
+    when imported; once done here, those calls return at once."""
+    import warp  # anny's dependency; imported here to configure it before anny initialises it
+
+    warp.config.log_level = warp.LOG_WARNING
+    with _without_native_stderr_line(_WARP_NO_DRIVER):
+        warp.init()
+
+
 def _load_anny():
     # anny's cache goes under ours unless the user chose another place.
     os.environ.setdefault("ANNY_CACHE_DIR", str(cache_dir() / "anny"))
+    _init_warp_quietly()
     import anny
     import anny.paths
 

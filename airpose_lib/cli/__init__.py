@@ -14,6 +14,7 @@ module             subcommands
 :mod:`.node`       ``node``, ``launch``, ``export``, ``keys`` (the online runtime;
                    :mod:`.drone` is a drone's own process)
 :mod:`.reproduce`  ``reproduce``
+:mod:`.report`     ``report``
 :mod:`.common`     the user-error policy, path/range checks, ``--set`` parsing
 =================  ===========================================================================
 
@@ -36,6 +37,7 @@ from .finetune import add_finetune, add_predict
 from .fit import add_fit
 from .node import add_export, add_keys, add_launch, add_node
 from .prior import add_prior
+from .report import add_report
 from .reproduce import add_reproduce
 from .train import add_pretrain, add_train
 
@@ -44,7 +46,7 @@ __all__ = ["CLIError", "build_parser", "main"]
 # Subcommand builders, in help order; each adds its parser to the group.
 _SUBCOMMANDS: tuple[Callable, ...] = (add_body, add_data, add_pretrain, add_train, add_eval, add_prior, add_fit,
                                        add_finetune, add_predict, add_node, add_launch, add_export, add_keys,
-                                       add_reproduce)
+                                       add_reproduce, add_report)
 
 
 def build_parser() -> argparse.ArgumentParser:

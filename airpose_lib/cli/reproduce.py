@@ -41,7 +41,7 @@ def _cmd_reproduce(args: argparse.Namespace) -> int:
     else:
         print(f"figures collected in {report.figures_dir}")
     _check_reference(report, args.write_reference)
-    return 0
+    return _write_reference_report(report) if args.write_reference else 0
 
 
 def _check_reference(report, write: bool) -> None:
@@ -65,6 +65,27 @@ def _check_reference(report, write: bool) -> None:
     for msg in messages:
         if msg:
             print(msg)
+
+
+def _write_reference_report(report) -> int:
+    """With ``--write-reference`` after a run of every catalogued notebook: the run's HTML report
+    into ``results/<profile>/report/``, size-capped, beside the reference tables it shows."""
+    from airpose_lib.eval.reference import reference_dir
+    from airpose_lib.reproduce import load_catalog
+    from airpose_lib.reproduce.report import REFERENCE_MAX_BYTES, REFERENCE_MAX_IMAGE_PX, build_report
+
+    from .report import print_report_result
+
+    ran = {r.name for r in report.results if r.status == "ok"}
+    missing = [e.name for e in load_catalog() if e.name not in ran]
+    out = reference_dir(report.profile) / "report"
+    if missing:
+        print(f"reference report: {out} not written: it shows a whole run, and {missing} did not run in this "
+              f"call (run the profile without --only to write it)")
+        return 0
+    return print_report_result(build_report(report.profile, run_dir=report.run_dir, figures_dir=report.figures_dir,
+                                            out_dir=out, max_image_px=REFERENCE_MAX_IMAGE_PX,
+                                            max_bytes=REFERENCE_MAX_BYTES))
 
 
 def add_reproduce(sub) -> None:
@@ -97,7 +118,8 @@ def add_reproduce(sub) -> None:
     rep.add_argument("--quiet", action="store_true",
                      help="print only failures and where the figures are (no per-notebook lines or table)")
     rep.add_argument("--write-reference", action="store_true",
-                     help="store notebook 02's Table I files as the reference in results/<profile>/, and "
-                          "notebook 05's recording tables in results/<profile>/recordings/ "
+                     help="store notebook 02's Table I files as the reference in results/<profile>/, "
+                          "notebook 05's recording tables in results/<profile>/recordings/ and, when every "
+                          "notebook ran, the run's HTML report in results/<profile>/report/ "
                           "(default: only compare with them)")
     rep.set_defaults(func=_cmd_reproduce)

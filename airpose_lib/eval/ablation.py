@@ -16,7 +16,7 @@ import pandas as pd
 from .oracle import ORACLE_LABEL
 
 __all__ = ["VARIANT_LABELS", "PAPER_TABLE_I", "PER_SEED_METRICS", "TABLE_COLUMNS", "per_seed_table",
-           "ablation_table", "paper_gaps", "table_to_markdown", "table_to_latex"]
+           "ablation_table", "paper_gaps", "ablation_findings", "table_to_markdown", "table_to_latex"]
 
 #: Row names of Table I for the kit's variant names.
 VARIANT_LABELS = {
@@ -155,6 +155,66 @@ def paper_gaps(table: pd.DataFrame) -> pd.DataFrame:
     if ORACLE_LABEL in table.index:
         out["MPE kit / oracle"] = table.loc[rows, "MPE [m]"] / table.loc[ORACLE_LABEL, "MPE [m]"]
     return out
+
+
+def _signed_length(x_m: float) -> str:
+    """A paired difference: millimetres below a metre, metres above."""
+    return f"{x_m * 1000:+.1f} mm" if abs(x_m) < 1 else f"{x_m:+.3f} m"
+
+
+def _listed(rows: pd.DataFrame) -> str:
+    return "; ".join(f"{r['claim']} ({_signed_length(r['difference [m]'])})" for _, r in rows.iterrows()) or "none"
+
+
+def ablation_findings(table: pd.DataFrame, claims: pd.DataFrame | None = None) -> str:
+    """What a run's Table I says, as Markdown built from its own tables (notebook 02's summary):
+    no number in it is typed by hand, so it cannot contradict the tables above it.
+
+    Args:
+        table: :func:`ablation_table` (variant rows in Table I order, optional oracle row and
+            extra columns; a column that is absent or NaN is left out of the text).
+        claims: :func:`airpose_lib.eval.significance.claims_table` (index ``claim``, columns
+            ``difference [m]`` and ``verdict``; or ``claim`` as a column, as in ``claims.csv``), or None.
+    Returns:
+        a bulleted Markdown paragraph: AirPose against the paper and the oracle floor, the claims'
+        verdicts, what the root orientation adds to MPJPE, and the seed count's caveat.
+    """
+    rows = [m for m in table.index if m != ORACLE_LABEL]
+    best = "AirPose" if "AirPose" in rows else rows[-1]
+    r = table.loc[best]
+
+    def has(column: str) -> bool:
+        return column in table.columns and pd.notna(r.get(column))
+
+    head = (f"* **{best}**: MPE {r['MPE [m]']:.3f} m (the paper's {r['MPE paper [m]']:.3f} m), "
+            f"MPJPE {r['MPJPE [m]']:.3f} m (the paper's {r['MPJPE paper [m]']:.3f} m)")
+    if ORACLE_LABEL in table.index:
+        floor = float(table.loc[ORACLE_LABEL, "MPE [m]"])
+        head += (f"; the oracle floor of this data is MPE {floor:.3f} m, so {best}'s MPE is "
+                 f"{r['MPE [m]'] / floor:.2f} x the floor and the paper's is "
+                 f"{'below' if r['MPE paper [m]'] < floor else 'above'} it")
+    lines = [head + "."]
+    if claims is not None and len(claims):
+        claims = claims if "claim" in claims.columns else claims.reset_index()  # claims_table's index
+        verdicts = claims["verdict"]
+        lines.append(f"* **Claims**: {int((verdicts == 'holds').sum())} of the paper's {len(claims)} orderings "
+                     f"hold with significance. Not significant: {_listed(claims[verdicts == 'not significant'])}. "
+                     f"Reversed: {_listed(claims[verdicts == 'reversed'])}.")
+    if has("MPJPE true root [m]"):
+        others = ", ".join(f"{m} {table.loc[m, 'MPJPE true root [m]']:.3f}" for m in rows if m != best)
+        root = (f" (median root-orientation error {r['root orient. median [deg]']:.1f} deg)"
+                if has("root orient. median [deg]") else "")
+        lines.append(f"* **Root orientation**: with the ground-truth root orientation, {best}'s MPJPE is "
+                     f"{r['MPJPE true root [m]']:.3f} m ({others}); the predicted root orientation{root} "
+                     f"adds {(r['MPJPE [m]'] - r['MPJPE true root [m]']) * 1000:.1f} mm to the "
+                     f"{r['MPJPE [m]']:.3f} m.")
+    if has("PA-MPJPE [m]"):
+        lines.append(f"* **Alignment**: PA-MPJPE, which aligns rotation and scale away, is "
+                     f"{r['PA-MPJPE [m]']:.3f} m against MPJPE's {r['MPJPE [m]']:.3f} m.")
+    seeds = int(r["seeds"]) if has("seeds") else 1
+    if seeds == 1:
+        lines.append("* **One seed**: no seed spread, so a claim that holds may hold by luck.")
+    return "\n".join(lines)
 
 
 def _fmt(x, digits: int) -> str:

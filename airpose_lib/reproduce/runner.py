@@ -297,7 +297,7 @@ def _ipc_kernel_manager():
 
     nbclient's default TCP transport makes ipykernel (>= 7) warn "Kernel is running over TCP
     without encryption" in every executed notebook; local sockets are neither exposed nor warned
-    about. The socket files live in one private temporary folder of this process (removed at
+    about. The kernel is not interrupted on its way to shutdown (see the method). The socket files live in one private temporary folder of this process (removed at
     exit), never in the checkout; the kernel manager deletes each kernel's sockets when it ends.
     """
     import uuid
@@ -309,6 +309,13 @@ def _ipc_kernel_manager():
         def __init__(self, *args, **kwargs):
             super().__init__(*args, **kwargs)
             _LIVE_KERNELS.add(self)  # a stop signal kills their kernels (_stop_on_signals)
+
+        async def _async_interrupt_kernel(self) -> None:
+            # jupyter_client sends SIGINT before every shutdown; a kernel caught between messages
+            # then logs "KeyboardInterrupt caught in kernel" on the runner's terminal. The notebook
+            # has finished (or its cell timed out and was interrupted already): nothing to stop.
+            if not self.shutting_down:
+                await super()._async_interrupt_kernel()
 
         @default("transport")
         def _transport_default(self) -> str:

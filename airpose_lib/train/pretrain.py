@@ -36,6 +36,7 @@ from airpose_lib.data.generate import GenerationConfig, default_root, ensure_sti
 from airpose_lib.data.manifest import load_manifest
 from airpose_lib.data.shards import sha256_file
 from airpose_lib.engine.checkpoint import kit_version, load_checkpoint
+from airpose_lib.engine.launch import single_process
 from airpose_lib.eval.metrics import rotation_error
 from airpose_lib.folder_lock import file_lock
 from airpose_lib.geometry import axis_angle_to_matrix, rot6d_to_matrix
@@ -115,7 +116,8 @@ def backbone_key(cfg: TrainConfig, data_fingerprint: str, start_key: str | None 
                              "val_every", "val_batches", "device", "num_threads", "profile",
                              "trainable_from", "backbone_lr_scale")}  # the last two: regressor-task fields
     settings["pretrained"] = start_key
-    for name, default in (("lr_schedule", "constant"), ("warmup_steps", 0)):
+    for name, default in (("lr_schedule", "constant"), ("warmup_steps", 0), ("precision", "fp32"),
+                          ("sync_batchnorm", False)):
         if settings.get(name) == default:  # added after the first committed backbone, whose key stays
             settings.pop(name)
     blob = json.dumps({"version": PRETRAIN_VERSION, "settings": settings, "data": data_fingerprint},
@@ -125,7 +127,7 @@ def backbone_key(cfg: TrainConfig, data_fingerprint: str, start_key: str | None 
 
 def reference_backbone_path(profile: str) -> Path:
     """Where a profile's committed backbone lives in the repository."""
-    return _REPO / "results" / profile / "pretrained_backbone.pt"
+    return _REPO / "results" / Path(str(profile)).stem / "pretrained_backbone.pt"
 
 
 @torch.no_grad()
@@ -256,9 +258,12 @@ def _train_stage(profile: str, cfg: TrainConfig, key: str, start: Path | None, o
             ensure_still_dataset(config=GenerationConfig.from_dict(cfg.data["generation"]), root=data_root,
                                  progress=progress)
         cfg = cfg.replace(pretrained=None if start is None else str(start), data={"root": str(data_root)})
-        out = Path(out_root) if out_root is not None else run_path("pretrain", profile)
+        out = Path(out_root) if out_root is not None else run_path("pretrain", Path(str(profile)).stem)
         t0 = time.time()
-        run = train("pretrain", profile, out_dir=out / key, config=cfg.replace(progress=progress))
+        # One process trains a backbone (the others, torchrun's ranks included, wait on the lock
+        # above): a pretraining nested in a distributed training must not join its process group.
+        with single_process():
+            run = train("pretrain", profile, out_dir=out / key, config=cfg.replace(progress=progress))
         wall = time.time() - t0
         model = _load_pretrain_model(run.checkpoint, cfg)
         gate = gate_metrics(model, StillFrameDataset(data_root, "test", augment=False))  # the whole test split

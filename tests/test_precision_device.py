@@ -107,3 +107,34 @@ def test_cuda_rng_states_restore_onto_fewer_gpus(monkeypatch):
     state["cuda"] = [torch.tensor([7], dtype=torch.uint8), torch.tensor([9], dtype=torch.uint8)]
     ckpt.restore_rng_state(state)
     assert calls == [(7, 0)]
+
+
+def test_evaluation_and_features_take_the_device(tmp_path, open_model_files):
+    """`airpose eval` / `predict` default to `auto` (CPU here); a checkpoint recorded on another
+    device loads onto the one asked for; a device this machine lacks is a ValueError (one CLI line)."""
+    from airpose_lib.model import resnet18
+    from airpose_lib.train.evaluate import load_trained_model
+    from airpose_lib.train.features import compute_features
+
+    cfg = tiny_config(steps=1, val_every=None, device="cpu")
+    res = train("airpose", config=cfg, out_dir=tmp_path / "r", **FAKES)
+    state = load_checkpoint(res.checkpoint)
+    state["config"]["device"] = "cuda:3"  # as a GPU run records it
+    torch.save(state, tmp_path / "gpu.pt")
+    model, loaded = load_trained_model(tmp_path / "gpu.pt", "auto")
+    assert loaded.device == "cuda:3" and all(p.device.type == "cpu" for p in model.parameters())
+    if not torch.cuda.is_available():
+        with pytest.raises(ValueError, match="CPU-only torch"):
+            load_trained_model(tmp_path / "gpu.pt", "cuda")
+
+    class Crops(torch.utils.data.Dataset):
+        def __len__(self):
+            return 3
+
+        def __getitem__(self, i):
+            return {"images": torch.randn(2, 3, 32, 32, generator=torch.Generator().manual_seed(i))}
+
+    net = resnet18().eval()
+    a = compute_features(net, Crops(), batch_size=2)
+    b = compute_features(net, Crops(), batch_size=2, device="cpu")
+    assert a.shape == (3, 2, 512) and np.array_equal(a, b)

@@ -83,6 +83,7 @@ from airpose_lib.engine import (
     restore_rng_state,
     run_engine,
 )
+from airpose_lib.engine.launch import resolve_device
 from airpose_lib.folder_lock import folder_lock
 from airpose_lib.model import to_smplx_params
 from airpose_lib.model.record import network_record
@@ -597,10 +598,7 @@ class _FineTuneTask(TrainingTask):
 def _finetune(checkpoint: Path, root: Path, out_dir: Path, cfg: FineTuneConfig, resume: bool, progress: bool,
               prior, body_model, stop_at, diagnostic) -> FineTuneResult:
     t0 = time.time()
-    if cfg.device == "auto":
-        device = torch.device("cuda" if torch.cuda.is_available() else "cpu")
-    else:
-        device = torch.device(cfg.device)
+    device = resolve_device(cfg.device)
     seed_everything(cfg.seed)
     model, train_cfg, input_size = load_network(checkpoint, device, cfg.input_size)
     K_net_np = np.asarray(model.camera_K, np.float64)

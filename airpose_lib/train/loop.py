@@ -126,9 +126,12 @@ def default_model_factory(cfg: TrainConfig) -> nn.Module:
     return model
 
 
-def prepare_data(cfg: TrainConfig, progress: bool | None = None) -> TrainConfig:
+def prepare_data(cfg: TrainConfig, progress: bool | None = None, device: str | torch.device = "cpu"
+                 ) -> TrainConfig:
     """Resolve the dataset folder: ``cfg.data["root"]``, or the ``data: still:`` dataset of
-    ``cfg.data["profile"]`` / ``cfg.profile``, generated (``airpose_lib.data``) if missing.
+    ``cfg.data["profile"]`` / ``cfg.profile``, generated (``airpose_lib.data``) if missing; a
+    pretraining or feature cache it needs runs on ``device`` (the caller's: a checkpoint's
+    recorded device may not exist where it is evaluated).
 
     Returns the config with ``data["root"]`` set. Called once by :func:`train` before any training
     process opens the data.
@@ -156,12 +159,14 @@ def prepare_data(cfg: TrainConfig, progress: bool | None = None) -> TrainConfig:
         from .pretrain import ensure_backbone
 
         fingerprint = load_manifest(Path(data["root"]))["fingerprint"]
-        cfg = cfg.replace(pretrained=str(ensure_backbone(cfg.profile, data["root"], fingerprint, progress=show)))
+        cfg = cfg.replace(pretrained=str(ensure_backbone(cfg.profile, data["root"], fingerprint, progress=show,
+                                                         device=str(device))))
     if cfg.task == "regressor":
         if cfg.pretrained is None:
             raise ValueError("the regressor task trains on the features of a pretrained backbone: set pretrained")
         for split in {cfg.train_split, cfg.val_split}:
-            ensure_features(cfg.pretrained, data["root"], split, progress=show, cut=cfg.trainable_from)
+            ensure_features(cfg.pretrained, data["root"], split, progress=show, cut=cfg.trainable_from,
+                            device=device)
     return cfg
 
 
@@ -367,7 +372,7 @@ def train(variant: str, profile: str | Path | None = "smoke", seed: int | None =
         finally:
             dist.destroy_process_group()
     if dataset_factory is None:
-        cfg = prepare_data(cfg)
+        cfg = prepare_data(cfg, device=resolve_device(cfg.device))
     if cfg.world_size > 1:
         return _spawn(cfg, out, resume, factories, stop_at)
     return run_training(cfg, out, resume, *factories, stop_at=stop_at)
@@ -377,8 +382,9 @@ def _prepare_alone(cfg: TrainConfig, out: Path, show: bool) -> TrainConfig:
     """:func:`prepare_data` in each torchrun process before the process group exists, one process
     at a time (a waiting lock in the run folder): a nested pretraining runs in that one process
     and no collective waits on it (see the module docstring)."""
+    device = resolve_device(cfg.device, launch_env()[1])
     with single_process(), file_lock(Path(out) / ".prerequisites.lock"):
-        return prepare_data(cfg, progress=show)
+        return prepare_data(cfg, progress=show, device=device)
 
 
 def _backend(cfg: TrainConfig, local_rank: int = 0) -> str:

@@ -36,7 +36,7 @@ from airpose_lib.data.generate import GenerationConfig, default_root, ensure_sti
 from airpose_lib.data.manifest import load_manifest
 from airpose_lib.data.shards import sha256_file
 from airpose_lib.engine.checkpoint import kit_version, load_checkpoint
-from airpose_lib.engine.launch import single_process
+from airpose_lib.engine.launch import resolve_device, single_process
 from airpose_lib.eval.metrics import rotation_error
 from airpose_lib.folder_lock import file_lock
 from airpose_lib.geometry import axis_angle_to_matrix, rot6d_to_matrix
@@ -131,20 +131,20 @@ def reference_backbone_path(profile: str) -> Path:
 
 
 @torch.no_grad()
-def gate_metrics(model: torch.nn.Module, dataset, batch_size: int = 32, max_samples: int | None = None
-                 ) -> dict[str, float]:
+def gate_metrics(model: torch.nn.Module, dataset, batch_size: int = 32, max_samples: int | None = None,
+                 device: str | torch.device = "cpu") -> dict[str, float]:
     """The pretrained heads on held-out data: heading accuracy, root-rotation and body-pose errors.
 
     Returns ``heading_acc`` (fraction), ``root_rot_median_deg`` / ``root_rot_mean_deg`` of the
     linear ``phi6d`` head, ``theta_mean_deg`` (mean over the 21 joints) and ``n`` crops.
     """
-    model = model.eval()
+    model = model.to(device).eval()
     n_bins = model.n_heading_bins
     rot, th, hit = [], [], []
     n = 0
     for batch in DataLoader(dataset, batch_size=batch_size, shuffle=False):
         B, V = batch["phi"].shape[:2]
-        out = model(batch["images"].flatten(0, 1))
+        out = {k: v.cpu() for k, v in model(batch["images"].flatten(0, 1).to(device)).items()}
         phi = batch["phi"].flatten(0, 1)
         rot.append(torch.rad2deg(rotation_error(rot6d_to_matrix(out["phi6d"]).double(), phi.double())))
         theta = axis_angle_to_matrix(batch["theta"]).unsqueeze(1).expand(B, V, 21, 3, 3).flatten(0, 1)
@@ -217,7 +217,7 @@ def _with_data(stages: list[TrainConfig], data_root: str | Path, data_fingerprin
 
 
 def ensure_backbone(profile: str, data_root: str | Path, data_fingerprint: str, out_root: str | Path | None = None,
-                    progress: bool = False, **overrides) -> Path:
+                    progress: bool = False, device: str | None = None, **overrides) -> Path:
     """The profile's pretrained backbone file (see the module docstring for where it comes from).
 
     Args:
@@ -225,9 +225,13 @@ def ensure_backbone(profile: str, data_root: str | Path, data_fingerprint: str, 
         data_root: the still-frame dataset to pretrain on (train split; the test split gates).
         data_fingerprint: that dataset's configuration fingerprint (part of the key).
         out_root: parent of the pretraining run folders (default ``<runs>/pretrain/<profile>``).
+        device: where the stages that must be trained train and are gated (default: their
+            ``device``, ``auto``); not part of the key.
         overrides: TrainConfig fields over the ``pretrain:`` section (its last stage).
     """
     stages = _with_data(pretrain_stages(profile, **overrides), data_root, data_fingerprint)
+    if device is not None:
+        stages = [cfg.replace(device=device) for cfg in stages]
     keys = stage_keys(stages, data_fingerprint)
     start, path = 0, None
     for i in reversed(range(len(stages))):  # the latest stage already made needs nothing before it
@@ -266,7 +270,8 @@ def _train_stage(profile: str, cfg: TrainConfig, key: str, start: Path | None, o
             run = train("pretrain", profile, out_dir=out / key, config=cfg.replace(progress=progress))
         wall = time.time() - t0
         model = _load_pretrain_model(run.checkpoint, cfg)
-        gate = gate_metrics(model, StillFrameDataset(data_root, "test", augment=False))  # the whole test split
+        gate = gate_metrics(model, StillFrameDataset(data_root, "test", augment=False),  # the whole test split
+                            device=resolve_device(cfg.device))
         meta = {"backbone": cfg.backbone, "key": key, "profile": profile, "kit_version": kit_version(),
                 "config": cfg.to_dict(), "data_fingerprint": data_fingerprint, "gate": gate,
                 "train_wall_s": round(wall, 1), "steps": run.step,

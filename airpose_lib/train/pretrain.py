@@ -37,17 +37,19 @@ from airpose_lib.data.manifest import load_manifest
 from airpose_lib.data.shards import sha256_file
 from airpose_lib.engine.checkpoint import kit_version, load_checkpoint
 from airpose_lib.engine.launch import resolve_device, single_process
+from airpose_lib.errors import reading
 from airpose_lib.eval.metrics import rotation_error
 from airpose_lib.folder_lock import file_lock
 from airpose_lib.geometry import axis_angle_to_matrix, rot6d_to_matrix
 from airpose_lib.losses.pretrain import heading_bin
+from airpose_lib.model.backbone import build_backbone
 from airpose_lib.paths import cache_dir, run_path
 from airpose_lib.profiles import profile_section
 
 from .config import TrainConfig, load_train_config
 
 __all__ = ["PRETRAIN_VERSION", "pretrain_config", "pretrain_stages", "backbone_key", "stage_keys", "ensure_backbone",
-           "profile_backbone", "profile_backbone_key", "export_backbone", "gate_metrics", "reference_backbone_path", "write_reference_backbone"]
+           "profile_backbone", "profile_backbone_key", "export_backbone", "import_torchvision_backbone", "gate_metrics", "reference_backbone_path", "write_reference_backbone"]
 
 #: Bumped when the same settings would train another backbone.
 PRETRAIN_VERSION = 1
@@ -164,12 +166,60 @@ def export_backbone(checkpoint: str | Path, path: str | Path, meta: dict) -> Pat
     state = load_checkpoint(checkpoint)
     sd = {k[len("backbone."):]: v.half() if v.is_floating_point() else v
           for k, v in state["model"].items() if k.startswith("backbone.")}
+    return _write_backbone_file(sd, path, meta)
+
+
+def _write_backbone_file(sd: dict, path: str | Path, meta: dict) -> Path:
+    """A backbone file (``state_dict`` + ``meta_json``, read by ``features.load_backbone_file``)
+    and its JSON record beside it."""
     path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
     with atomic_path(path) as tmp:
         torch.save({"state_dict": sd, "meta_json": json.dumps(meta, sort_keys=True)}, tmp)
     record = dict(meta, sha256=sha256_file(path), bytes=path.stat().st_size)
     path.with_suffix(".json").write_text(json.dumps(record, indent=2, sort_keys=True) + "\n")
     return path
+
+
+def import_torchvision_backbone(weights: str | Path, backbone: str = "resnet50", out: str | Path | None = None
+                                ) -> Path:
+    """A torchvision ResNet state dict (e.g. ImageNet weights the user downloaded:
+    ``torchvision.models.resnet50(weights="IMAGENET1K_V2").state_dict()`` saved with
+    ``torch.save``) as a kit backbone file, float32, for ``train: pretrained: <file>`` (the
+    paper starts from ImageNet weights).
+
+    Args:
+        weights: the ``.pth`` file: a state dict, or a dict holding one under ``state_dict`` /
+            ``model``; ``fc.*`` is dropped, a ``module.`` prefix stripped.
+        backbone: the kit's name of the architecture (``resnet50``, ``resnet34``, ``resnet18``).
+        out: the file to write (default ``<cache>/backbones/imagenet-<backbone>-<sha256[:12]>.pt``).
+
+    Raises:
+        ValueError: not a state dict of that architecture (the missing/unexpected keys or the
+            shape mismatch, one line).
+    """
+    weights = Path(weights)
+    with reading(weights, f"a torchvision {backbone} state dict (torch.save of model.state_dict())",
+                 "save the weights again with torch.save(model.state_dict(), FILE)"):
+        blob = torch.load(weights, map_location="cpu", weights_only=True)
+    for key in ("state_dict", "model"):
+        if isinstance(blob, dict) and isinstance(blob.get(key), dict):
+            blob = blob[key]
+    if not isinstance(blob, dict) or not all(isinstance(v, torch.Tensor) for v in blob.values()):
+        raise ValueError(f"{weights} is not a state dict of tensors; save one with torch.save(model.state_dict(), FILE)")
+    net = build_backbone(backbone)
+    try:
+        net.load_torchvision_state_dict({k: v.float() if v.is_floating_point() else v for k, v in blob.items()})
+    except RuntimeError as e:
+        first = " ".join(str(e).split())[:300]
+        raise ValueError(f"{weights} is not a torchvision {backbone} state dict ({first}); give the weights of a "
+                         f"{backbone} or choose the matching --backbone") from None
+    digest = sha256_file(weights)
+    path = Path(out) if out is not None else cache_dir() / "backbones" / f"imagenet-{backbone}-{digest[:12]}.pt"
+    meta = {"backbone": backbone, "key": f"imported-{digest[:16]}", "source": str(weights.absolute()),
+            "source_sha256": digest, "kit_version": kit_version(),
+            "command": f"airpose backbone import {weights} --backbone {backbone}"}
+    return _write_backbone_file(net.state_dict(), path, meta)
 
 
 def _reference_if_valid(profile: str, key: str) -> Path | None:

@@ -241,3 +241,23 @@ def test_kernels_use_ipc_sockets_outside_the_checkout():
     km = __import__("airpose_lib.reproduce.runner", fromlist=["x"])._ipc_kernel_manager()(kernel_name="python3")
     assert km.transport == "ipc"
     assert not Path(km.ip).resolve().is_relative_to(NOTEBOOKS_DIR.parent)
+
+
+def test_explicit_official_data_source_fails_at_once_naming_the_missing_asset(tmp_path, monkeypatch, capsys):
+    """`airpose reproduce --data-source official` with an asset missing: exit 2 naming it, before
+    any notebook runs (the notebooks themselves fall back to generated data; asked for explicitly,
+    that would silently start generating and training on the paper profile)."""
+    from airpose_lib import cli
+    from airpose_lib.reproduce.runner import NOTEBOOKS_DIR, official_needs
+
+    assert official_needs(NOTEBOOKS_DIR / "02_ablation_table.ipynb") == [
+        "official_synthetic", "official_checkpoints", "smplx_v1_1"]
+    assert official_needs(NOTEBOOKS_DIR / "07_recording_3d.ipynb") == []
+    monkeypatch.setenv("AIRPOSE_OFFICIAL_SYNTHETIC_DIR", str(tmp_path / "nowhere"))  # a mistyped folder
+    monkeypatch.setenv("AIRPOSE_RUNS", str(tmp_path / "runs"))
+    code = cli.main(["reproduce", "--profile", "smoke", "--only", "02_ablation_table", "--data-source", "official",
+                     "--out", str(tmp_path / "runs"), "--figures", str(tmp_path / "figs")])
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and err.startswith("airpose: error: --data-source official: official_synthetic is missing")
+    assert str(tmp_path / "nowhere") in err and "\n" not in err
+    assert not (tmp_path / "runs" / "smoke").exists()  # nothing ran

@@ -336,6 +336,7 @@ def test_kit_profiles_have_train_sections(profile):
     paper = load_train_config("paper", "airpose")
     if profile == "paper":
         assert (paper.lr, paper.batch_size, paper.seed, paper.backbone) == (5e-5, 30, 123, "resnet50")
+        assert paper.grad_clip == 1.0 == load_train_config("cpu", "multiview").grad_clip  # the cpu profile's evidence
 
 
 def test_learning_rate_schedules_by_hand():

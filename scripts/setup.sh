@@ -4,6 +4,11 @@
 #   - a virtual environment in .venv with torch==2.13.0 (CPU) kept pinned by constraints.txt;
 #   - the kit itself, editable, with its test extras.
 # Idempotent: a second run only checks. Any failure stops with a message (set -e).
+#
+# On a GPU machine keep your CUDA build of torch: AIRPOSE_KEEP_TORCH=1 bash scripts/setup.sh
+# skips the torch pin when a torch is already importable (a new .venv then sees the system's
+# packages; or point AIRPOSE_VENV at the environment that has it) and installs the rest under
+# constraints.txt without its torch line.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -32,14 +37,29 @@ if [ ${#need_apt[@]} -gt 0 ]; then
 fi
 
 # 2. Virtual environment.
+KEEP_TORCH=${AIRPOSE_KEEP_TORCH:-0}
 if [ ! -x "$VENV/bin/python" ]; then
   log "creating $VENV with $($PYTHON --version)"
-  "$PYTHON" -m venv "$VENV"
+  venv_flags=()
+  [ "$KEEP_TORCH" = 1 ] && venv_flags=(--system-site-packages)  # the system's CUDA torch stays visible
+  "$PYTHON" -m venv "${venv_flags[@]}" "$VENV"
 fi
 PIP=("$VENV/bin/python" -m pip --disable-pip-version-check)
 
-# 3. torch first, CPU build, exactly the pinned version (an unpinned torch pulls CUDA wheels).
-if ! "$VENV/bin/python" -c 'import torch, sys; sys.exit(torch.__version__.split("+")[0] != "2.13.0")' 2>/dev/null; then
+# 3. torch first, CPU build, exactly the pinned version (an unpinned torch pulls CUDA wheels);
+#    with AIRPOSE_KEEP_TORCH=1 the torch already there, whatever its version and build.
+CONSTRAINTS=constraints.txt
+if [ "$KEEP_TORCH" = 1 ]; then
+  if ! "$VENV/bin/python" -c 'import torch' 2>/dev/null; then
+    echo "[setup] AIRPOSE_KEEP_TORCH=1 but $VENV has no torch to keep: install your CUDA torch into it first" >&2
+    echo "[setup] (e.g. $VENV/bin/pip install torch --index-url https://download.pytorch.org/whl/cu124), or drop AIRPOSE_KEEP_TORCH" >&2
+    exit 1
+  fi
+  log "keeping $("$VENV/bin/python" -c 'import torch; print("torch", torch.__version__, "CUDA", torch.version.cuda)')"
+  CONSTRAINTS=$(mktemp)
+  trap 'rm -f "$CONSTRAINTS"' EXIT
+  grep -v -E '^torch(==|>|<|~|$)' constraints.txt > "$CONSTRAINTS"
+elif ! "$VENV/bin/python" -c 'import torch, sys; sys.exit(torch.__version__.split("+")[0] != "2.13.0")' 2>/dev/null; then
   log "installing torch==2.13.0 (CPU)"
   extra=()
   [ -n "${AIRPOSE_TORCH_INDEX_URL:-}" ] && extra=(--index-url "$AIRPOSE_TORCH_INDEX_URL")
@@ -48,11 +68,12 @@ fi
 
 # 4. The kit and everything else, always under the constraints.
 log "installing airpose_lib and its dependencies"
-"${PIP[@]}" install -q -c constraints.txt -e ".[test]"
+"${PIP[@]}" install -q -c "$CONSTRAINTS" -e ".[test]"
 
-"$VENV/bin/python" - <<'PY'
+AIRPOSE_KEEP_TORCH=$KEEP_TORCH "$VENV/bin/python" - <<'PY'
+import os
 import torch
-assert torch.__version__.startswith("2.13.0"), torch.__version__
+assert os.environ["AIRPOSE_KEEP_TORCH"] == "1" or torch.__version__.startswith("2.13.0"), torch.__version__
 import airpose_lib, smplx, anny, pyvista, papermill  # noqa: F401
 print(f"[setup] ok: torch {torch.__version__}, kit at {airpose_lib.__file__}")
 PY

@@ -36,6 +36,7 @@ from airpose_lib.data.official_synthetic import (
     OfficialDataError,
     OfficialSyntheticDataset,
     official_split_files,
+    read_official_sample,
     remap_official_path,
 )
 from airpose_lib.model import AirPoseNet
@@ -484,3 +485,40 @@ def test_conversion_reads_spin_mean_buffers():
     torch.testing.assert_close(conv.state_dict["init_phi6d"], pose[0, :6].float())
     torch.testing.assert_close(conv.state_dict["init_theta6d"], pose[0, 6:132].float())
     torch.testing.assert_close(conv.state_dict["init_cam"], torch.tensor([0.9, 0.1, -0.1]))
+
+
+def test_test_crops_follow_the_official_jitter(synth):
+    """The official loader (copenet/dsets/aerialpeople.py, HEAD): each side keeps m - randint(m)
+    pixels of its margin m (200 px, less at the frame edge), i.e. a whole number uniform on 1..m.
+    Seeded draws of the test crops (jitter_seed) reproduce; the growth matches that distribution."""
+    from scipy import stats
+
+    ds = OfficialSyntheticDataset(synth["root"], "test", input_size=S, augment=False, jitter=True, jitter_seed=0)
+    s = _sample(ds.files[0])
+    tight = np.array([*s["bb0"][0], *s["bb0"][1]], np.float64)
+    a, b = ds[0], OfficialSyntheticDataset(synth["root"], "test", input_size=S, jitter=True, jitter_seed=0)[0]
+    assert torch.equal(a["bbox"], b["bbox"]) and torch.equal(a["images"], b["images"])  # seeded: reproducible
+    c = OfficialSyntheticDataset(synth["root"], "test", input_size=S, jitter=True, jitter_seed=1)[0]
+    assert not torch.equal(a["bbox"], c["bbox"])
+    g0 = np.array([tight[0] - a["bbox"][0, 0], tight[1] - a["bbox"][0, 1], a["bbox"][0, 2] - tight[2],
+                   a["bbox"][0, 3] - tight[3]], np.float64)
+    assert np.allclose(g0, np.round(g0), atol=1e-3) and (g0 >= 1).all()  # whole pixels, at least 1
+
+    # the distribution, on the stored image of that view (margins up to 200 px, clipped at the frame)
+    img, offset = ds.load_image(ds.files[0], read_official_sample(ds.files[0], ds.views), 0)
+    room = np.r_[tight[:2] - (np.array(offset) - 0.5), (np.array(offset) - 0.5 + [img.shape[1], img.shape[0]])
+                 - tight[2:]]
+    margins = np.minimum(np.floor(room + 1e-9), 200).astype(int)
+    draws = np.array([ds.crop_box(tight, offset, img.shape, np.random.default_rng(k)) for k in range(3000)])
+    growth = np.round(np.c_[tight[:2] - draws[:, :2], draws[:, 2:] - tight[2:]]).astype(int)
+    for side, m in enumerate(margins):
+        g = growth[:, side]
+        if m == 0:
+            assert (g == 0).all()
+            continue
+        assert g.min() >= 1 and g.max() <= m
+        # the official draw with numpy's legacy RNG, as an independent reference sample
+        ref = m - np.random.RandomState(side).randint(m, size=3000)
+        assert stats.ks_2samp(g, ref).pvalue > 0.001
+        assert abs(g.mean() - (m + 1) / 2) < 4 * np.sqrt((m * m - 1) / 12 / len(g))
+    assert (margins == 200).any()  # the fixture has at least one full 200-px margin

@@ -339,3 +339,23 @@ def test_kernels_are_not_interrupted_on_their_way_to_shutdown(monkeypatch):
     km.shutting_down = False
     asyncio.run(km._async_interrupt_kernel())
     assert sent == [False]
+
+
+def test_explicit_official_data_source_fails_at_once_naming_the_missing_asset(tmp_path, monkeypatch, capsys):
+    """`airpose reproduce --data-source official` with an asset missing: exit 2 naming it, before
+    any notebook runs (the notebooks themselves fall back to generated data; asked for explicitly,
+    that would silently start generating and training on the paper profile)."""
+    from airpose_lib import cli
+    from airpose_lib.reproduce.runner import NOTEBOOKS_DIR, official_needs
+
+    assert official_needs(NOTEBOOKS_DIR / "02_ablation_table.ipynb") == [
+        "official_synthetic", "official_checkpoints", "smplx_v1_1"]
+    assert official_needs(NOTEBOOKS_DIR / "07_recording_3d.ipynb") == []
+    monkeypatch.setenv("AIRPOSE_OFFICIAL_SYNTHETIC_DIR", str(tmp_path / "nowhere"))  # a mistyped folder
+    monkeypatch.setenv("AIRPOSE_RUNS", str(tmp_path / "runs"))
+    code = cli.main(["reproduce", "--profile", "smoke", "--only", "02_ablation_table", "--data-source", "official",
+                     "--out", str(tmp_path / "runs"), "--figures", str(tmp_path / "figs")])
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and err.startswith("airpose: error: --data-source official: official_synthetic is missing")
+    assert str(tmp_path / "nowhere") in err and "\n" not in err
+    assert not (tmp_path / "runs" / "smoke").exists()  # nothing ran

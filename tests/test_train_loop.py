@@ -276,8 +276,12 @@ def test_sampler_shares_and_resume_position():
     assert list(ResumableBatchSampler(10, 4, 3, 1, start_batch=1)) == full[1:]
     assert len(list(ResumableBatchSampler(10, 4, 3, 1, drop_last=False))) == 3
     assert sample_seed(3, 1, 5) == sample_seed(3, 1, 5) != sample_seed(3, 2, 5)
-    with pytest.raises(ValueError):
-        ResumableBatchSampler(10, 3, 0, 0, world_size=2)
+    # any global batch over any number of processes: slices of ceil/floor sizes (30 over 4: 8, 8, 7, 7)
+    shares = [list(ResumableBatchSampler(30, 30, 3, 1, rank=r, world_size=4)) for r in range(4)]
+    assert [len(s[0]) for s in shares] == [8, 8, 7, 7]
+    assert sum((s[0] for s in shares), []) == list(ResumableBatchSampler(30, 30, 3, 1))[0]
+    with pytest.raises(ValueError, match="smaller than world_size"):
+        ResumableBatchSampler(10, 3, 0, 0, world_size=4)
 
 
 def test_seeded_dataset_is_reproducible_and_restores_rngs():
@@ -317,8 +321,11 @@ def test_load_train_config_from_profile(tmp_path):
     prof.write_text("train:\n  stepz: 11\n")
     with pytest.raises(ValueError, match="stepz"):
         load_train_config(prof, "airpose")
-    with pytest.raises(ValueError):
-        TrainConfig(batch_size=5, world_size=2)
+    TrainConfig(batch_size=5, world_size=2)  # an uneven split is fine
+    with pytest.raises(ValueError, match="at least world_size"):
+        TrainConfig(batch_size=2, world_size=3)
+    with pytest.raises(ValueError, match="precision"):
+        TrainConfig(precision="fp8")
 
 
 @pytest.mark.parametrize("profile", ["smoke", "cpu", "paper"])
@@ -329,6 +336,7 @@ def test_kit_profiles_have_train_sections(profile):
     paper = load_train_config("paper", "airpose")
     if profile == "paper":
         assert (paper.lr, paper.batch_size, paper.seed, paper.backbone) == (5e-5, 30, 123, "resnet50")
+        assert paper.grad_clip == 1.0 == load_train_config("cpu", "multiview").grad_clip  # the cpu profile's evidence
 
 
 def test_learning_rate_schedules_by_hand():

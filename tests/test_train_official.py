@@ -30,16 +30,45 @@ def test_official_ablation_evaluates_each_official_checkpoint_like_the_kit(offic
     from airpose_lib.train.official import official_ablation
 
     data, ckpts, models = official_assets
-    runs = official_ablation(ckpts, data, backbone="resnet18", body="open", input_size=64)
-    assert set(runs) == {(v, 0) for v in models}
-    # the same numbers as evaluating the in-memory kit model on the same split
-    test = OfficialSyntheticDataset(data, split="test", input_size=64, body_source="open")
-    ref = evaluate(models["airpose"], test, "AirPose", body="open")["per_view"]
-    got = runs["airpose", 0].tables["per_view"]
-    np.testing.assert_allclose(got["mpjpe_m"].to_numpy(), ref["mpjpe_m"].to_numpy(), rtol=1e-6)
-    np.testing.assert_allclose(got["mpe_m"].to_numpy(), ref["mpe_m"].to_numpy(), rtol=1e-6)
-    table = ablation_table({k: r.tables["per_view"] for k, r in runs.items()})
+    runs = official_ablation(ckpts, data, backbone="resnet18", body="open", input_size=64, draws=2)
+    assert set(runs) == {(v, k) for v in models for k in (0, 1)}  # K = 2 seeded jitter draws
+    # the same numbers as evaluating the in-memory kit model on the same crops: the official
+    # loader's jittered test crops (draw k: jitter_seed k), and the tight ones as an extra table
+    for k in (0, 1):
+        test = OfficialSyntheticDataset(data, split="test", input_size=64, body_source="open", jitter=True,
+                                        jitter_seed=k)
+        ref = evaluate(models["airpose"], test, "AirPose", body="open")["per_view"]
+        got = runs["airpose", k].tables["per_view"]
+        np.testing.assert_allclose(got["mpjpe_m"].to_numpy(), ref["mpjpe_m"].to_numpy(), rtol=1e-6)
+        np.testing.assert_allclose(got["mpe_m"].to_numpy(), ref["mpe_m"].to_numpy(), rtol=1e-6)
+    tight = OfficialSyntheticDataset(data, split="test", input_size=64, body_source="open")
+    ref = evaluate(models["airpose"], tight, "AirPose", body="open")["per_view"]
+    np.testing.assert_allclose(runs["airpose", 1].tables["per_view_tight"]["mpe_m"].to_numpy(),
+                               ref["mpe_m"].to_numpy(), rtol=1e-6)
+    assert not np.allclose(runs["airpose", 0].tables["per_view"]["mpe_m"], ref["mpe_m"])  # jitter matters
+    per_view = {k: r.tables["per_view"] for k, r in runs.items()}
+    table = ablation_table(per_view, per_view_tight={k: r.tables["per_view_tight"] for k, r in runs.items()},
+                           camera0=True)
     assert list(table.index) == ["Baseline", "Baseline + Multi-view", "Baseline + Fullcam", "AirPose"]
+    assert (table["seeds"] == 2).all() and table["MPE std [m]"].notna().all()  # mean and spread over draws
+    pv = per_view["airpose", 0]
+    cam0 = np.mean([per_view["airpose", k].query("view == 0")["mpe_m"].mean() for k in (0, 1)])
+    assert table.loc["AirPose", "MPE camera 0 [m]"] == pytest.approx(cam0)
+    assert table.loc["AirPose", "MPE tight box [m]"] == pytest.approx(ref["mpe_m"].mean())
+    assert set(pv["view"]) == {0, 1}
+
+    # explicit checkpoints and the official batch drop (whole batches of 30; the fixture has fewer)
+    other = {"airpose": ckpts / "copenet_twoview_synthetic_ckpt" / "checkpoints" / "epoch=1.ckpt"}
+    with pytest.raises(ValueError, match="no test sample"):
+        official_ablation(ckpts, data, variants=["airpose"], backbone="resnet18", body="open", input_size=64,
+                          draws=1, drop_last=True, checkpoints=other)
+    one = official_ablation(ckpts, data, variants=["airpose"], backbone="resnet18", body="open", input_size=64,
+                            draws=1, tight=False, checkpoints=other)
+    assert one["airpose", 0].checkpoint == other["airpose"] and "per_view_tight" not in one["airpose", 0].tables
+    from airpose_lib.train.official import official_test_samples
+
+    assert [official_test_samples(n, drop_last=True) for n in (29, 30, 59, 61)] == [0, 30, 30, 60]
+    assert official_test_samples(61, max_samples=45, drop_last=True) == 30 and official_test_samples(61) == 61
 
 
 def test_missing_checkpoint_names_the_folder_and_the_manifest(tmp_path):

@@ -7,6 +7,7 @@ module             subcommands
 :mod:`.data`       ``data generate``, ``data sequence``, and from :mod:`.assets` ``data list``,
                    ``data verify``, ``data fetch``
 :mod:`.train`      ``pretrain``, ``train``
+:mod:`.backbone`   ``backbone import`` (ImageNet weights as a backbone file)
 :mod:`.eval`       ``eval``
 :mod:`.prior`      ``prior train``, ``prior info``
 :mod:`.fit`        ``fit`` (AirPose+)
@@ -29,6 +30,7 @@ import sys
 import traceback
 from collections.abc import Callable, Sequence
 
+from .backbone import add_backbone
 from .body import add_body
 from .common import EXIT_USER_ERROR, CLIError, user_error_message
 from .data import add_data
@@ -44,9 +46,9 @@ from .train import add_pretrain, add_train
 __all__ = ["CLIError", "build_parser", "main"]
 
 # Subcommand builders, in help order; each adds its parser to the group.
-_SUBCOMMANDS: tuple[Callable, ...] = (add_body, add_data, add_pretrain, add_train, add_eval, add_prior, add_fit,
-                                       add_finetune, add_predict, add_node, add_launch, add_export, add_keys,
-                                       add_reproduce, add_report)
+_SUBCOMMANDS: tuple[Callable, ...] = (add_body, add_data, add_pretrain, add_backbone, add_train, add_eval, add_prior,
+                                       add_fit, add_finetune, add_predict, add_node, add_launch, add_export,
+                                       add_keys, add_reproduce, add_report)
 
 
 def build_parser() -> argparse.ArgumentParser:

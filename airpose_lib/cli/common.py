@@ -17,7 +17,7 @@ from airpose_lib.errors import UserError  # standard library only
 from airpose_lib.profiles import profile_names  # yaml only
 
 __all__ = [
-    "CLIError", "EXIT_USER_ERROR", "GENDERS", "PROFILES", "SEQUENCE_FOLDER", "VARIANTS", "parse_range",
+    "CLIError", "EXIT_USER_ERROR", "GENDERS", "PROFILES", "SEQUENCE_FOLDER", "VARIANTS", "parse_profile", "parse_range",
     "parse_sets", "require_file", "require_folder", "require_path", "user_error_message",
 ]
 
@@ -27,6 +27,21 @@ PROFILES = tuple(profile_names()) or ("smoke", "cpu", "paper")
 SEQUENCE_FOLDER = "a recording folder in the official layout (machine_1/, machine_2/ with openpose_res.pkl)"
 
 EXIT_USER_ERROR = 2  # as argparse for a bad flag: the user can fix it
+
+
+def parse_profile(value: str) -> str:
+    """``--profile``'s type: a kit profile's name or the path of a profile YAML file of one's own
+    (read by :mod:`airpose_lib.profiles`; its run folders are named after the file's stem)."""
+    import argparse  # the error type argparse turns into its usage message (exit 2)
+
+    if value in PROFILES:
+        return value
+    if Path(value).suffix in (".yaml", ".yml"):
+        if Path(value).is_file():
+            return str(Path(value).absolute())
+        raise argparse.ArgumentTypeError(f"profile file {value} does not exist")
+    raise argparse.ArgumentTypeError(f"unknown profile {value!r}; choose one of {', '.join(PROFILES)} "
+                                     "or give the path of a profile YAML file")
 
 
 class CLIError(Exception):

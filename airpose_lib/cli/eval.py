@@ -44,5 +44,5 @@ def add_eval(sub) -> None:
     ev.add_argument("--out", type=Path, default=None, help="(default: <run>/eval_<split>/)")
     ev.add_argument("--batch-size", type=int, default=8)
     ev.add_argument("--max-samples", type=int, default=None)
-    ev.add_argument("--device", default="cpu")
+    ev.add_argument("--device", default="auto", help="auto (CUDA if available), cpu, cuda or cuda:N (default: auto)")
     ev.set_defaults(func=_cmd_eval)

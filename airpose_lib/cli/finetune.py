@@ -152,7 +152,7 @@ def add_predict(sub) -> None:
                     help="crop size of the network, when its checkpoint does not record it")
     pr.add_argument("--allow-missing-detections", action="store_true",
                     help="treat frames a detector file lacks as undetected instead of failing")
-    pr.add_argument("--device", default="cpu", help="(default: cpu)")
+    pr.add_argument("--device", default="auto", help="auto (CUDA if available), cpu, cuda or cuda:N (default: auto)")
     pr.add_argument("--threads", type=int, default=None, help="torch threads")
     pr.add_argument("--quiet", action="store_true", help="no progress bar")
     pr.set_defaults(func=_cmd_predict)

@@ -9,7 +9,7 @@ from pathlib import Path
 from airpose_lib.errors import DamagedFileError  # standard library only
 from airpose_lib.folder_lock import folder_lock
 
-from .common import PROFILES, VARIANTS, CLIError, parse_sets
+from .common import VARIANTS, CLIError, parse_profile, parse_sets
 
 __all__ = ['add_pretrain', 'add_train']
 
@@ -20,6 +20,7 @@ __all__ = ['add_pretrain', 'add_train']
 
 def _cmd_train(args: argparse.Namespace) -> int:
     from airpose_lib.losses import LossConfig
+    from airpose_lib.engine.launch import launch_env
     from airpose_lib.train import TrainConfig, default_out_dir, load_train_config
     from airpose_lib.train.loop import check_data_root
 
@@ -42,8 +43,11 @@ def _cmd_train(args: argparse.Namespace) -> int:
     out = args.out if args.out is not None else default_out_dir(args.profile, cfg.variant, cfg.seed)
     out.mkdir(parents=True, exist_ok=True)
     # A second training into this folder is refused at once (the loop takes the lock again,
-    # re-entrant; with DDP only there, in the rank-0 process that writes).
-    with folder_lock(out) if cfg.world_size <= 1 else contextlib.nullcontext():
+    # re-entrant). Rank 0 is its one holder: under torchrun the launch's rank 0 (the environment
+    # says which, the process group does not exist yet); with --world-size N the spawned rank 0.
+    launch = launch_env()
+    holder = launch[0] == 0 if launch is not None else cfg.world_size <= 1
+    with folder_lock(out) if holder else contextlib.nullcontext():
         return _train_locked(args, cfg, out)
 
 
@@ -90,7 +94,8 @@ def add_pretrain(sub) -> None:
         description="Train (or find in the cache / the committed results/<profile>/) the backbone every "
                     "variant of the profile starts from: the `pretrain:` section, variant-neutral objective, "
                     "gated on the test split.")
-    pr.add_argument("--profile", choices=PROFILES, default="smoke", help="(default: smoke)")
+    pr.add_argument("--profile", type=parse_profile, default="smoke",
+                    help="a kit profile (smoke, cpu, paper) or the path of your own profile YAML (default: smoke)")
     pr.add_argument("--write-reference", action="store_true",
                     help="also copy the backbone into results/<profile>/ (the committed reference)")
     pr.add_argument("--quiet", action="store_true", help="no progress bars")
@@ -103,9 +108,12 @@ def add_train(sub) -> None:
         description="Train one of the four variants (Table I) on the still-frame dataset with the "
                     "profile's `train:` section: Adam (AMSGrad), deterministic seeds, checkpoints "
                     "every N steps in <out>/checkpoints/ (resumed automatically), <out>/log.csv. "
-                    "--world-size N trains with N processes (PyTorch DDP).")
+                    "--world-size N trains with N processes (PyTorch DDP) on this machine; under "
+                    "`torchrun --nproc_per_node=N -m airpose_lib.cli train ...` the processes come from "
+                    "torchrun (one per GPU, any number of nodes). Mixed precision: --set precision=bf16.")
     tr.add_argument("--variant", choices=VARIANTS, required=True)
-    tr.add_argument("--profile", choices=PROFILES, default="smoke", help="(default: smoke)")
+    tr.add_argument("--profile", type=parse_profile, default="smoke",
+                    help="a kit profile (smoke, cpu, paper) or the path of your own profile YAML (default: smoke)")
     tr.add_argument("--seed", type=int, default=None, help="(default: the profile's)")
     tr.add_argument("--out", type=Path, default=None,
                     help="run folder (default: <runs>/train/<profile>/<variant>/seed<seed>; <runs> is "
@@ -114,9 +122,10 @@ def add_train(sub) -> None:
                     help="continue from <out>/checkpoints/last.pt if present (default: yes)")
     tr.add_argument("--steps", type=int, default=None, help="override the profile's step count")
     tr.add_argument("--batch-size", type=int, default=None, help="override the global batch size")
-    tr.add_argument("--world-size", type=int, default=None, help="training processes (DDP)")
+    tr.add_argument("--world-size", type=int, default=None,
+                    help="training processes (DDP) spawned here; not needed under torchrun")
     tr.add_argument("--num-workers", type=int, default=None, help="DataLoader workers per process")
-    tr.add_argument("--device", default=None, help="auto, cpu or cuda")
+    tr.add_argument("--device", default=None, help="auto, cpu, cuda (each process its own GPU) or cuda:N")
     tr.add_argument("--set", nargs="+", metavar="KEY=VALUE",
                     help="any other TrainConfig option, e.g. lr=1e-4 model.dropout=0 loss.vertex_subsample=2000 "
                          "(keys and value types are checked)")

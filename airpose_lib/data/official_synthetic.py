@@ -44,10 +44,14 @@ every side and clipped to the frame (``prepare_aerialpeople.py``): a stored imag
 columns ``max(xmin - 200, 0) .. min(xmax + 200, 1920)`` (same for rows). The loader accepts that
 size or a full 1920 x 1080 frame (the uncropped renders), and rejects anything else.
 
-Crops (the network input), as the official loader: training boxes grow each side of the tight box
-by a random amount in ``[0, 200]`` px, clipped to the image (the official code draws the growth
-inside the pre-cropped image, which is the same range); the test split uses the tight box (the
-official loader jitters its test crops too; ``jitter=True`` reproduces that). The box is resized
+Crops (the network input), as the official loader (``copenet/dsets/aerialpeople.py`` at the
+official HEAD): each side of the tight box grows by a whole number of pixels drawn uniformly from
+``1 .. m``, where ``m`` is that side's margin in the pre-cropped image (200 px, less where the
+frame edge is nearer; no growth where the box touches it) -- the official code keeps
+``m - randint(m)`` pixels of the margin (:func:`official_growth`). The official loader does this
+for every split, unseeded; here the training split jitters by default and the test split uses the
+tight box unless ``jitter=True`` (:func:`airpose_lib.train.official.official_ablation` evaluates
+the authors' networks on ``K`` seeded jitter draws, ``jitter_seed``, and on the tight crops). The box is resized
 keeping its aspect ratio and padded with black, centred, to ``input_size`` (the official
 ``resize_with_pad`` of ``copenet/src/copenet/utils/utils.py``). The kit resamples with the exact affine map of
 :func:`airpose_lib.geometry.crop_affine_matrix` (integer pixel centres, bilinear), so ``P``, the
@@ -70,8 +74,9 @@ Views: the official loader uses cameras 0 and 1 (the renders have 4); ``views=(0
 Split: the list files by default. Without them (or ``split_by="subjects"``) the authors' rule of
 ``prepare_aerialpeople.py``: subjects are the second ``_``-separated field of the
 ``dataset/pkls/<subject>`` folder names, sorted; the last 10 are the test split. Note that the
-official ``prepare_aerialpeople_dataset.py`` writes the *training* list into ``test_pkls.pkl``; a
-test list equal to the training list is refused with that explanation.
+official ``prepare_aerialpeople_dataset.py`` wrote the *training* list into ``test_pkls.pkl`` until
+its commit afd33f9 (16 Dec 2021, the official HEAD writes the test list); a test list equal to the
+training list is refused with that explanation.
 
 Besides the items, :meth:`OfficialSyntheticDataset.rgb` gives the uint8 crops and
 :meth:`OfficialSyntheticDataset.arrays_for` the ground-truth arrays of chosen samples (the
@@ -110,6 +115,7 @@ __all__ = [
     "subject_of",
     "stored_image_box",
     "crop_image",
+    "official_growth",
 ]
 
 #: Full frame of the synthetic renders, ``(W, H)`` pixels.
@@ -204,8 +210,9 @@ def official_split_files(root: Path | str, split: str, split_by: str = "auto",
         if lists["train"] and lists["train"] == lists["test"]:
             raise OfficialDataError(
                 f"{ds / 'test_pkls.pkl'} lists exactly the training samples (the official "
-                f"prepare_aerialpeople_dataset.py writes the train list into it); pass split_by='subjects' to "
-                f"split by the authors' rule (last 10 subjects are the test split)")
+                f"prepare_aerialpeople_dataset.py wrote the train list into it before its fix afd33f9 of "
+                f"16 Dec 2021); run that script of the official HEAD again, or pass split_by='subjects' "
+                f"(--set data.split_by=subjects) to split by the authors' rule (last 10 subjects are the test split)")
         files = lists["train"] + lists["test"] if split == "all" else lists[split]
     else:
         files_all = sorted((ds / "pkls").glob("*/*.pkl"))
@@ -301,6 +308,16 @@ def stored_image_box(bb: np.ndarray, frame_size: tuple[int, int] = OFFICIAL_FRAM
     return max(x0 - margin, 0), max(y0 - margin, 0), min(x1 + margin, W), min(y1 + margin, H)
 
 
+def official_growth(margins: np.ndarray, rng) -> np.ndarray:
+    """Pixels each side of the tight box grows by, as the official loader draws them: ``margins``
+    ``(4,)`` whole pixels available per side (left, top, right, bottom); side ``k`` keeps
+    ``m - randint(m)``, uniform on ``1 .. m`` (``0`` when ``m == 0``). ``rng``: ``np.random`` or a
+    ``numpy.random.Generator``."""
+    m = np.maximum(np.asarray(margins, np.int64), 0)
+    draw = rng.integers if isinstance(rng, np.random.Generator) else rng.randint
+    return np.array([k - draw(k) if k > 0 else 0 for k in m], np.int64)
+
+
 def crop_image(image: np.ndarray, offset: tuple[float, float], bbox: np.ndarray, size: int) -> np.ndarray:
     """The network input of a box: resize keeping aspect, black outside the box, centred.
 
@@ -330,9 +347,13 @@ class OfficialSyntheticDataset(Dataset):
         augment: random view permutation (the official random camera swap); default True for the
             train split.
         input_size: crop side S (224 in the paper).
-        jitter: grow each side of the training box by ``U(0, jitter_px)``; default True for the
-            train split (the official loader jitters every split: pass True to match it).
+        jitter: grow each side of the box as the official loader (:func:`official_growth`, at most
+            ``jitter_px``); default True for the train split (the official loader jitters every
+            split: pass True to match it).
         jitter_px: the maximum growth per side (200 px).
+        jitter_seed: draw the growth of sample ``i``, view ``v`` from
+            ``numpy.random.default_rng([jitter_seed, i, v])`` (one reproducible draw of the test
+            crops per seed); None: numpy's global RNG (seeded per sample in training).
         views: which of the sample's cameras, in order (the official loader: 0 and 1).
         split_by: ``"auto"``, ``"lists"`` or ``"subjects"`` (:func:`official_split_files`).
         num_test_subjects: test subjects for ``split_by="subjects"``.
@@ -348,6 +369,7 @@ class OfficialSyntheticDataset(Dataset):
 
     def __init__(self, root: Path | str, split: str = "train", augment: bool | None = None,
                  input_size: int = 224, *, jitter: bool | None = None, jitter_px: float = OFFICIAL_CROP_MARGIN,
+                 jitter_seed: int | None = None,
                  views: Sequence[int] = (0, 1), split_by: str = "auto", num_test_subjects: int = 10,
                  joints: str = "pkl", body_source: str = "smplx",
                  frame_size: tuple[int, int] = OFFICIAL_FRAME_SIZE) -> None:
@@ -361,6 +383,7 @@ class OfficialSyntheticDataset(Dataset):
         self.augment = (split == "train") if augment is None else bool(augment)
         self.jitter = (split == "train") if jitter is None else bool(jitter)
         self.jitter_px = float(jitter_px)
+        self.jitter_seed = jitter_seed
         self.views = tuple(int(v) for v in views)
         self.num_views = len(self.views)
         self.crop_size = int(input_size)
@@ -418,15 +441,19 @@ class OfficialSyntheticDataset(Dataset):
                 f"or the image was altered: {_RELEASE_HINT}")
         return np.ascontiguousarray(img[..., ::-1]), offset
 
-    def crop_box(self, tight: np.ndarray, offset: tuple[int, int], shape: tuple[int, ...]) -> np.ndarray:
-        """The crop box ``(4,)``: the tight box, grown by ``U(0, jitter_px)`` per side when
-        jittering, clipped to the stored image (integer pixel centres: it spans
+    def crop_box(self, tight: np.ndarray, offset: tuple[int, int], shape: tuple[int, ...], rng=np.random
+                 ) -> np.ndarray:
+        """The crop box ``(4,)``: the tight box, grown per side as the official loader when
+        jittering (:func:`official_growth` over the margins to the stored image's edges, at most
+        ``jitter_px``), clipped to the stored image (integer pixel centres: it spans
         ``[o - 0.5, o + n - 0.5]``)."""
         box = np.asarray(tight, np.float64).copy()
-        if self.jitter and self.jitter_px > 0:
-            box += np.random.uniform(0.0, self.jitter_px, size=4) * np.array([-1.0, -1.0, 1.0, 1.0])
         lo = np.array([offset[0], offset[1]], np.float64) - 0.5
         hi = lo + np.array([shape[1], shape[0]], np.float64)
+        if self.jitter and self.jitter_px > 0:
+            room = np.r_[box[:2] - lo, hi - box[2:]]  # pixels between the box and the image's edges
+            margins = np.minimum(np.floor(room + 1e-9), self.jitter_px)
+            box += official_growth(margins, rng) * np.array([-1.0, -1.0, 1.0, 1.0])
         return np.clip(box, np.r_[lo, lo], np.r_[hi, hi])
 
     def model_joints(self, sample: dict) -> np.ndarray:
@@ -471,7 +498,8 @@ class OfficialSyntheticDataset(Dataset):
             crops, boxes = [], []
             for v in range(V):
                 img, offset = self.load_image(pkl, s, v)
-                box = self.crop_box(s["bb"][v], offset, img.shape)
+                rng = np.random if self.jitter_seed is None else np.random.default_rng([self.jitter_seed, i, v])
+                box = self.crop_box(s["bb"][v], offset, img.shape, rng)
                 boxes.append(box)
                 crops.append(crop_image(img, offset, box, S))
             out["rgb"] = np.stack(crops)

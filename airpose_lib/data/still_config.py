@@ -160,5 +160,6 @@ def profile_config(profile: str) -> GenerationConfig:
 
 
 def default_root(profile: str) -> Path:
-    """Where a profile's dataset lives by default: ``<kit cache>/data/still_<profile>``."""
-    return cache_dir() / "data" / f"still_{profile}"
+    """Where a profile's dataset lives by default: ``<kit cache>/data/still_<profile>`` (a profile
+    file of one's own: its stem)."""
+    return cache_dir() / "data" / f"still_{Path(str(profile)).stem}"

@@ -94,7 +94,16 @@ def restore_rng_state(state: dict[str, Any]) -> None:
     p = state["python"]
     random.setstate((p["version"], tuple(p["internal"]), p["gauss"]))
     if "cuda" in state and torch.cuda.is_available():
-        torch.cuda.set_rng_state_all(state["cuda"])
+        _restore_cuda_rng(list(state["cuda"]))
+
+
+def _restore_cuda_rng(states: list) -> None:
+    """One saved state per GPU that was visible then, restored onto the GPUs visible now: the
+    common ones in order. A process that trains on one GPU (``cuda:<local_rank>``) draws only from
+    that GPU's stream, which keeps its index when a resumed job sees fewer or more GPUs only if the
+    job keeps its ``CUDA_VISIBLE_DEVICES`` order; the others are re-seeded by torch as usual."""
+    for index in range(min(len(states), torch.cuda.device_count())):
+        torch.cuda.set_rng_state(states[index], index)
 
 
 def checkpoint_dir(out_dir: str | Path) -> Path:

@@ -9,8 +9,10 @@ terms), its validation, and its own checkpoint entries.
 
 Order within one optimiser step ``s`` (1-based, counted after the update):
 
-1. ``terms = task.train_step(batch, s - 1)``; ``zero_grad``, ``terms["total"].backward()``,
-   optional gradient clipping, ``optimizer.step()``;
+1. ``terms = task.train_step(batch, s - 1)`` (under ``torch.autocast`` for ``bf16``/``fp16``
+   precision, :mod:`.launch`); ``zero_grad``, ``terms["total"].backward()`` (scaled by a
+   ``GradScaler`` for fp16, whose state the checkpoints carry), optional gradient clipping,
+   ``optimizer.step()``;
 2. the terms as floats (averaged over processes under DDP); a non-finite total raises;
 3. a ``train`` row in ``log.csv`` every ``log_every`` steps and at the last one; the progress bar;
 4. validation at its steps (``val_every``; also at the last step), before the checkpoint so that a
@@ -58,6 +60,7 @@ from .checkpoint import (
     restore_rng_state,
     save_checkpoint,
 )
+from .launch import autocast, check_precision, grad_scaler, is_distributed, process_rank
 from .logger import RunLogger
 
 __all__ = ["Schedule", "TrainingTask", "EngineRun", "EngineResult", "run_engine", "run_folder", "process_rank"]
@@ -85,6 +88,8 @@ class Schedule:
         progress: show a progress bar (rank 0 only).
         progress_kwargs: extra ``progress_bar`` arguments (``unit``).
         tensorboard: also write TensorBoard events next to the CSV when available.
+        precision: ``fp32``, ``bf16`` or ``fp16`` (:data:`.launch.PRECISIONS`): the autocast of
+            ``train_step`` on the task's ``device`` (validation is the task's own business).
     """
 
     steps: int
@@ -102,6 +107,7 @@ class Schedule:
     progress: bool = False
     progress_kwargs: Mapping[str, Any] | None = None
     tensorboard: bool = True
+    precision: str = "fp32"
 
     def logs_at(self, step: int) -> bool:
         return (step - self.log_offset) % self.log_every == 0 or step == self.steps
@@ -117,8 +123,9 @@ class Schedule:
 class TrainingTask:
     """What one kind of training adds to the engine (SPIN's ``train_step`` and friends).
 
-    A task holds ``model`` (the unwrapped network whose ``state_dict`` is checkpointed) and
-    ``optimizer``. Hooks that receive ``run`` get the :class:`EngineRun` (step counter, data
+    A task holds ``model`` (the unwrapped network whose ``state_dict`` is checkpointed),
+    ``optimizer`` and, when it trains off the CPU or in reduced precision, ``device`` (where the
+    autocast of :attr:`Schedule.precision` applies; CPU when absent). Hooks that receive ``run`` get the :class:`EngineRun` (step counter, data
     position, :meth:`EngineRun.checkpoint_state`).
     """
 
@@ -180,16 +187,9 @@ class EngineResult:
     tensorboard: bool
 
 
-def process_rank() -> tuple[int, int]:
-    """``(rank, world_size)`` of this process (``(0, 1)`` without ``torch.distributed``)."""
-    if dist.is_available() and dist.is_initialized():
-        return dist.get_rank(), dist.get_world_size()
-    return 0, 1
-
-
 def run_folder(out_dir: str | Path | None):
-    """The run folder's exclusive lock (rank 0 is its one writer; nothing without a folder).
-    Re-entrant: hold it around a task's set-up too, which may write there (feature caches)."""
+    """The run folder's exclusive lock (rank 0 is its one writer, also under ``torchrun`` before
+    the process group exists: :func:`.launch.process_rank`; nothing without a folder). Re-entrant: hold it around a task's set-up too, which may write there (feature caches)."""
     if out_dir is None or process_rank()[0] != 0:
         return contextlib.nullcontext()
     return folder_lock(out_dir)
@@ -201,21 +201,25 @@ class EngineRun:
     def __init__(self, task: TrainingTask, schedule: Schedule, out_dir: Path | None) -> None:
         self.task, self.schedule, self.out_dir = task, schedule, out_dir
         self.rank, self.world = process_rank()
-        self.distributed = dist.is_available() and dist.is_initialized()
+        self.distributed = is_distributed()
         self.step = self.epoch = self.batch_in_epoch = 0
+        self.device = torch.device(getattr(task, "device", "cpu"))
+        check_precision(schedule.precision, self.device)
+        self.scaler = grad_scaler(schedule.precision, self.device)
 
     def checkpoint_state(self) -> dict[str, Any]:
         """The checkpoint of now: ``model, optimizer, rng`` (one entry per process), ``step,
-        epoch, batch_in_epoch``, then the task's entries. Collective under DDP."""
+        epoch, batch_in_epoch``, ``scaler`` (fp16 only), then the task's entries. Collective under DDP."""
         rng = capture_rng_state()
         if self.distributed:
             all_rng: list = [None] * self.world
             dist.all_gather_object(all_rng, rng)
         else:
             all_rng = [rng]
+        scaler = {"scaler": self.scaler.state_dict()} if self.scaler is not None else {}
         return {"model": self.task.model.state_dict(), "optimizer": self.task.optimizer.state_dict(),
                 "rng": all_rng, "step": self.step, "epoch": self.epoch, "batch_in_epoch": self.batch_in_epoch,
-                **self.task.checkpoint_state()}
+                **scaler, **self.task.checkpoint_state()}
 
     def save(self) -> Path | None:
         state = self.checkpoint_state()
@@ -238,6 +242,8 @@ class EngineRun:
             self.task.model.load_state_dict(state["model"])
             self.task.optimizer.load_state_dict(state["optimizer"])
             self.step, self.epoch, self.batch_in_epoch = state["step"], state["epoch"], state["batch_in_epoch"]
+            if self.scaler is not None and "scaler" in state:
+                self.scaler.load_state_dict(state["scaler"])
             if len(state["rng"]) == self.world:
                 restore_rng_state(state["rng"][self.rank])
             else:
@@ -260,6 +266,24 @@ class EngineRun:
         dist.all_reduce(stacked)
         stacked /= self.world
         return dict(zip(terms.keys(), stacked.tolist()))
+
+
+def _update(optimizer: torch.optim.Optimizer, model: nn.Module, total: torch.Tensor, grad_clip: float | None,
+            scaler: "torch.amp.GradScaler | None") -> None:
+    """Backward and optimiser step; with a loss scaler the gradients are unscaled before clipping
+    (the clip is a norm of the true gradients) and a step with inf/nan gradients is skipped."""
+    if scaler is None:
+        total.backward()
+        if grad_clip is not None:
+            nn.utils.clip_grad_norm_(model.parameters(), grad_clip)
+        optimizer.step()
+        return
+    scaler.scale(total).backward()
+    if grad_clip is not None:
+        scaler.unscale_(optimizer)
+        nn.utils.clip_grad_norm_(model.parameters(), grad_clip)
+    scaler.step(optimizer)
+    scaler.update()
 
 
 def run_engine(task: TrainingTask, schedule: Schedule, out_dir: str | Path | None = None, resume: bool = True,
@@ -306,12 +330,10 @@ def _run(task: TrainingTask, schedule: Schedule, out: Path | None, resume: bool,
         task.begin(run)
         while run.step < schedule.steps and not stopped:
             for batch in task.batches(run.epoch, run.batch_in_epoch):
-                terms = task.train_step(batch, run.step)
+                with autocast(schedule.precision, run.device):
+                    terms = task.train_step(batch, run.step)
                 task.optimizer.zero_grad(set_to_none=True)
-                terms["total"].backward()
-                if schedule.grad_clip is not None:
-                    nn.utils.clip_grad_norm_(task.model.parameters(), schedule.grad_clip)
-                task.optimizer.step()
+                _update(task.optimizer, task.model, terms["total"], schedule.grad_clip, run.scaler)
                 run.step += 1
                 run.batch_in_epoch += 1
                 step = run.step

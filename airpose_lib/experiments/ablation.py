@@ -55,7 +55,7 @@ class AblationExperiment:
         source: ``"generated"`` (the kit's networks on its data) or ``"official"`` (the
             authors' checkpoints on the official synthetic test split).
         variants: variant names, in table order.
-        seeds: the seeds trained (``[0]`` for the official checkpoints).
+        seeds: the seeds trained (for the official checkpoints: the seeded jitter draws of the test crops).
         runs: (variant, seed) -> ``AblationRun`` (checkpoint and evaluation tables).
         test: the test split (``StillFrameDataset`` or ``OfficialSyntheticDataset``).
         wall: step name -> wall time in seconds, recorded in the results bundle.
@@ -97,7 +97,7 @@ class AblationExperiment:
 
     def per_seed(self) -> pd.DataFrame:
         """:func:`~airpose_lib.eval.ablation.per_seed_table` with the training times."""
-        return per_seed_table(self.per_view, self.per_view_tight, wall_s=self.train_wall())
+        return per_seed_table(self.per_view, self.per_view_tight, wall_s=self.train_wall(), camera0=self.official)
 
     def caption(self) -> str:
         """Caption of the kit's Table I: which networks on which data."""
@@ -129,7 +129,7 @@ def run_ablation_experiment(profile: str, source: DataSource, variants: Sequence
     if source.source == "official":  # the paper's own networks on the paper's own test split
         runs = official_ablation(source.roots["official_checkpoints"], source.roots["official_synthetic"],
                                  variants=variants, max_samples=eval_max_samples, backbone=None)
-        seeds = [0]
+        seeds = sorted({k for _, k in runs})  # the jitter draws of the test crops (official protocol)
         test = OfficialSyntheticDataset(source.roots["official_synthetic"], "test")
     else:
         runs = run_ablation(profile, variants=variants, seeds=seeds, eval_max_samples=eval_max_samples,

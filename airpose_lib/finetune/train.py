@@ -85,6 +85,7 @@ from airpose_lib.engine import (
     restore_rng_state,
     run_engine,
 )
+from airpose_lib.engine.launch import resolve_device
 from airpose_lib.folder_lock import folder_lock
 from airpose_lib.model import to_smplx_params
 from airpose_lib.model.record import network_record
@@ -614,10 +615,7 @@ def _read_inputs(checkpoint: Path, root: Path, cfg: FineTuneConfig) -> tuple:
     Returns:
         ``(device, model, train_cfg, input_size, seq, scales, targets_np (F, V, 25, 3), keypoints)``.
     """
-    if cfg.device == "auto":
-        device = torch.device("cuda" if torch.cuda.is_available() else "cpu")
-    else:
-        device = torch.device(cfg.device)
+    device = resolve_device(cfg.device)
     seed_everything(cfg.seed)  # first, as before the split: the network's build draws from it
     model, train_cfg, input_size = load_network(checkpoint, device, cfg.input_size)
     seq = _load_frames(root, cfg)

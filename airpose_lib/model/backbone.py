@@ -80,6 +80,14 @@ class Bottleneck(nn.Module):
         return self.relu(out + identity)
 
 
+def global_pool(x: Tensor) -> Tensor:
+    """Mean over the feature map: ``(B, C, h, w)`` -> ``(B, C)``. A plain mean rather than
+    ``nn.AdaptiveAvgPool2d(1)``, whose CUDA backward has no deterministic kernel (it would break the
+    bit-identical resume on a GPU under ``use_deterministic_algorithms``); same numbers up to float
+    summation order (tests/test_model_backbone.py)."""
+    return x.mean(dim=(2, 3))
+
+
 class ResNet(nn.Module):
     """ResNet trunk without the classifier: image ``(B, 3, H, W)`` -> feature ``(B, feature_dim)``.
 
@@ -102,9 +110,8 @@ class ResNet(nn.Module):
         self.layer2 = self._make_layer(block, 128, layers[1], stride=2)
         self.layer3 = self._make_layer(block, 256, layers[2], stride=2)
         self.layer4 = self._make_layer(block, 512, layers[3], stride=2)
-        # Global pooling instead of HMR's fixed 7x7 AvgPool2d: identical at 224 px, and any input
-        # size (128 px for the CPU profile) still gives one feature vector.
-        self.avgpool = nn.AdaptiveAvgPool2d(1)
+        # Global pooling (:func:`global_pool`) instead of HMR's fixed 7x7 AvgPool2d: identical at
+        # 224 px, and any input size (128 px for the CPU profile) still gives one feature vector.
         self.feature_dim = 512 * block.expansion
         self.layers = tuple(layers)
         self.block_name = block.__name__
@@ -140,7 +147,7 @@ class ResNet(nn.Module):
     def forward(self, x: Tensor) -> Tensor:
         """Args: x ``(B, 3, H, W)`` normalised RGB. Returns ``(B, feature_dim)``."""
         x = self.layer4(self.layer3(self.layer2(self.layer1(self._stem(x)))))
-        return torch.flatten(self.avgpool(x), 1)
+        return global_pool(x)
 
     def _stem(self, x: Tensor) -> Tensor:
         if self.channels_last:
@@ -184,7 +191,7 @@ class ResNet(nn.Module):
             h = h.contiguous(memory_format=torch.channels_last)
         for block in self.blocks_from(cut):
             h = block(h)
-        return torch.flatten(self.avgpool(h), 1)
+        return global_pool(h)
 
     def blocks_from(self, cut: str) -> list[nn.Module]:
         """The modules :meth:`forward_from` runs with weights: block ``cut`` and those after it."""

@@ -23,11 +23,13 @@ This module imports nothing else of the kit but the leaves :mod:`airpose_lib.pat
 
 from __future__ import annotations
 
+import ast
 import contextlib
 import datetime as _dt
 import json
 import logging
 import os
+import re
 import shutil
 import signal
 import threading
@@ -47,6 +49,8 @@ from airpose_lib.profiles import PROFILES_DIR, ProfileError, profile_path, read_
 from airpose_lib.profiles import profile_names as list_profiles
 
 __all__ = [
+    "check_official_assets",
+    "official_needs",
     "CATALOG_PATH",
     "PROFILES_DIR",
     "NOTEBOOKS_DIR",
@@ -523,6 +527,33 @@ def _data_source_parameter(nb_path: Path, data_source: str | None) -> dict:
     return {"data_source": data_source} if "data_source" in papermill.inspect_notebook(str(nb_path)) else {}
 
 
+def official_needs(nb_path: Path) -> list[str]:
+    """The official assets a notebook needs for ``data_source="official"``: the ``needs=[...]``
+    of its ``setup_notebook`` call (read from the notebook's code cells, nothing executed)."""
+    names: list[str] = []
+    for cell in nbformat.read(str(nb_path), as_version=4).cells:
+        if cell.cell_type == "code":
+            for found in re.findall(r"needs=(\[[^\]]*\])", cell.source):
+                names += [n for n in ast.literal_eval(found) if n not in names]
+    return names
+
+
+def check_official_assets(notebooks: Sequence[Path]) -> None:
+    """``--data-source official`` asked for explicitly: every asset the notebooks need must be
+    there (presence and sizes; checksums are the notebooks' business), else a
+    :class:`ReproductionError` naming the missing ones -- instead of the notebooks' silent
+    fallback to generated data (on the paper profile: days of generating and training)."""
+    from airpose_lib.assets import verify  # lazy: the runner's import stays light
+
+    needed = list(dict.fromkeys(n for nb in notebooks if nb.is_file() for n in official_needs(nb)))
+    missing = [r for r in (verify(name, checksums=False) for name in needed) if not r.ok]
+    if missing:
+        raise ReproductionError(
+            "--data-source official: " + "; ".join(f"{r.name} is missing or incomplete in {r.root}" for r in missing)
+            + f"; see `airpose data verify {missing[0].name}` for what is missing and how to get it, or run "
+            "without --data-source official (the kit's generated data)")
+
+
 def run_profile(
     profile: str,
     only: Sequence[str] | None = None,
@@ -556,7 +587,8 @@ def run_profile(
         verbose: print the summary table.
         data_source: ``generated`` or ``official``: injected as ``data_source`` into every selected
             notebook that declares it (a profile's own ``data_source`` for a notebook wins, so it can
-            be set per notebook). None: each notebook's default.
+            be set per notebook). None: each notebook's default. ``official`` fails at once
+            (:func:`check_official_assets`) when an asset a selected notebook needs is missing.
 
     Returns:
         A :class:`RunReport` (also written to ``<out>/<profile>/report.json``); check ``.ok`` or
@@ -575,6 +607,8 @@ def run_profile(
         raise ReproductionError(f"profile {prof['name']!r} sets parameters for notebooks not in the "
                                 f"catalog: {unknown}")
     selected = _select(catalog, only)
+    if data_source == "official":
+        check_official_assets([notebooks_dir / e.file for e in selected])
     run_dir = (out_dir / prof["name"]).resolve()
     figures_dir = figures_dir.resolve()
 

@@ -36,7 +36,9 @@ class TrainConfig:
     Attributes:
         variant: ``baseline``, ``multiview``, ``fullcam`` or ``airpose``.
         steps: optimiser steps in total.
-        batch_size: global batch (samples; each holds V views), split evenly over processes.
+        batch_size: global batch (samples; each holds V views), split over the processes in
+            slices whose sizes differ by at most one (any ``world_size <= batch_size``; see
+            :func:`airpose_lib.train.sampling.share_bounds`).
         lr, amsgrad, weight_decay: Adam (paper: lr 5e-5, AMSGrad, batch 30, seed 123).
         lr_schedule: ``"constant"`` (the paper) or ``"cosine"`` (from ``lr`` to 0 at ``steps``).
         warmup_steps: the learning rate rises linearly from 0 over this many steps first (0: none).
@@ -50,7 +52,8 @@ class TrainConfig:
         loss: :class:`airpose_lib.losses.LossConfig` field overrides; ``official_loss`` applies the
             official code's variations first.
         body_source: body model of the losses (``open`` or ``smplx``).
-        profile: the profile the config came from (names the default dataset).
+        profile: the profile the config came from (names the default dataset): a kit profile's name,
+            or the absolute path of a profile file of one's own.
         data: the still-frame dataset: ``root`` (a generated dataset folder) or ``profile`` (whose
             ``data: still:`` dataset is used, generated on first use; default: ``profile`` above),
             other keys are passed to ``StillFrameDataset`` (e.g. ``augment``).
@@ -63,8 +66,13 @@ class TrainConfig:
         val_batches: at most this many validation batches (None: the whole split).
         val_batch_size: validation batch (default: ``batch_size``).
         log_every: CSV/TensorBoard row every this many steps.
-        world_size: processes (DDP); 1 = single process.
-        device: ``auto`` (CUDA if available), ``cpu`` or ``cuda``.
+        world_size: processes (DDP); 1 = single process. Under ``torchrun`` it is the launch's.
+        sync_batchnorm: with several processes, BatchNorm statistics over the global batch
+            (``torch.nn.SyncBatchNorm``) instead of each process's share.
+        device: ``auto`` (CUDA if available), ``cpu``, ``cuda`` (each process its own GPU,
+            ``cuda:<LOCAL_RANK>``) or ``cuda:N``; a run records the device it used.
+        precision: ``fp32``, ``bf16`` (autocast, CPU and CUDA) or ``fp16`` (autocast with loss
+            scaling, CUDA only) for the training step's network; losses and validation in float32.
         num_threads: torch CPU threads per process (None: torch's default, divided by the number
             of processes under DDP).
         deterministic: ``torch.use_deterministic_algorithms`` (warn only).
@@ -110,7 +118,9 @@ class TrainConfig:
     val_batch_size: int | None = None
     log_every: int = 10
     world_size: int = 1
+    sync_batchnorm: bool = False
     device: str = "auto"
+    precision: str = "fp32"
     num_threads: int | None = None
     deterministic: bool = True
     progress: bool = True
@@ -144,8 +154,10 @@ class TrainConfig:
         require(self.steps >= 0, "steps", ">= 0", self.steps)
         require(self.batch_size >= 1, "batch_size", ">= 1", self.batch_size)
         require(self.world_size >= 1, "world_size", ">= 1", self.world_size)
-        if self.batch_size % self.world_size:
-            raise ConfigError(f"batch_size {self.batch_size} must be a multiple of world_size {self.world_size}")
+        if self.batch_size < self.world_size:
+            raise ConfigError(f"batch_size {self.batch_size} must be at least world_size {self.world_size} "
+                              "(every process needs a sample)")
+        require(self.precision in ("fp32", "bf16", "fp16"), "precision", "'fp32', 'bf16' or 'fp16'", self.precision)
         require(self.checkpoint_every >= 1, "checkpoint_every", ">= 1", self.checkpoint_every)
         require(self.log_every >= 1, "log_every", ">= 1", self.log_every)
         require(self.keep_checkpoints >= 0, "keep_checkpoints", ">= 0 (0: only last.pt)", self.keep_checkpoints)
@@ -178,7 +190,7 @@ class TrainConfig:
     # Fields whose change makes a resumed run differ from a straight one.
     RESUME_KEYS = ("variant", "batch_size", "lr", "lr_schedule", "warmup_steps", "amsgrad", "weight_decay", "grad_clip", "seed", "backbone",
                    "model", "freeze_backbone", "loss", "official_loss", "body_source", "data", "train_split",
-                   "task", "pretrained", "trainable_from", "backbone_lr_scale")
+                   "task", "pretrained", "trainable_from", "backbone_lr_scale", "precision", "sync_batchnorm")
 
     def resume_keys(self) -> tuple[str, ...]:
         """:attr:`RESUME_KEYS`, and ``steps`` when the rate schedule depends on the total: a
@@ -217,9 +229,15 @@ def _check_model_options(model: dict, task: str) -> None:
 
 
 def _device_ok(device: str) -> bool:
-    """``auto``, ``cpu``, ``cuda`` or ``cuda:N`` (whether CUDA is there is checked when a run starts)."""
-    head, _, index = device.partition(":")
-    return device in ("auto", "cpu", "cuda") or head == "cuda" and index.isdigit()
+    """``auto`` or a string torch reads as a device (whether this machine has it is checked when a
+    run starts, :func:`airpose_lib.engine.launch.resolve_device`: a config read from a checkpoint
+    trained on a GPU stays valid on a CPU)."""
+    import torch  # lazy, as the model checks
+
+    try:
+        return device == "auto" or torch.device(device) is not None
+    except (RuntimeError, TypeError):
+        return False
 
 
 def load_train_config(profile: str | Path | None, variant: str, seed: int | None = None,
@@ -247,7 +265,9 @@ def load_train_config(profile: str | Path | None, variant: str, seed: int | None
             raise ConfigError(f"{where}: {e}; fix the file") from None
     values["variant"] = variant
     if profile is not None:
-        values.setdefault("profile", Path(str(profile)).stem)
+        # a kit profile by name; a profile file of one's own by its path (read again for its data)
+        own = Path(str(profile)).suffix in (".yaml", ".yml")
+        values.setdefault("profile", str(Path(profile).absolute()) if own else Path(str(profile)).stem)
     if seed is not None:
         values["seed"] = seed
     values.update(overrides)

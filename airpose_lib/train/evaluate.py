@@ -23,6 +23,7 @@ from torch.utils.data import DataLoader
 from airpose_lib.body import load_body_model
 from airpose_lib.body.forward import BodyForward
 from airpose_lib.engine.checkpoint import load_checkpoint
+from airpose_lib.engine.launch import resolve_device
 from airpose_lib.eval import per_joint_table, per_view_table, relative_camera_table
 from airpose_lib.geometry import axis_angle_to_matrix
 from airpose_lib.model import build_model, to_smplx_params
@@ -105,7 +106,9 @@ def evaluate(model: nn.Module, dataset, method: str = "", **predict_kwargs) -> d
 
 
 def load_trained_model(checkpoint: str | Path, device: str | torch.device = "cpu") -> tuple[nn.Module, TrainConfig]:
-    """The network of a training checkpoint (built with ``airpose_lib.model.build_model``)."""
+    """The network of a training checkpoint (built with ``airpose_lib.model.build_model``) on
+    ``device`` (``auto``, ``cpu``, ``cuda``, ``cuda:N``: :func:`airpose_lib.engine.launch.resolve_device`)."""
+    device = resolve_device(str(device))
     state = load_checkpoint(checkpoint)
     cfg = TrainConfig(**state["config"])
     model = build_model(cfg.variant, backbone=cfg.backbone, **cfg.model)
@@ -114,18 +117,19 @@ def load_trained_model(checkpoint: str | Path, device: str | torch.device = "cpu
 
 
 def evaluate_checkpoint(checkpoint: str | Path, split: str = "test", method: str | None = None,
-                        data: dict | None = None, batch_size: int = 8, device: str | torch.device = "cpu",
+                        data: dict | None = None, batch_size: int = 8, device: str | torch.device = "auto",
                         max_samples: int | None = None, crops: str | None = None) -> dict[str, pd.DataFrame]:
     """Evaluate a checkpoint on a split of the dataset it was trained with (or ``data`` kwargs).
 
     ``crops="tight"`` evaluates on the test split's tight-box crops instead of the jittered ones.
     A checkpoint of the ``regressor`` task is evaluated on the cached features of its backbone.
     """
+    device = resolve_device(str(device))
     model, cfg = load_trained_model(checkpoint, device)
     if data is not None:
         cfg = cfg.replace(data=dict(data))
     if crops is not None:
         cfg = cfg.replace(data=dict(cfg.data, crops=crops))
-    dataset = default_dataset_factory(prepare_data(cfg, progress=False), split)
+    dataset = default_dataset_factory(prepare_data(cfg, progress=False, device=device), split)
     return evaluate(model, dataset, method or cfg.variant, batch_size=batch_size, device=device,
                     max_samples=max_samples, body=cfg.body_source, feature_cut=cfg.trainable_from)

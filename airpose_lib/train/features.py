@@ -64,24 +64,26 @@ def feature_key(backbone_file: str | Path, data_root: str | Path, split: str, cr
 
 @torch.no_grad()
 def compute_features(backbone: torch.nn.Module, dataset: StillFrameDataset, batch_size: int = 64,
-                     progress: bool = False, cut: str | None = None) -> np.ndarray:
+                     progress: bool = False, cut: str | None = None,
+                     device: str | torch.device = "cpu") -> np.ndarray:
     """Features of every crop of ``dataset`` (in order, no augmentation), float32: the pooled
-    ``(N, V, C)``, or with ``cut`` the input of that block, ``(N, V, C, h, w)``."""
-    backbone = backbone.eval()
+    ``(N, V, C)``, or with ``cut`` the input of that block, ``(N, V, C, h, w)``; computed on
+    ``device`` (a GPU's differ from the CPU's by float rounding only)."""
+    backbone = backbone.to(device).eval()
     loader = DataLoader(dataset, batch_size=batch_size, shuffle=False)
     out = []
     for batch in progress_bar(loader, enabled=progress, desc="features"):
-        x = batch["images"]
+        x = batch["images"].to(device)
         B, V = x.shape[:2]
         f = backbone(x.flatten(0, 1)) if cut is None else backbone.forward_until(x.flatten(0, 1), cut)
-        out.append(f.contiguous().reshape(B, V, *f.shape[1:]).numpy())
+        out.append(f.contiguous().reshape(B, V, *f.shape[1:]).cpu().numpy())
     return np.concatenate(out).astype(np.float32)
 
 
 def ensure_features(backbone_file: str | Path, data_root: str | Path, split: str, crops: str = "jittered",
-                    progress: bool = False, cut: str | None = None) -> Path:
+                    progress: bool = False, cut: str | None = None, device: str | torch.device = "cpu") -> Path:
     """The feature file of a dataset split (computed on first use, atomically, under a lock);
-    ``cut`` as :func:`compute_features`.
+    ``cut`` and ``device`` as :func:`compute_features`.
 
     Returns ``<kit cache>/features/<key>.npy``.
     """
@@ -91,7 +93,7 @@ def ensure_features(backbone_file: str | Path, data_root: str | Path, split: str
         if not path.is_file():
             backbone, _ = load_backbone_file(backbone_file)
             ds = StillFrameDataset(data_root, split, augment=False, crops=crops)
-            feats = compute_features(backbone, ds, progress=progress, cut=cut)
+            feats = compute_features(backbone, ds, progress=progress, cut=cut, device=device)
             with atomic_path(path) as tmp:
                 with open(tmp, "wb") as f:
                     np.save(f, feats)

@@ -15,17 +15,37 @@ interruption (Ctrl-C, a killed job) loses the steps since the last checkpoint
 (``checkpoint_every``); nothing is written on the way out, so no checkpoint can hold a
 half-applied step.
 
-Multi-process training (DDP). ``world_size > 1`` spawns that many processes
-(``torch.multiprocessing``; ``gloo`` on CPU, ``nccl`` on CUDA); under ``torchrun`` the processes
-already exist and are joined from the environment. The global batch is split evenly: process r
-gets the r-th slice of every global batch, gradients are averaged, so with the same global batch
-the updates equal the single-process ones up to floating-point summation order -- except for
-what is computed per process by design: BatchNorm batch statistics (per-process batches) and
-dropout masks (per-process RNG streams).
+Multi-process training (DDP). Under ``torchrun`` (``torchrun --nproc_per_node=N -m airpose_lib.cli
+train ...``, one process per GPU, one or several nodes) the processes exist already: each reads
+its rank, local rank (its GPU, ``cuda:<LOCAL_RANK>``) and the world size from the environment
+(:func:`airpose_lib.engine.launch.launch_env`); ``world_size > 1`` without torchrun spawns that
+many processes on this machine (``torch.multiprocessing``). ``gloo`` on CPU, ``nccl`` on CUDA.
+
+The prerequisites (the dataset, the pretrained backbone, the feature caches) are resolved before
+the process group exists, each process alone (:func:`airpose_lib.engine.launch.single_process`)
+and one after the other (a file lock in the run folder): the first builds what is missing, a
+nested pretraining included, the others find it made. Several nodes therefore need the run folder
+and the cache on a shared file system (or the prerequisites made beforehand: ``airpose
+pretrain``). Rank 0 is the run folder's one writer (lock, checkpoints, log).
+
+The global batch B is split over the W processes in contiguous slices whose sizes differ by at
+most one (:func:`airpose_lib.train.sampling.share_bounds`: 30 over 4 GPUs is 8, 8, 7, 7), and
+every process's loss terms are weighted by ``n_r W / B`` so that DDP's gradient average (and the
+logged all-reduced mean) is the mean over the global batch: with the same global batch the
+updates equal the single-process ones up to floating-point summation order, for any W <= B --
+except for what is computed per process by design: BatchNorm batch statistics (per-process
+batches; ``sync_batchnorm: true`` shares them) and dropout masks (per-process RNG streams). A run
+may resume with another number of processes (the RNG streams are re-seeded, with a warning).
+
+Precision (``precision: fp32 | bf16 | fp16``): the training step's network forward runs under
+``torch.autocast`` (:mod:`airpose_lib.engine.launch`); the losses are computed in float32
+(:func:`_supervised_terms`), and validation runs in float32.
 """
 
 from __future__ import annotations
 
+import contextlib
+import dataclasses
 import functools
 import json
 import os
@@ -48,6 +68,8 @@ from airpose_lib.data.manifest import check_complete, load_manifest
 from airpose_lib.data.official_synthetic import OfficialSyntheticDataset
 from airpose_lib.data.training_input import training_input
 from airpose_lib.engine import EngineRun, Schedule, StaleRunError, TrainingTask, process_rank, run_engine, run_folder
+from airpose_lib.engine.launch import check_precision, launch_env, resolve_device, single_process
+from airpose_lib.folder_lock import file_lock
 from airpose_lib.losses import SupervisedLoss, loss_config
 from airpose_lib.losses.pretrain import PretrainLoss, PretrainLossConfig
 from airpose_lib.model import build_model, to_smplx_params
@@ -112,9 +134,12 @@ def check_data_root(cfg: TrainConfig) -> None:
         check_complete(Path(cfg.data["root"]))
 
 
-def prepare_data(cfg: TrainConfig, progress: bool | None = None) -> TrainConfig:
+def prepare_data(cfg: TrainConfig, progress: bool | None = None, device: str | torch.device = "cpu"
+                 ) -> TrainConfig:
     """Resolve the dataset folder: ``cfg.data["root"]``, or the ``data: still:`` dataset of
-    ``cfg.data["profile"]`` / ``cfg.profile``, generated (``airpose_lib.data``) if missing.
+    ``cfg.data["profile"]`` / ``cfg.profile``, generated (``airpose_lib.data``) if missing; a
+    pretraining or feature cache it needs runs on ``device`` (the caller's: a checkpoint's
+    recorded device may not exist where it is evaluated).
 
     Returns the config with ``data["root"]`` set. Called once by :func:`train` before any training
     process opens the data.
@@ -144,12 +169,14 @@ def prepare_data(cfg: TrainConfig, progress: bool | None = None) -> TrainConfig:
         from .pretrain import ensure_backbone
 
         fingerprint = load_manifest(Path(data["root"]))["fingerprint"]
-        cfg = cfg.replace(pretrained=str(ensure_backbone(cfg.profile, data["root"], fingerprint, progress=show)))
+        cfg = cfg.replace(pretrained=str(ensure_backbone(cfg.profile, data["root"], fingerprint, progress=show,
+                                                         device=str(device))))
     if cfg.task == "regressor":
         if cfg.pretrained is None:
             raise ValueError("the regressor task trains on the features of a pretrained backbone: set pretrained")
         for split in {cfg.train_split, cfg.val_split}:
-            ensure_features(cfg.pretrained, data["root"], split, progress=show, cut=cfg.trainable_from)
+            ensure_features(cfg.pretrained, data["root"], split, progress=show, cut=cfg.trainable_from,
+                            device=device)
     return cfg
 
 
@@ -185,7 +212,25 @@ MIN_WEAK_SCALE = 0.05
 MAX_WEAK_SCALE = 5.0
 
 
+@contextlib.contextmanager
+def _float32(device: torch.device):
+    """No autocast inside: the losses (body model, projections, depths from the weak camera) run in
+    float32 whatever the network's precision; the network's outputs are cast up first."""
+    with torch.autocast(device.type, enabled=False):
+        yield
+
+
+def _up(out: Mapping) -> dict:
+    return {k: v.float() if isinstance(v, torch.Tensor) and v.is_floating_point() else v for k, v in out.items()}
+
+
 def _supervised_terms(out: Mapping, loss_fn: nn.Module, batch: Mapping[str, torch.Tensor], input_size: int) -> dict:
+    with _float32(batch["P"].device):
+        return _supervised_terms_fp32(_up(out), loss_fn, batch, input_size)
+
+
+def _supervised_terms_fp32(out: Mapping, loss_fn: nn.Module, batch: Mapping[str, torch.Tensor], input_size: int
+                           ) -> dict:
     if "cam" in out:
         cam = out["cam"]
         out = dict(out, cam=torch.cat((cam[..., :1].clamp(MIN_WEAK_SCALE, MAX_WEAK_SCALE), cam[..., 1:]), dim=-1))
@@ -217,7 +262,8 @@ def regressor_forward_loss(model: nn.Module, loss_fn: nn.Module, batch: Mapping[
 def pretrain_forward_loss(model: nn.Module, loss_fn: nn.Module, batch: Mapping[str, torch.Tensor]) -> dict:
     """Task ``pretrain``: the heads on every crop of the batch (views flattened)."""
     out = model(batch["images"].flatten(0, 1))
-    return loss_fn(out, batch, _unwrap(model).n_heading_bins)
+    with _float32(batch["images"].device):
+        return loss_fn(_up(out), batch, _unwrap(model).n_heading_bins)
 
 
 #: The step of each task (SPIN's ``train_step`` per task, one engine around them).
@@ -318,36 +364,41 @@ def train(variant: str, profile: str | Path | None = "smoke", seed: int | None =
     out = Path(out_dir) if out_dir is not None else default_out_dir(profile, cfg.variant, cfg.seed)
     factories = (model_factory or default_model_factory, dataset_factory or default_dataset_factory,
                  loss_factory or default_loss_factory)
-    if "RANK" in os.environ and "WORLD_SIZE" in os.environ:  # torchrun: join the existing group
-        world = int(os.environ["WORLD_SIZE"])
+    launch = launch_env()
+    check_precision(cfg.precision, resolve_device(cfg.device, launch[1] if launch else 0))  # before any data
+    if launch is not None:  # torchrun: prerequisites alone, then join the process group
+        rank, local_rank, world = launch
         cfg = cfg.replace(world_size=world)
-        if not dist.is_initialized():
-            dist.init_process_group(_backend(cfg))
-        if dataset_factory is None:  # rank 0 generates a missing dataset, the others then verify it
-            if dist.get_rank() == 0:
-                cfg = prepare_data(cfg)
-            dist.barrier()
-            if dist.get_rank() != 0:
-                cfg = prepare_data(cfg, progress=False)
-        return run_training(cfg, out, resume, *factories, stop_at=stop_at)
+        if dataset_factory is None:
+            cfg = _prepare_alone(cfg, out, show=cfg.progress and rank == 0)
+        if dist.is_initialized():
+            return run_training(cfg, out, resume, *factories, stop_at=stop_at)
+        device = resolve_device(cfg.device, local_rank)
+        if device.type == "cuda":
+            torch.cuda.set_device(device)  # before NCCL's first collective: one GPU per process
+        dist.init_process_group(_backend(cfg, local_rank))
+        try:
+            return run_training(cfg, out, resume, *factories, stop_at=stop_at)
+        finally:
+            dist.destroy_process_group()
     if dataset_factory is None:
-        cfg = prepare_data(cfg)
+        cfg = prepare_data(cfg, device=resolve_device(cfg.device))
     if cfg.world_size > 1:
         return _spawn(cfg, out, resume, factories, stop_at)
     return run_training(cfg, out, resume, *factories, stop_at=stop_at)
 
 
-def _backend(cfg: TrainConfig) -> str:
-    return "nccl" if _device(cfg, 0).type == "cuda" else "gloo"
+def _prepare_alone(cfg: TrainConfig, out: Path, show: bool) -> TrainConfig:
+    """:func:`prepare_data` in each torchrun process before the process group exists, one process
+    at a time (a waiting lock in the run folder): a nested pretraining runs in that one process
+    and no collective waits on it (see the module docstring)."""
+    device = resolve_device(cfg.device, launch_env()[1])
+    with single_process(), file_lock(Path(out) / ".prerequisites.lock"):
+        return prepare_data(cfg, progress=show, device=device)
 
 
-def _device(cfg: TrainConfig, local_rank: int) -> torch.device:
-    if cfg.device == "auto":
-        return torch.device(f"cuda:{local_rank}") if torch.cuda.is_available() else torch.device("cpu")
-    dev = torch.device(cfg.device)
-    if dev.type == "cuda" and dev.index is None:
-        dev = torch.device(f"cuda:{local_rank}")
-    return dev
+def _backend(cfg: TrainConfig, local_rank: int = 0) -> str:
+    return "nccl" if resolve_device(cfg.device, local_rank).type == "cuda" else "gloo"
 
 
 def _free_port() -> int:
@@ -404,6 +455,9 @@ def _param_groups(model: nn.Module, cfg: TrainConfig) -> list[dict]:
 
 def _check_resume(saved: dict, cfg: TrainConfig) -> None:
     now = cfg.to_dict()
+    # a key added after the checkpoint was written compares with its default
+    saved = {**{f.name: f.default for f in dataclasses.fields(TrainConfig) if f.name not in saved
+                and f.default is not dataclasses.MISSING}, **saved}
     strip = lambda d: {k: v for k, v in (d or {}).items() if k != "root"}  # noqa: E731 - may move
     diff = [k for k in cfg.resume_keys()
             if (strip(saved.get(k)) != strip(now.get(k)) if k == "data" else saved.get(k) != now.get(k))]
@@ -428,6 +482,12 @@ def run_training(cfg: TrainConfig, out_dir: Path, resume: bool, model_factory: C
         torch.use_deterministic_algorithms(saved[1], warn_only=saved[2])
 
 
+def _share_weight(n_local: int, batch_size: int, world: int) -> float:
+    """``n_r W / B``: the weight of a process's mean loss that makes DDP's average over the W
+    processes the mean over the B samples of the global batch (1 for an even split)."""
+    return n_local * world / batch_size
+
+
 class StillFrameTask(TrainingTask):
     """The engine's task for the still-frame trainings (``supervised``, ``regressor``,
     ``pretrain``: the step of :data:`TASK_FORWARD`), one process of a DDP group or alone.
@@ -439,6 +499,7 @@ class StillFrameTask(TrainingTask):
 
     def __init__(self, cfg: TrainConfig, model: nn.Module, loss_fn: nn.Module, train_ds, val_ds,
                  device: torch.device, rank: int, world: int, network: Mapping | None = None) -> None:
+        # ``device`` also tells the engine where the autocast of ``cfg.precision`` applies
         self.cfg, self.model, self.loss_fn, self.device = cfg, model, loss_fn, device
         self.train_ds, self.val_ds, self.rank, self.world = train_ds, val_ds, rank, world
         self.network = dict(network or {})  # the checkpoints' network record (run_network_entry)
@@ -461,7 +522,9 @@ class StillFrameTask(TrainingTask):
         lr = self.cfg.lr_at(step)  # a function of the step alone, so a resumed run follows it too
         for group in self.optimizer.param_groups:
             group["lr"] = lr * group.get("lr_scale", 1.0)
-        return self.step_fn(self.net, self.loss_fn, batch)
+        terms = self.step_fn(self.net, self.loss_fn, batch)
+        weight = _share_weight(int(batch["phi"].shape[0]), self.cfg.batch_size, self.world)
+        return terms if weight == 1.0 else {k: v * weight for k, v in terms.items()}
 
     def train_mode(self) -> None:
         _set_train_mode(self.model, self.cfg)
@@ -502,10 +565,11 @@ def _run_training(cfg: TrainConfig, out_dir: Path, resume: bool, model_factory: 
     rank, world = process_rank()
     if world != cfg.world_size:
         cfg = cfg.replace(world_size=world)
-    local_rank = int(os.environ.get("LOCAL_RANK", rank))
-    device = _device(cfg, local_rank)
+    local_rank = int(os.environ.get("LOCAL_RANK", rank)) if world > 1 else 0
+    device = resolve_device(cfg.device, local_rank)
     if device.type == "cuda":
         torch.cuda.set_device(device)
+    cfg = cfg.replace(device=str(device))  # what the run used, in config.json and the checkpoints
     threads = cfg.num_threads or (max(1, torch.get_num_threads() // world) if world > 1 else None)
     if threads:
         torch.set_num_threads(threads)
@@ -515,6 +579,8 @@ def _run_training(cfg: TrainConfig, out_dir: Path, resume: bool, model_factory: 
 
     seed_everything(cfg.seed)
     model = model_factory(cfg).to(device)  # identical initial weights in every process
+    if cfg.sync_batchnorm and world > 1:  # batch statistics over the global batch (same parameters)
+        model = nn.SyncBatchNorm.convert_sync_batchnorm(model)
     if cfg.freeze_backbone and hasattr(model, "backbone"):
         for p in model.backbone.parameters():
             p.requires_grad_(False)
@@ -525,7 +591,8 @@ def _run_training(cfg: TrainConfig, out_dir: Path, resume: bool, model_factory: 
     task = StillFrameTask(cfg, model, loss_fn, train_ds, val_ds, device, rank, world, network)
     schedule = Schedule(steps=cfg.steps, log_every=cfg.log_every, checkpoint_every=cfg.checkpoint_every,
                         keep_checkpoints=cfg.keep_checkpoints, val_every=cfg.val_every, grad_clip=cfg.grad_clip,
-                        stop_at=stop_at, what=f"train {cfg.variant}", progress=cfg.progress)
+                        stop_at=stop_at, what=f"train {cfg.variant}", progress=cfg.progress,
+                        precision=cfg.precision)
     t_start = time.time()
     run = run_engine(task, schedule, out_dir, resume)
     result = TrainResult(out_dir=out_dir, step=run.step, checkpoint=run.checkpoint,

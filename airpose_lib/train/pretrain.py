@@ -36,17 +36,20 @@ from airpose_lib.data.generate import GenerationConfig, default_root, ensure_sti
 from airpose_lib.data.manifest import load_manifest
 from airpose_lib.data.shards import sha256_file
 from airpose_lib.engine.checkpoint import kit_version, load_checkpoint
+from airpose_lib.engine.launch import resolve_device, single_process
+from airpose_lib.errors import reading
 from airpose_lib.eval.metrics import rotation_error
 from airpose_lib.folder_lock import file_lock
 from airpose_lib.geometry import axis_angle_to_matrix, rot6d_to_matrix
 from airpose_lib.losses.pretrain import heading_bin
+from airpose_lib.model.backbone import build_backbone
 from airpose_lib.paths import cache_dir, run_path
 from airpose_lib.profiles import profile_section
 
 from .config import TrainConfig, load_train_config
 
 __all__ = ["PRETRAIN_VERSION", "pretrain_config", "pretrain_stages", "backbone_key", "stage_keys", "ensure_backbone",
-           "profile_backbone", "profile_backbone_key", "export_backbone", "gate_metrics", "reference_backbone_path", "write_reference_backbone"]
+           "profile_backbone", "profile_backbone_key", "export_backbone", "import_torchvision_backbone", "gate_metrics", "reference_backbone_path", "write_reference_backbone"]
 
 #: Bumped when the same settings would train another backbone.
 PRETRAIN_VERSION = 1
@@ -115,7 +118,8 @@ def backbone_key(cfg: TrainConfig, data_fingerprint: str, start_key: str | None 
                              "val_every", "val_batches", "device", "num_threads", "profile",
                              "trainable_from", "backbone_lr_scale")}  # the last two: regressor-task fields
     settings["pretrained"] = start_key
-    for name, default in (("lr_schedule", "constant"), ("warmup_steps", 0)):
+    for name, default in (("lr_schedule", "constant"), ("warmup_steps", 0), ("precision", "fp32"),
+                          ("sync_batchnorm", False)):
         if settings.get(name) == default:  # added after the first committed backbone, whose key stays
             settings.pop(name)
     blob = json.dumps({"version": PRETRAIN_VERSION, "settings": settings, "data": data_fingerprint},
@@ -125,24 +129,24 @@ def backbone_key(cfg: TrainConfig, data_fingerprint: str, start_key: str | None 
 
 def reference_backbone_path(profile: str) -> Path:
     """Where a profile's committed backbone lives in the repository."""
-    return _REPO / "results" / profile / "pretrained_backbone.pt"
+    return _REPO / "results" / Path(str(profile)).stem / "pretrained_backbone.pt"
 
 
 @torch.no_grad()
-def gate_metrics(model: torch.nn.Module, dataset, batch_size: int = 32, max_samples: int | None = None
-                 ) -> dict[str, float]:
+def gate_metrics(model: torch.nn.Module, dataset, batch_size: int = 32, max_samples: int | None = None,
+                 device: str | torch.device = "cpu") -> dict[str, float]:
     """The pretrained heads on held-out data: heading accuracy, root-rotation and body-pose errors.
 
     Returns ``heading_acc`` (fraction), ``root_rot_median_deg`` / ``root_rot_mean_deg`` of the
     linear ``phi6d`` head, ``theta_mean_deg`` (mean over the 21 joints) and ``n`` crops.
     """
-    model = model.eval()
+    model = model.to(device).eval()
     n_bins = model.n_heading_bins
     rot, th, hit = [], [], []
     n = 0
     for batch in DataLoader(dataset, batch_size=batch_size, shuffle=False):
         B, V = batch["phi"].shape[:2]
-        out = model(batch["images"].flatten(0, 1))
+        out = {k: v.cpu() for k, v in model(batch["images"].flatten(0, 1).to(device)).items()}
         phi = batch["phi"].flatten(0, 1)
         rot.append(torch.rad2deg(rotation_error(rot6d_to_matrix(out["phi6d"]).double(), phi.double())))
         theta = axis_angle_to_matrix(batch["theta"]).unsqueeze(1).expand(B, V, 21, 3, 3).flatten(0, 1)
@@ -162,12 +166,60 @@ def export_backbone(checkpoint: str | Path, path: str | Path, meta: dict) -> Pat
     state = load_checkpoint(checkpoint)
     sd = {k[len("backbone."):]: v.half() if v.is_floating_point() else v
           for k, v in state["model"].items() if k.startswith("backbone.")}
+    return _write_backbone_file(sd, path, meta)
+
+
+def _write_backbone_file(sd: dict, path: str | Path, meta: dict) -> Path:
+    """A backbone file (``state_dict`` + ``meta_json``, read by ``features.load_backbone_file``)
+    and its JSON record beside it."""
     path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
     with atomic_path(path) as tmp:
         torch.save({"state_dict": sd, "meta_json": json.dumps(meta, sort_keys=True)}, tmp)
     record = dict(meta, sha256=sha256_file(path), bytes=path.stat().st_size)
     path.with_suffix(".json").write_text(json.dumps(record, indent=2, sort_keys=True) + "\n")
     return path
+
+
+def import_torchvision_backbone(weights: str | Path, backbone: str = "resnet50", out: str | Path | None = None
+                                ) -> Path:
+    """A torchvision ResNet state dict (e.g. ImageNet weights the user downloaded:
+    ``torchvision.models.resnet50(weights="IMAGENET1K_V2").state_dict()`` saved with
+    ``torch.save``) as a kit backbone file, float32, for ``train: pretrained: <file>`` (the
+    paper starts from ImageNet weights).
+
+    Args:
+        weights: the ``.pth`` file: a state dict, or a dict holding one under ``state_dict`` /
+            ``model``; ``fc.*`` is dropped, a ``module.`` prefix stripped.
+        backbone: the kit's name of the architecture (``resnet50``, ``resnet34``, ``resnet18``).
+        out: the file to write (default ``<cache>/backbones/imagenet-<backbone>-<sha256[:12]>.pt``).
+
+    Raises:
+        ValueError: not a state dict of that architecture (the missing/unexpected keys or the
+            shape mismatch, one line).
+    """
+    weights = Path(weights)
+    with reading(weights, f"a torchvision {backbone} state dict (torch.save of model.state_dict())",
+                 "save the weights again with torch.save(model.state_dict(), FILE)"):
+        blob = torch.load(weights, map_location="cpu", weights_only=True)
+    for key in ("state_dict", "model"):
+        if isinstance(blob, dict) and isinstance(blob.get(key), dict):
+            blob = blob[key]
+    if not isinstance(blob, dict) or not all(isinstance(v, torch.Tensor) for v in blob.values()):
+        raise ValueError(f"{weights} is not a state dict of tensors; save one with torch.save(model.state_dict(), FILE)")
+    net = build_backbone(backbone)
+    try:
+        net.load_torchvision_state_dict({k: v.float() if v.is_floating_point() else v for k, v in blob.items()})
+    except RuntimeError as e:
+        first = " ".join(str(e).split())[:300]
+        raise ValueError(f"{weights} is not a torchvision {backbone} state dict ({first}); give the weights of a "
+                         f"{backbone} or choose the matching --backbone") from None
+    digest = sha256_file(weights)
+    path = Path(out) if out is not None else cache_dir() / "backbones" / f"imagenet-{backbone}-{digest[:12]}.pt"
+    meta = {"backbone": backbone, "key": f"imported-{digest[:16]}", "source": str(weights.absolute()),
+            "source_sha256": digest, "kit_version": kit_version(),
+            "command": f"airpose backbone import {weights} --backbone {backbone}"}
+    return _write_backbone_file(net.state_dict(), path, meta)
 
 
 def _reference_if_valid(profile: str, key: str) -> Path | None:
@@ -215,7 +267,7 @@ def _with_data(stages: list[TrainConfig], data_root: str | Path, data_fingerprin
 
 
 def ensure_backbone(profile: str, data_root: str | Path, data_fingerprint: str, out_root: str | Path | None = None,
-                    progress: bool = False, **overrides) -> Path:
+                    progress: bool = False, device: str | None = None, **overrides) -> Path:
     """The profile's pretrained backbone file (see the module docstring for where it comes from).
 
     Args:
@@ -223,9 +275,13 @@ def ensure_backbone(profile: str, data_root: str | Path, data_fingerprint: str, 
         data_root: the still-frame dataset to pretrain on (train split; the test split gates).
         data_fingerprint: that dataset's configuration fingerprint (part of the key).
         out_root: parent of the pretraining run folders (default ``<runs>/pretrain/<profile>``).
+        device: where the stages that must be trained train and are gated (default: their
+            ``device``, ``auto``); not part of the key.
         overrides: TrainConfig fields over the ``pretrain:`` section (its last stage).
     """
     stages = _with_data(pretrain_stages(profile, **overrides), data_root, data_fingerprint)
+    if device is not None:
+        stages = [cfg.replace(device=device) for cfg in stages]
     keys = stage_keys(stages, data_fingerprint)
     start, path = 0, None
     for i in reversed(range(len(stages))):  # the latest stage already made needs nothing before it
@@ -256,12 +312,16 @@ def _train_stage(profile: str, cfg: TrainConfig, key: str, start: Path | None, o
             ensure_still_dataset(config=GenerationConfig.from_dict(cfg.data["generation"]), root=data_root,
                                  progress=progress)
         cfg = cfg.replace(pretrained=None if start is None else str(start), data={"root": str(data_root)})
-        out = Path(out_root) if out_root is not None else run_path("pretrain", profile)
+        out = Path(out_root) if out_root is not None else run_path("pretrain", Path(str(profile)).stem)
         t0 = time.time()
-        run = train("pretrain", profile, out_dir=out / key, config=cfg.replace(progress=progress))
+        # One process trains a backbone (the others, torchrun's ranks included, wait on the lock
+        # above): a pretraining nested in a distributed training must not join its process group.
+        with single_process():
+            run = train("pretrain", profile, out_dir=out / key, config=cfg.replace(progress=progress))
         wall = time.time() - t0
         model = _load_pretrain_model(run.checkpoint, cfg)
-        gate = gate_metrics(model, StillFrameDataset(data_root, "test", augment=False))  # the whole test split
+        gate = gate_metrics(model, StillFrameDataset(data_root, "test", augment=False),  # the whole test split
+                            device=resolve_device(cfg.device))
         meta = {"backbone": cfg.backbone, "key": key, "profile": profile, "kit_version": kit_version(),
                 "config": cfg.to_dict(), "data_fingerprint": data_fingerprint, "gate": gate,
                 "train_wall_s": round(wall, 1), "steps": run.step,

@@ -1,0 +1,85 @@
+"""One training step in float32 against bfloat16 autocast (``precision: bf16``), with and without
+channels_last, as ratios measured in one run.
+
+    taskset -c 1 env OMP_NUM_THREADS=1 python benchmarks/training_precision.py            # ~3 min
+    python benchmarks/training_precision.py --quick                                       # ResNet-18 only
+
+A step is what the engine does for ``task: supervised`` (:func:`airpose_lib.engine.loop.run_engine`):
+the AirPose network's forward on ``--batch`` two-view samples under the kit's autocast
+(:func:`airpose_lib.engine.launch.autocast`), a loss in float32, backward and an Adam (AMSGrad)
+step. The loss is a plain squared error of the network's outputs, not the body-model loss (its
+cost does not change with the precision, so the ratios here are an upper bound of the whole
+step's; the regressor task, the cpu profile's, runs only the regressor and gains less). Random
+(seeded) weights and images: the speed does not depend on them.
+
+The four set-ups are timed interleaved (one step of each in turn, repeated), so that a change of
+load on a shared machine hits them alike: the ratio to fp32 NCHW of the same run is the robust
+figure; the load average is printed with the table.
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import statistics
+import time
+
+import torch
+
+from airpose_lib.engine.launch import autocast
+from airpose_lib.model import build_model
+
+SETUPS = {"fp32": ("fp32", False), "fp32 channels_last": ("fp32", True), "bf16": ("bf16", False),
+          "bf16 channels_last": ("bf16", True)}
+
+
+def make_step(backbone: str, size: int, batch: int, precision: str, channels_last: bool):
+    """A closure running one training step; its model and data built once (seeded)."""
+    torch.manual_seed(0)
+    model = build_model("airpose", backbone=backbone, channels_last=channels_last).train()
+    opt = torch.optim.Adam(model.parameters(), lr=5e-5, amsgrad=True)
+    images = torch.randn(batch, 2, 3, size, size)
+    P = torch.randn(batch, 2, 3) * 0.1
+
+    def step() -> None:
+        with autocast(precision, "cpu"):
+            out = model(images, P)
+        loss = sum(v.float().pow(2).mean() for k, v in out.items() if isinstance(v, torch.Tensor))
+        opt.zero_grad(set_to_none=True)
+        loss.backward()
+        opt.step()
+    return step
+
+
+def bench(backbone: str, size: int, batch: int, repeat: int) -> list[tuple[str, float, float]]:
+    steps = {name: make_step(backbone, size, batch, *cfg) for name, cfg in SETUPS.items()}
+    for fn in steps.values():  # warm-up (allocations, oneDNN kernels)
+        fn()
+    times: dict[str, list[float]] = {k: [] for k in steps}
+    for _ in range(repeat):
+        for name, fn in steps.items():
+            t = time.perf_counter()
+            fn()
+            times[name].append(time.perf_counter() - t)
+    base = statistics.median(times["fp32"])
+    return [(name, statistics.median(t), base / statistics.median(t)) for name, t in times.items()]
+
+
+def main(argv=None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--batch", type=int, default=4, help="two-view samples per step (default 4: 8 crops)")
+    ap.add_argument("--repeat", type=int, default=5)
+    ap.add_argument("--quick", action="store_true", help="ResNet-18 at 128 px only")
+    args = ap.parse_args(argv)
+    configs = [("resnet18", 128)] + ([] if args.quick else [("resnet50", 224)])
+    print(f"torch {torch.__version__}, {torch.get_num_threads()} thread(s), batch {args.batch} two-view samples, "
+          f"median of {args.repeat} interleaved steps; load average before: {os.getloadavg()}")
+    print("| backbone @ px | set-up | step [s] | img/s | speed-up vs fp32 |")
+    print("|---|---|---|---|---|")
+    for backbone, size in configs:
+        for name, t, ratio in bench(backbone, size, args.batch, args.repeat):
+            print(f"| {backbone} @ {size} | {name} | {t:.3f} | {2 * args.batch / t:.1f} | {ratio:.2f}x |")
+    print(f"load average after: {os.getloadavg()}")
+
+
+if __name__ == "__main__":
+    main()

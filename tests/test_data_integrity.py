@@ -193,3 +193,14 @@ def test_ensure_waits_for_a_dataset_being_generated_and_does_not_make_it_again(t
     assert len(made) == CFG.num_shards
     ensure_still_dataset(config=CFG, root=root, progress=False, workers=1)
     assert {p.name: p.stat().st_mtime_ns for p in root.glob("shard_*.npz")} == made
+
+
+def test_training_on_a_damaged_named_dataset_is_refused_before_its_run_folder_exists(copy, tmp_path, capsys):
+    from airpose_lib import cli
+
+    _flip_one_byte(copy / shard_name(1))
+    out = tmp_path / "run"
+    code = cli.main(["train", "--variant", "airpose", "--quiet", "--set", f"data.root={copy}", "--out", str(out)])
+    err = [line for line in capsys.readouterr().err.splitlines() if line.strip()]
+    assert code == 2 and len(err) == 1 and f"{copy / shard_name(1)} is damaged" in err[0], err
+    assert not out.exists()

@@ -316,16 +316,9 @@ def ensure_still_dataset(profile: str | None = None, *, config: GenerationConfig
 
 
 def _finished_and_intact(root: Path, config: GenerationConfig) -> bool:
-    """Whether ``root`` holds the complete dataset of ``config`` with every shard as recorded; a
-    damaged shard is named on stderr (the generator then rebuilds it)."""
+    """Whether ``root`` holds the complete dataset of ``config`` with every shard as recorded (the
+    generator names a damaged one when it rebuilds it)."""
     done = load_manifest(root)
     if done is None or done.get("status") != "complete" or done.get("fingerprint") != config.fingerprint():
         return False
-    intact = True
-    for rec in done.get("shards") or []:
-        problem = shard_problem(root, rec)
-        if problem is not None:
-            print(f"airpose: shard {root / rec['file']} {problem}; the kit owns this dataset and rebuilds it",
-                  file=sys.stderr)
-            intact = False
-    return intact
+    return all(shard_problem(root, rec) is None for rec in done.get("shards") or [])

@@ -30,6 +30,7 @@ __all__ = [
     "regenerate_command",
     "shard_problem",
     "verify_shard",
+    "verify_dataset",
     "check_complete",
 ]
 
@@ -165,6 +166,15 @@ def verify_shard(root: Path, record: dict, manifest: dict | None = None) -> Path
             f"shard {path} {problem}; regenerate it with `{regenerate_command(manifest, root)}` (finished "
             f"shards are kept, missing or damaged ones are rebuilt identically)")
     return path
+
+
+def verify_dataset(root: Path) -> dict:
+    """:func:`check_complete`, then every shard checked (:func:`verify_shard`; hashed once per
+    process, so the datasets that open it later do not hash again). Returns the manifest."""
+    manifest = check_complete(root)
+    for rec in manifest.get("shards") or []:
+        verify_shard(root, rec, manifest)
+    return manifest
 
 
 def check_complete(root: Path) -> dict:

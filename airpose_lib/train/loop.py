@@ -64,7 +64,7 @@ from torch.utils.data import DataLoader
 from airpose_lib.assets import locate
 from airpose_lib.data.dataset import StillFrameDataset
 from airpose_lib.data.generate import ensure_still_dataset
-from airpose_lib.data.manifest import check_complete, load_manifest
+from airpose_lib.data.manifest import load_manifest, verify_dataset
 from airpose_lib.data.official_synthetic import OfficialSyntheticDataset
 from airpose_lib.data.training_input import training_input
 from airpose_lib.engine import EngineRun, Schedule, StaleRunError, TrainingTask, process_rank, run_engine, run_folder
@@ -127,11 +127,12 @@ def default_model_factory(cfg: TrainConfig) -> nn.Module:
 
 
 def check_data_root(cfg: TrainConfig) -> None:
-    """A dataset folder the user named (``data.root``) must hold a finished dataset: the kit makes
-    data only in its own folders. Cheap (the manifest only): callers run it before they create
-    anything. Raises :class:`~airpose_lib.data.manifest.DatasetError`."""
+    """A dataset folder the user named (``data.root``) must hold a finished, intact dataset: the kit
+    makes and repairs data only in its own folders. Callers run it before they create anything; the
+    shards' hashes are then known to this process and not computed again when the data are read.
+    Raises :class:`~airpose_lib.data.manifest.DatasetError` (a damaged shard: ``ShardIntegrityError``)."""
     if cfg.data.get("root") is not None and cfg.data.get("source", "generated") == "generated":
-        check_complete(Path(cfg.data["root"]))
+        verify_dataset(Path(cfg.data["root"]))
 
 
 def prepare_data(cfg: TrainConfig, progress: bool | None = None, device: str | torch.device = "cpu"

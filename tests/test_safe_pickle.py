@@ -60,24 +60,8 @@ def _assert_nothing_ran(marker: Path) -> None:
     assert not marker.exists(), "unpickling ran code from the file"
 
 
-def test_detector_file_of_a_recording_runs_nothing(tmp_path):
-    from airpose_lib.data.official_layout import OfficialLayoutWriter, SequenceFormatError, load_sequence
-
-    seq = tmp_path / "seq"
-    w = OfficialLayoutWriter(seq, num_views=2)
-    for i in range(2):
-        w.write_frame(i, [np.zeros((16, 24, 3), np.uint8)] * 2)
-    w.finish(np.array([[[20.0, 0, 12], [0, 20.0, 8], [0, 0, 1]]] * 2),
-             {"openpose": np.full((2, 2, 25, 3), 0.5), "alphapose": np.full((2, 2, 18, 3), 0.5)})
-    marker = tmp_path / "ran"
-    (seq / "machine_1" / "openpose_res.pkl").write_bytes(_crafted(marker))
-    with pytest.raises(SequenceFormatError, match="openpose_res.pkl"):
-        load_sequence(seq)
-    _assert_nothing_ran(marker)
-
-
-def test_predict_on_a_crafted_recording_is_one_line_and_runs_nothing(tmp_path, capsys):
-    """The attack of the issue: `airpose predict --sequence DIR` with a crafted openpose_res.pkl."""
+def _crafted_recording(tmp_path: Path) -> tuple[Path, Path]:
+    """A two-frame recording whose machine_1/openpose_res.pkl is crafted; (folder, marker file)."""
     from airpose_lib.data.official_layout import OfficialLayoutWriter
 
     seq = tmp_path / "seq"
@@ -88,6 +72,21 @@ def test_predict_on_a_crafted_recording_is_one_line_and_runs_nothing(tmp_path, c
              {"openpose": np.full((2, 2, 25, 3), 0.5), "alphapose": np.full((2, 2, 18, 3), 0.5)})
     marker = tmp_path / "ran"
     (seq / "machine_1" / "openpose_res.pkl").write_bytes(_crafted(marker))
+    return seq, marker
+
+
+def test_detector_file_of_a_recording_runs_nothing(tmp_path):
+    from airpose_lib.data.official_layout import SequenceFormatError, load_sequence
+
+    seq, marker = _crafted_recording(tmp_path)
+    with pytest.raises(SequenceFormatError, match="openpose_res.pkl"):
+        load_sequence(seq)
+    _assert_nothing_ran(marker)
+
+
+def test_predict_on_a_crafted_recording_is_one_line_and_runs_nothing(tmp_path, capsys):
+    """The attack of the issue: `airpose predict --sequence DIR` with a crafted openpose_res.pkl."""
+    seq, marker = _crafted_recording(tmp_path)
     ckpt = tmp_path / "ckpt.pt"
     ckpt.write_bytes(b"")  # never reached: the recording is read first or the checkpoint fails
     code = cli.main(["predict", "--checkpoint", str(ckpt), "--sequence", str(seq), "--out",

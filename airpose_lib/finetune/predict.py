@@ -51,6 +51,7 @@ from torch import Tensor, nn
 from airpose_lib import __version__  # the package root holds only the version
 from airpose_lib.atomic import atomic_path
 from airpose_lib.data.official_layout import load_sequence
+from airpose_lib.errors import UserError
 from airpose_lib.model import to_smplx_params
 from airpose_lib.progress import progress_bar
 from airpose_lib.runtime.offline import offline_inputs
@@ -77,7 +78,7 @@ REQUIRED_PREDICTION_KEYS = ("phi", "tau", "theta", "beta", "frames")
 PREDICTION_KEYS = REQUIRED_PREDICTION_KEYS + ("P", "boxes", "valid", "provenance")
 
 
-class PredictionFormatError(ValueError):
+class PredictionFormatError(UserError, ValueError):
     """A predictions file or dict does not follow the contract; the message names the file."""
 
 

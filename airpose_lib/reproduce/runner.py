@@ -43,6 +43,7 @@ import nbformat
 import yaml
 
 from airpose_lib import __version__  # the package root holds only the version
+from airpose_lib.errors import UserError
 from airpose_lib.folder_lock import folder_lock
 from airpose_lib.paths import figures_root, runs_root
 from airpose_lib.profiles import PROFILES_DIR, ProfileError, profile_path, read_profile
@@ -81,7 +82,7 @@ RESERVED_PARAMETERS = ("profile", "output_dir")
 DATA_SOURCES = ("generated", "official")
 
 
-class ReproductionError(RuntimeError):
+class ReproductionError(UserError, RuntimeError):
     """A notebook failed, lacks a parameters cell, or did not write an expected figure."""
 
 

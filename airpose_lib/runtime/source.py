@@ -28,6 +28,8 @@ from typing import Protocol, runtime_checkable
 
 import numpy as np
 
+from airpose_lib.errors import UserError
+
 __all__ = [
     "ViewSource",
     "SyntheticSource",
@@ -152,7 +154,7 @@ class SyntheticSource:
         return self.views[v]
 
 
-class SourceError(ValueError):
+class SourceError(UserError, ValueError):
     """A ``--source`` a drone cannot replay: an unknown or malformed ``synthetic:`` option, or a
     camera the source does not have. The message names the option and the fix."""
 

@@ -207,7 +207,7 @@ class _SequenceView:
         self.K = np.asarray(seq.K[v], np.float64)
         self.numbers = np.asarray(seq.frames)  # the image numbers of the official layout
         if detector not in seq.keypoints:
-            raise ValueError(f"{seq.root}: no {detector!r} detections (have {sorted(seq.keypoints)})")
+            raise SourceError(f"{seq.root}: no {detector!r} detections (have {sorted(seq.keypoints)})")
         self._kp = seq.keypoints[detector]  # (F, V, J, 3), missing = 0
 
     def image(self, i: int) -> np.ndarray:

@@ -302,6 +302,37 @@ def test_every_kit_error_is_a_user_error_or_listed_as_internal():
     assert issubclass(classes["airpose_lib.assets.fetch:ChecksumError"], RuntimeError)
 
 
+def _raise_internal(*args, **kwargs):
+    raise ValueError("an internal invariant broke")  # a bug: not a UserError
+
+
+@pytest.mark.parametrize("debug", [False, True], ids=["plain", "debug"])
+@pytest.mark.parametrize("command", ["train", "fit", "finetune"])
+def test_an_internal_value_error_stays_a_traceback(command, debug, inputs, monkeypatch, capsys):
+    """A plain ValueError inside a command (a bug) propagates out of ``cli.main``, with --debug or
+    not: the command line no longer turns any ValueError into a one-line user error."""
+    out = inputs["tmp"] / f"bug_{command}_{debug}"
+    if command == "train":
+        import airpose_lib.train as lib
+
+        monkeypatch.setattr(lib, "load_train_config", _raise_internal)
+        argv = ["train", "--variant", "airpose", "--out", out]
+    elif command == "fit":
+        import airpose_lib.fitting as lib
+
+        monkeypatch.setattr(lib, "fit_sequence", _raise_internal)
+        monkeypatch.setattr("airpose_lib.prior.load_prior", lambda *a, **k: (None, {}))
+        argv = ["fit", "--sequence", inputs["seq"], "--init", inputs["good_npz"], "--out", out / "x.npz"]
+    else:
+        import airpose_lib.finetune.train as lib
+
+        monkeypatch.setattr(lib, "finetune", _raise_internal)
+        argv = ["finetune", "--checkpoint", inputs["good_ckpt"], "--sequence", inputs["seq"], "--out", out]
+    with pytest.raises(ValueError, match="an internal invariant broke"):
+        cli.main([str(a) for a in argv] + (["--debug"] if debug else []))
+    assert "airpose: error" not in capsys.readouterr().err
+
+
 def _fake_node(*extra: str) -> list[str]:
     return ["node", "--id", "1", "--port", "5999", "--backend", "fake", "--insecure", "--frames", "2", *extra]
 

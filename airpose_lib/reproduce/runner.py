@@ -426,10 +426,6 @@ def _socket_dir() -> Path:
     return _SOCKET_DIR
 
 
-def _kit_version() -> str:
-    return __version__
-
-
 def _select(catalog: list[CatalogEntry], only: Sequence[str] | None) -> list[CatalogEntry]:
     if not only:
         return list(catalog)
@@ -613,7 +609,7 @@ def run_profile(
     run_dir = (out_dir / prof["name"]).resolve()
     figures_dir = figures_dir.resolve()
 
-    report = RunReport(profile=prof["name"], description=prof["description"], kit_version=_kit_version(),
+    report = RunReport(profile=prof["name"], description=prof["description"], kit_version=__version__,
                        kernel_name=kernel_name,
                        started_at=_dt.datetime.now().isoformat(timespec="seconds"),
                        run_dir=str(run_dir), figures_dir=str(figures_dir))

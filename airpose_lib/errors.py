@@ -8,7 +8,13 @@ says what it should have been and how to get a good one. A missing file stays a
 :class:`ProfileError` is an unknown profile or a profile file without a section it needs,
 :class:`ConfigError` a configuration value of the wrong type or range; all derive from
 :class:`UserError`, the class the ``airpose`` command reports on one line.
-Imports nothing of the kit.
+
+Every error class of the kit that a user can fix derives from :class:`UserError` (and keeps its
+built-in base, e.g. ``class SourceError(UserError, ValueError)``, for ``except ValueError``
+callers); raise one of them, never a plain ``ValueError``, for a mistake in a file, a profile or a
+flag. A plain exception is a bug and keeps its traceback. ``tests/test_cli_errors.py`` lists the
+two exception classes that are not user errors (``runtime.wire.WireError``,
+``safe_pickle.ForbiddenGlobalError``). Imports nothing of the kit.
 """
 from __future__ import annotations
 

@@ -28,6 +28,8 @@ from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 from typing import TypeVar
 
+from airpose_lib.errors import UserError
+
 __all__ = ["LOCK_NAME", "MAKER_WAIT_S", "STALE_PATTERNS", "FolderBusyError", "folder_lock", "file_lock_for",
            "locks_folder", "lock_holder", "file_lock"]
 
@@ -42,7 +44,7 @@ MAKER_WAIT_S = 6 * 3600.0
 STALE_PATTERNS = (".*.tmp", "*/.*.tmp")
 
 
-class FolderBusyError(RuntimeError):
+class FolderBusyError(UserError, RuntimeError):
     """Another live process holds the folder's lock."""
 
 

@@ -452,7 +452,7 @@ def run_cli(argv: list[str]) -> int:
 
 
 def test_cli_verify_exit_status_and_fetch_refusal(tmp_path, capsys):
-    from airpose_lib.cli import CLIError
+    from airpose_lib.errors import UserError  # RegistrationRequired: the `airpose` command's one line
 
     path = write_manifest(tmp_path / "m", asset_yaml(layout=[{"path": "a.bin"}]))
     root = tmp_path / "toy"
@@ -461,7 +461,7 @@ def test_cli_verify_exit_status_and_fetch_refusal(tmp_path, capsys):
     assert "Missing: a.bin" in capsys.readouterr().out
     (root / "a.bin").write_bytes(b"a")
     assert run_cli(["verify", str(path), "--root", str(root)]) == 0
-    with pytest.raises(CLIError, match="register"):
+    with pytest.raises(UserError, match="register"):
         run_cli(["fetch", "smplx_v1_1", "--root", str(tmp_path / "s")])
     assert run_cli(["list", "--no-check"]) == 0
     out = capsys.readouterr().out

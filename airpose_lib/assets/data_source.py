@@ -16,6 +16,8 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from airpose_lib.errors import ConfigError
+
 from .verify import VerifyReport, verify
 
 __all__ = ["DATA_SOURCES", "DataSource", "resolve_data_source"]
@@ -57,7 +59,7 @@ def resolve_data_source(requested: str, needs: Sequence[str], *, checksums: bool
         AssetError: a name in ``needs`` has no manifest (a bug in the caller, not a missing download).
     """
     if requested not in DATA_SOURCES:
-        raise ValueError(f"data source must be one of {DATA_SOURCES}, got {requested!r}")
+        raise ConfigError(f"data source must be one of {DATA_SOURCES}, got {requested!r}")
     if requested == "generated":
         return DataSource(requested, "generated", "Data source: the kit's generated data (data_source='generated').")
     reports = tuple(verify(name, checksums=checksums, manifests=manifests) for name in needs)

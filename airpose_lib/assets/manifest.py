@@ -20,6 +20,8 @@ from typing import Any
 
 import yaml
 
+from airpose_lib.errors import UserError
+
 __all__ = [
     "AssetError",
     "ManifestError",
@@ -62,7 +64,7 @@ _LAYOUT_KEYS = {"path", "required", "size", "sha256", "min_count", "alternatives
 _FILE_KEYS = {"name", "url", "sha256", "size", "extract", "extract_to"}
 
 
-class AssetError(RuntimeError):
+class AssetError(UserError, RuntimeError):
     """An asset is unknown, missing or unusable; the message says what to do."""
 
 

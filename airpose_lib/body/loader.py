@@ -15,6 +15,7 @@ import numpy as np
 import torch
 
 from airpose_lib.assets import locate
+from airpose_lib.errors import UserError
 
 from .joint_sets import EXTRA_JOINT_NAMES
 from .open_model import build_open_model, open_model_path
@@ -24,7 +25,7 @@ SMPLX_FILES = {g: f"SMPLX_{g.upper()}.npz" for g in ("neutral", "male", "female"
 _REQUIRED_KEYS = ("v_template", "f", "shapedirs", "posedirs", "J_regressor", "weights", "kintree_table")
 
 
-class BodyModelError(RuntimeError):
+class BodyModelError(UserError, RuntimeError):
     """A body-model file is missing or unusable; the message says which file and what to do."""
 
 

@@ -73,15 +73,15 @@ class _Parser(argparse.ArgumentParser):
 
 
 class _VersionAction(argparse.Action):
-    """``--version`` that looks the version up only when asked (it imports matplotlib)."""
+    """``--version``: the kit's version (:data:`airpose_lib.__version__`, its one home)."""
 
     def __init__(self, option_strings, dest, **kwargs):
         super().__init__(option_strings, dest, nargs=0, help="print the kit version and exit")
 
     def __call__(self, parser, namespace, values, option_string=None):
-        from airpose_lib.viz.style import kit_version  # lazy: matplotlib, see above
+        from airpose_lib import __version__  # the package root holds only the version
 
-        print(f"{parser.prog} {kit_version()}")
+        print(f"{parser.prog} {__version__}")
         parser.exit()
 
 

@@ -2,24 +2,18 @@
 over :mod:`airpose_lib.assets`.
 
 :func:`add_asset_commands` adds them to the ``airpose data`` sub-parser group of :mod:`.data`.
-Errors are raised as :class:`~.common.CLIError` (printed without a traceback, exit status 2);
-``verify`` and ``fetch`` exit with 1 when the asset is not complete.
+Their errors are :class:`~airpose_lib.assets.manifest.AssetError`, a user error (printed without a
+traceback, exit status 2); ``verify`` and ``fetch`` exit with 1 when the asset is not complete.
 """
 from __future__ import annotations
 
 import argparse
 from pathlib import Path
 
-from .common import CLIError
-
 __all__ = ["add_asset_commands"]
 
 # Handlers import the library when they run (as every command group: the parser is built on
 # every call and stays free of the libraries' imports).
-
-
-def _cli_error(exc: Exception) -> Exception:
-    return CLIError(str(exc))
 
 
 def _how(manifest) -> str:
@@ -32,22 +26,19 @@ def _how(manifest) -> str:
 
 def _cmd_list(args: argparse.Namespace) -> int:
     from airpose_lib.assets.locate import locate
-    from airpose_lib.assets.manifest import AssetError, list_manifests
+    from airpose_lib.assets.manifest import list_manifests
     from airpose_lib.assets.verify import verify
 
-    try:
-        manifests = list_manifests()
-        rows = []
-        for m in manifests:
-            loc = locate(m)
-            if args.no_check:
-                status = "-"
-            else:
-                status = "ok" if verify(m, checksums=False).ok else (
-                    "missing" if not loc.path.exists() else "incomplete")
-            rows.append((m.name, m.kind, _how(m), status, f"{loc.path} ({loc.origin})"))
-    except AssetError as e:
-        raise _cli_error(e) from None
+    manifests = list_manifests()
+    rows = []
+    for m in manifests:
+        loc = locate(m)
+        if args.no_check:
+            status = "-"
+        else:
+            status = "ok" if verify(m, checksums=False).ok else (
+                "missing" if not loc.path.exists() else "incomplete")
+        rows.append((m.name, m.kind, _how(m), status, f"{loc.path} ({loc.origin})"))
     header = ("NAME", "KIND", "GET BY", "STATUS", "FOLDER (from)")
     widths = [max(len(r[i]) for r in (header, *rows)) for i in range(4)]
     for row in (header, *rows):
@@ -58,26 +49,18 @@ def _cmd_list(args: argparse.Namespace) -> int:
 
 
 def _cmd_verify(args: argparse.Namespace) -> int:
-    from airpose_lib.assets.manifest import AssetError
     from airpose_lib.assets.verify import verify
 
-    try:
-        report = verify(args.name, root=args.root, checksums=not args.no_checksums)
-    except AssetError as e:
-        raise _cli_error(e) from None
+    report = verify(args.name, root=args.root, checksums=not args.no_checksums)
     print(report.text())
     return 0 if report.ok else 1
 
 
 def _cmd_fetch(args: argparse.Namespace) -> int:
     from airpose_lib.assets.fetch import fetch
-    from airpose_lib.assets.manifest import AssetError
 
-    try:
-        report = fetch(args.name, root=args.root, base_url=args.base_url, progress=not args.quiet,
-                       allow_unverified=args.allow_unverified)
-    except AssetError as e:
-        raise _cli_error(e) from None
+    report = fetch(args.name, root=args.root, base_url=args.base_url, progress=not args.quiet,
+                   allow_unverified=args.allow_unverified)
     print(report.text())
     return 0 if report.ok else 1
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from .common import CLIError, require_file
+from .common import require_file
 
 __all__ = ["add_backbone"]
 
@@ -13,10 +13,7 @@ def _cmd_import(args: argparse.Namespace) -> int:
     from airpose_lib.train.pretrain import import_torchvision_backbone
 
     require_file(args.weights, "FILE", f"a torchvision {args.backbone} state dict (torch.save of model.state_dict())")
-    try:
-        path = import_torchvision_backbone(args.weights, args.backbone, args.out)
-    except ValueError as e:
-        raise CLIError(str(e)) from None
+    path = import_torchvision_backbone(args.weights, args.backbone, args.out)
     print(f"backbone {path}\n  start a training from it: airpose train --variant airpose --profile paper "
           f"--set pretrained={path}")
     return 0

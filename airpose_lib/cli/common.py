@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import difflib
 import errno
-import sys
 import typing
 from pathlib import Path
 
@@ -44,29 +43,10 @@ def parse_profile(value: str) -> str:
                                      "or give the path of a profile YAML file")
 
 
-class CLIError(Exception):
-    """A user-facing error: printed on one line without a traceback, exit status 2."""
+class CLIError(UserError):
+    """A user-facing error found by the command line itself (a flag's value): printed on one line
+    without a traceback, exit status 2."""
 
-
-# Kit exceptions that carry a message for the user (which file, what is wrong, the fix); checked
-# through sys.modules so that an error path never imports torch. Any other exception is a bug in
-# the kit and keeps its traceback.
-_USER_ERRORS = (
-    "airpose_lib.errors:DamagedFileError",
-    "airpose_lib.errors:ProfileError",
-    "airpose_lib.folder_lock:FolderBusyError",
-    "airpose_lib.assets.manifest:AssetError",
-    "airpose_lib.body.loader:BodyModelError",
-    "airpose_lib.data.manifest:DatasetError",
-    "airpose_lib.data.official_layout:SequenceFormatError",
-    "airpose_lib.finetune.predict:PredictionFormatError",
-    "airpose_lib.model.official:OfficialCheckpointError",
-    "airpose_lib.prior.checkpoint:PriorError",
-    "airpose_lib.reproduce.runner:ReproductionError",
-    "airpose_lib.runtime.launcher:LaunchError",
-    "airpose_lib.runtime.source:SourceError",
-    "airpose_lib.runtime.keys:SwarmKeyError",
-)
 
 # errno -> how to fix an OSError about a path the user gave.
 _OS_FIXES = {
@@ -86,8 +66,7 @@ def user_error_message(exc: BaseException) -> str | None:
     no_space = _no_space(exc)
     if no_space is not None:
         return no_space
-    if isinstance(exc, (CLIError, UserError)) or any(
-            isinstance(exc, cls) for cls in (_class(spec) for spec in _USER_ERRORS) if cls is not None):
+    if isinstance(exc, UserError):  # every kit error the user can fix derives from it (CLIError too)
         return " ".join(str(exc).split()) or type(exc).__name__
     if isinstance(exc, OSError) and exc.filename is not None and exc.errno in _OS_FIXES:
         return f"{exc.filename}: {_OS_FIXES[exc.errno]}"
@@ -109,11 +88,6 @@ def _no_space(exc: BaseException) -> str | None:
                     "kept and the rerun resumes")
         exc = exc.__cause__ or exc.__context__
     return None
-
-
-def _class(spec: str) -> type | None:
-    module, _, name = spec.partition(":")
-    return getattr(sys.modules.get(module), name, None)
 
 
 def parse_range(text: str | None, what: str = "image numbers",

@@ -10,7 +10,7 @@ from pathlib import Path
 from airpose_lib.folder_lock import folder_lock  # standard library only
 
 from .assets import add_asset_commands
-from .common import PROFILES, CLIError
+from .common import PROFILES
 
 __all__ = ['add_data']
 
@@ -22,17 +22,11 @@ __all__ = ['add_data']
 def _cmd_data_sequence(args: argparse.Namespace) -> int:
     from airpose_lib.data.sequences import default_sequence_root, ensure_sequences, profile_sequences
 
-    try:
-        configs = profile_sequences(args.profile)
-    except ValueError as e:
-        raise CLIError(str(e)) from None
+    configs = profile_sequences(args.profile)
     root = args.out if args.out is not None else default_sequence_root(args.profile)
-    try:
-        with folder_lock(root, "recordings folder"):  # one writer; a killed one's temp files go
-            paths = ensure_sequences(args.profile, root, configs=configs, only=args.only, force=args.force,
-                                     progress=not args.quiet)
-    except ValueError as e:
-        raise CLIError(str(e)) from None
+    with folder_lock(root, "recordings folder"):  # one writer; a killed one's temp files go
+        paths = ensure_sequences(args.profile, root, configs=configs, only=args.only, force=args.force,
+                                 progress=not args.quiet)
     for name, path in paths.items():
         print(f"{name:<10} {path}")
     return 0
@@ -58,16 +52,11 @@ def _add_data_sequence(dsub) -> None:
 
 def _cmd_data_generate(args: argparse.Namespace) -> int:
     from airpose_lib.data.generate import default_root, generate_still_dataset, profile_config
-    from airpose_lib.data.manifest import DatasetError
-
-    try:
-        config = profile_config(args.profile)
-        root = args.out if args.out is not None else default_root(args.profile)
-        workers = args.workers if args.workers is not None else (os.cpu_count() or 1)
-        manifest = generate_still_dataset(config, root, workers=workers, profile=args.profile,
-                                          progress=not args.quiet, record=args.record_manifest)
-    except DatasetError as e:
-        raise CLIError(str(e)) from None
+    config = profile_config(args.profile)
+    root = args.out if args.out is not None else default_root(args.profile)
+    workers = args.workers if args.workers is not None else (os.cpu_count() or 1)
+    manifest = generate_still_dataset(config, root, workers=workers, profile=args.profile,
+                                      progress=not args.quiet, record=args.record_manifest)
     t = manifest["totals"]
     print(f"{root}: {t['train_samples']} train + {t['test_samples']} test samples "
           f"({config.scene.num_views} views, {config.crop_size} px), {t['dropped']} of "

@@ -4,7 +4,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from .common import CLIError, require_file
+from .common import require_file
 
 __all__ = ['add_eval']
 
@@ -14,16 +14,12 @@ __all__ = ['add_eval']
 
 
 def _cmd_eval(args: argparse.Namespace) -> int:
-    from airpose_lib.data.manifest import DatasetError
     from airpose_lib.eval import paper_table
     from airpose_lib.train import evaluate_checkpoint
 
     require_file(args.checkpoint, "--checkpoint", "a checkpoints/*.pt of `airpose train`")
-    try:
-        tables = evaluate_checkpoint(args.checkpoint, split=args.split, method=args.method,
-                                     batch_size=args.batch_size, device=args.device, max_samples=args.max_samples)
-    except (ValueError, DatasetError) as e:
-        raise CLIError(str(e)) from None
+    tables = evaluate_checkpoint(args.checkpoint, split=args.split, method=args.method,
+                                 batch_size=args.batch_size, device=args.device, max_samples=args.max_samples)
     out = args.out if args.out is not None else Path(args.checkpoint).resolve().parent.parent / f"eval_{args.split}"
     out.mkdir(parents=True, exist_ok=True)
     for name, table in tables.items():

@@ -31,20 +31,14 @@ def _cmd_finetune(args: argparse.Namespace) -> int:
         if None in frames:
             raise CLIError("--frames for fine-tuning needs both ends, e.g. 0:7000")
         overrides["frames"] = list(frames)
-    try:
-        cfg = finetune_config(args.profile, **{k: v for k, v in overrides.items() if not isinstance(v, dict)})
-        for k, v in overrides.items():  # dict fields (loss.w_vposer=0.5): merge into the profile's
-            if isinstance(v, dict):
-                cfg = cfg.replace(**{k: {**getattr(cfg, k), **v}})
-    except (ValueError, TypeError) as e:
-        raise CLIError(str(e)) from None
+    cfg = finetune_config(args.profile, **{k: v for k, v in overrides.items() if not isinstance(v, dict)})
+    for k, v in overrides.items():  # dict fields (loss.w_vposer=0.5): merge into the profile's
+        if isinstance(v, dict):
+            cfg = cfg.replace(**{k: {**getattr(cfg, k), **v}})
     require_file(args.checkpoint, "--checkpoint", "a checkpoints/*.pt of `airpose train`")
     require_folder(args.sequence, "--sequence", SEQUENCE_FOLDER)
     require_path(args.prior_path, "--prior-path", "a prior checkpoint file or folder")
-    try:
-        res = finetune(args.checkpoint, args.sequence, args.out, cfg, resume=args.resume, progress=not args.quiet)
-    except ValueError as e:  # missing files, damaged ones and busy folders: airpose_lib.cli.main
-        raise CLIError(str(e)) from None
+    res = finetune(args.checkpoint, args.sequence, args.out, cfg, resume=args.resume, progress=not args.quiet)
     k = res.keypoints
     print(f"{res.num_frames} training frames; 2D targets kept {k['kept']}, dropped {k['disagree']} disagreeing, "
           f"{k['unconfirmed']} unconfirmed, {k['low_confidence'] + k['missing']} missing/low confidence")
@@ -108,22 +102,19 @@ def _cmd_predict(args: argparse.Namespace) -> int:
 
     require_file(args.checkpoint, "--checkpoint", "a checkpoint of `airpose train` or `airpose finetune`")
     require_folder(args.sequence, "--sequence", SEQUENCE_FOLDER)
-    try:
-        model, cfg, size = load_network(args.checkpoint, args.device, args.input_size)
-        if args.threads:
-            import torch
+    model, cfg, size = load_network(args.checkpoint, args.device, args.input_size)
+    if args.threads:
+        import torch
 
-            torch.set_num_threads(args.threads)
-        rng = parse_range(args.frames)
-        frames = None if rng is None else frames_in_range(args.sequence, *rng)
-        seq = load_sequence(args.sequence, frames=frames, detectors=(args.detector,), ground_truth=False,
-                            missing_detections="zero" if args.allow_missing_detections else "error")
-        pred = predict_sequence(model, seq, input_size=size, detector=args.detector, batch_size=args.batch_size,
-                                progress=not args.quiet,
-                                provenance={"checkpoint": str(args.checkpoint), "backbone": cfg.backbone})
-        out = save_predictions(args.out, pred)
-    except ValueError as e:  # missing and damaged files: airpose_lib.cli.main
-        raise CLIError(str(e)) from None
+        torch.set_num_threads(args.threads)
+    rng = parse_range(args.frames)
+    frames = None if rng is None else frames_in_range(args.sequence, *rng)
+    seq = load_sequence(args.sequence, frames=frames, detectors=(args.detector,), ground_truth=False,
+                        missing_detections="zero" if args.allow_missing_detections else "error")
+    pred = predict_sequence(model, seq, input_size=size, detector=args.detector, batch_size=args.batch_size,
+                            progress=not args.quiet,
+                            provenance={"checkpoint": str(args.checkpoint), "backbone": cfg.backbone})
+    out = save_predictions(args.out, pred)
     F, V = pred["valid"].shape
     print(f"{F} frames x {V} views ({cfg.variant}, {size} px crops); {int((~pred['valid']).sum())} view-frames "
           f"without a detection reused the previous box")

@@ -4,7 +4,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from .common import PROFILES, SEQUENCE_FOLDER, CLIError, parse_range, require_file, require_folder, require_path
+from .common import PROFILES, SEQUENCE_FOLDER, parse_range, require_file, require_folder, require_path
 
 __all__ = ['add_fit']
 
@@ -19,32 +19,20 @@ def _cmd_fit(args: argparse.Namespace) -> int:
     from airpose_lib.fitting import fit_sequence
     from airpose_lib.fitting.recording import (fit_config, initialisation_for, open_initialisation, refined_path,
                                                save_refinement)
-    from airpose_lib.prior import PriorError, load_prior
+    from airpose_lib.prior import load_prior
 
     require_folder(args.sequence, "--sequence", SEQUENCE_FOLDER)
     require_file(args.init, "--init", "the .npz of `airpose predict`")
     require_path(args.prior_path, "--prior-path", "a prior checkpoint file or folder")
     rng = parse_range(args.frames)
     pred = open_initialisation(args.init)
-    try:  # image numbers, as in `predict` and `finetune`
-        frames = None if rng is None else frames_in_range(args.sequence, *rng)
-    except ValueError as e:
-        raise CLIError(str(e)) from None
+    frames = None if rng is None else frames_in_range(args.sequence, *rng)  # image numbers, as in `predict`
     seq = load_sequence(args.sequence, frames=frames, ground_truth=False)
-    try:
-        init = initialisation_for(pred, args.init, seq.frames)
-        cfg = fit_config(args.profile, official_temporal=args.official_temporal, iterations=args.iterations,
-                         threads=args.threads)
-    except ValueError as e:
-        raise CLIError(str(e)) from None
-    try:
-        prior, prior_prov = load_prior(args.prior, args.prior_path, return_provenance=True)
-    except PriorError as e:
-        raise CLIError(str(e)) from None
-    try:
-        res = fit_sequence(seq, init, prior=prior, config=cfg, progress=not args.quiet)
-    except ValueError as e:
-        raise CLIError(str(e)) from None
+    init = initialisation_for(pred, args.init, seq.frames)
+    cfg = fit_config(args.profile, official_temporal=args.official_temporal, iterations=args.iterations,
+                     threads=args.threads)
+    prior, prior_prov = load_prior(args.prior, args.prior_path, return_provenance=True)
+    res = fit_sequence(seq, init, prior=prior, config=cfg, progress=not args.quiet)
     out = save_refinement(args.out or refined_path(args.init), seq.frames, res, sequence=args.sequence,
                           init=args.init, profile=args.profile, prior=prior_prov)
     print(f"{len(seq.frames)} frames, {int(res.kept.sum())} fitted, {len(res.skipped_frames)} skipped "

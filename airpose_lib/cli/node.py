@@ -60,9 +60,11 @@ def _peers_from_flags(args: argparse.Namespace) -> dict[int, str]:
     """``--peers`` -> ``{id: endpoint}``, or a :class:`CLIError` naming the bad entry."""
     from airpose_lib.runtime.transport import parse_peers
 
+    from airpose_lib.errors import ConfigError  # standard library only
+
     try:
         peers = parse_peers(args.peers, args.host)
-    except ValueError as e:
+    except ConfigError as e:  # the flag's name in front of the entry's message
         raise CLIError(f"--peers: {e}") from None
     if args.id in peers:
         raise CLIError(f"--peers {' '.join(args.peers)}: lists this drone's own id {args.id}; give the other drones")

@@ -5,7 +5,7 @@ import argparse
 import json
 from pathlib import Path
 
-from .common import PROFILES, CLIError, require_path
+from .common import PROFILES, require_path
 
 __all__ = ['add_prior']
 
@@ -21,11 +21,8 @@ def _cmd_prior_train(args: argparse.Namespace) -> int:
 
     if args.threads:
         torch.set_num_threads(args.threads)
-    try:
-        out, val = train_and_save_prior(args.profile, args.out, steps=args.steps, seed=args.seed,
-                                        progress=not args.quiet)
-    except ValueError as e:
-        raise CLIError(str(e)) from None
+    out, val = train_and_save_prior(args.profile, args.out, steps=args.steps, seed=args.seed,
+                                    progress=not args.quiet)
     print(f"corpus: {val['train_poses']} training poses, {val['val_poses']} held out")
     print(f"trained {val['steps']} steps in {val['seconds']:.0f} s")
     print(f"held-out reconstruction: mean {val['rot_err_deg']:.2f} deg per joint "
@@ -37,13 +34,10 @@ def _cmd_prior_train(args: argparse.Namespace) -> int:
 
 
 def _cmd_prior_info(args: argparse.Namespace) -> int:
-    from airpose_lib.prior import PriorError, load_prior
+    from airpose_lib.prior import load_prior
 
     require_path(args.path, "--path", "a prior checkpoint file or folder")
-    try:
-        _, prov = load_prior(args.source, args.path, tag=args.tag, return_provenance=True)
-    except PriorError as e:
-        raise CLIError(str(e)) from None
+    _, prov = load_prior(args.source, args.path, tag=args.tag, return_provenance=True)
     print(json.dumps(prov, indent=1, default=str))
     return 0
 

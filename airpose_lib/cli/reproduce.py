@@ -16,7 +16,7 @@ __all__ = ['add_reproduce']
 
 
 def _cmd_reproduce(args: argparse.Namespace) -> int:
-    from airpose_lib.reproduce import ReproductionError, load_catalog, load_profile, run_profile
+    from airpose_lib.reproduce import load_catalog, load_profile, run_profile
 
     if args.list:
         prof = load_profile(args.profile)
@@ -25,13 +25,10 @@ def _cmd_reproduce(args: argparse.Namespace) -> int:
             params = prof["notebooks"].get(entry.name, {})
             print(f"  {entry.name:<24} {entry.file:<28} {params}")
         return 0
-    try:
-        report = run_profile(args.profile, only=args.only, out_dir=args.out, figures_dir=args.figures,
-                             kernel_name=args.kernel, keep_going=args.keep_going,
-                             log_output=args.log_output and not args.quiet, verbose=not args.quiet,
-                             data_source=args.data_source)
-    except ReproductionError as e:
-        raise CLIError(str(e)) from None
+    report = run_profile(args.profile, only=args.only, out_dir=args.out, figures_dir=args.figures,
+                         kernel_name=args.kernel, keep_going=args.keep_going,
+                         log_output=args.log_output and not args.quiet, verbose=not args.quiet,
+                         data_source=args.data_source)
     if not report.ok:
         print(f"\nreproduction FAILED (report: {report.run_dir}/report.json)", file=sys.stderr)
         print(report.failure_message(), file=sys.stderr)

@@ -30,11 +30,8 @@ def _cmd_train(args: argparse.Namespace) -> int:
     for name in ("steps", "batch_size", "world_size", "num_workers", "device"):
         if getattr(args, name) is not None:
             overrides[name] = getattr(args, name)
-    try:
-        cfg = load_train_config(args.profile, args.variant, args.seed, **{
-            k: v for k, v in overrides.items() if not isinstance(v, dict)})
-    except (ValueError, TypeError) as e:
-        raise CLIError(str(e)) from None
+    cfg = load_train_config(args.profile, args.variant, args.seed, **{
+        k: v for k, v in overrides.items() if not isinstance(v, dict)})
     for k, v in overrides.items():  # dict fields: merge into the profile's dicts
         if isinstance(v, dict):
             cfg = cfg.replace(**{k: {**getattr(cfg, k), **v}})
@@ -52,7 +49,6 @@ def _cmd_train(args: argparse.Namespace) -> int:
 
 
 def _train_locked(args: argparse.Namespace, cfg, out: Path) -> int:
-    from airpose_lib.data.manifest import DatasetError
     from airpose_lib.train import train
     from airpose_lib.engine.checkpoint import last_checkpoint, load_checkpoint
 
@@ -63,10 +59,7 @@ def _train_locked(args: argparse.Namespace, cfg, out: Path) -> int:
         except DamagedFileError as e:
             raise CLIError(f"cannot resume: {last} is damaged (cut short by a crash or a full disk?); copy the "
                            f"newest {last.parent}/step_*.pt over it, or start afresh with --no-resume") from e
-    try:
-        result = train(args.variant, args.profile, out_dir=out, resume=args.resume, config=cfg)
-    except (ValueError, DatasetError) as e:
-        raise CLIError(str(e)) from None
+    result = train(args.variant, args.profile, out_dir=out, resume=args.resume, config=cfg)
     print(f"step {result.step}  train loss {result.train_loss}  checkpoint {result.checkpoint}")
     if result.val_losses:
         print(f"validation loss {result.val_losses.get('total')}")
@@ -74,13 +67,9 @@ def _train_locked(args: argparse.Namespace, cfg, out: Path) -> int:
 
 
 def _cmd_pretrain(args: argparse.Namespace) -> int:
-    from airpose_lib.data.manifest import DatasetError
     from airpose_lib.train.pretrain import profile_backbone, write_reference_backbone
 
-    try:
-        path = profile_backbone(args.profile, progress=not args.quiet)
-    except (ValueError, DatasetError) as e:
-        raise CLIError(str(e)) from None
+    path = profile_backbone(args.profile, progress=not args.quiet)
     record = json.loads(path.with_suffix(".json").read_text())
     print(f"backbone {path}\n  key {record['key']}  sha256 {record['sha256']}\n  gate {record['gate']}")
     if args.write_reference:

@@ -38,6 +38,8 @@ import numpy as np
 import torch
 from torch.utils.data import Dataset
 
+from airpose_lib.errors import ConfigError
+
 from .manifest import check_complete, verify_shard
 from .shards import ShardImages, read_shard
 
@@ -121,9 +123,9 @@ class StillFrameDataset(Dataset):
     def __init__(self, root: Path | str, split: str = "train", augment: bool | None = None, *,
                  verify: bool = True, crops: str = "jittered") -> None:
         if split not in ("train", "test", "all"):
-            raise ValueError(f"split must be 'train', 'test' or 'all', got {split!r}")
+            raise ConfigError(f"split must be 'train', 'test' or 'all', got {split!r}")
         if crops not in ("jittered", "tight"):
-            raise ValueError(f"crops must be 'jittered' or 'tight', got {crops!r}")
+            raise ConfigError(f"crops must be 'jittered' or 'tight', got {crops!r}")
         self.crops = crops
         self.root = Path(root)
         self.split = split
@@ -141,8 +143,8 @@ class StillFrameDataset(Dataset):
                 try:
                     arrays = read_shard(path, list(_LOADED) + list(_TIGHT))
                 except KeyError:
-                    raise ValueError(f"{path}: no tight-box crops in this shard (only test shards of "
-                                     "generator version 2 or later with tight_test_crops hold them)") from None
+                    raise ConfigError(f"{path}: no tight-box crops in this shard (only test shards of "
+                                      "generator version 2 or later with tight_test_crops hold them)") from None
                 arrays["P"], arrays["bbox"] = arrays.pop("P_tight"), arrays.pop("bbox_tight_crop")
                 images = ShardImages(path, arrays.pop("image_offsets_tight"), member="images_tight")
             else:
@@ -155,7 +157,7 @@ class StillFrameDataset(Dataset):
             n = len(arrays["index"])
             loc.append(np.stack([np.full(n, s), np.arange(n)], 1))
         if not loc:
-            raise ValueError(f"{self.root}: the {split!r} split is empty")
+            raise ConfigError(f"{self.root}: the {split!r} split is empty")
         self._loc = np.concatenate(loc).astype(np.int64)
         self._arrays = {}
         for k in _LOADED:

@@ -69,6 +69,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from airpose_lib.body.joint_sets import BODY_25_NAMES, COCO18_NAMES
+from airpose_lib.errors import ConfigError
 
 __all__ = [
     "KEYPOINT_SETS",
@@ -170,16 +171,16 @@ class DetectorModel:
 
     def __post_init__(self) -> None:
         if self.keypoints not in KEYPOINT_SETS:
-            raise ValueError(f"keypoints must be one of {tuple(KEYPOINT_SETS)}, got {self.keypoints!r}")
+            raise ConfigError(f"keypoints must be one of {tuple(KEYPOINT_SETS)}, got {self.keypoints!r}")
         if not 0 <= self.temporal_corr < 1:
-            raise ValueError("temporal_corr must be in [0, 1)")
+            raise ConfigError("temporal_corr must be in [0, 1)")
         lo, hi = self.background_shift
         if not 0 <= lo <= hi:
-            raise ValueError(f"background_shift must be (min, max) with 0 <= min <= max, got {self.background_shift}")
+            raise ConfigError(f"background_shift must be (min, max) with 0 <= min <= max, got {self.background_shift}")
         for k in ("outlier_rate", "swap_rate", "limb_swap_rate", "background_limb_rate", "miss_rate",
                   "frame_miss_rate"):
             if not 0 <= getattr(self, k) <= 1:
-                raise ValueError(f"{k} must be a probability, got {getattr(self, k)}")
+                raise ConfigError(f"{k} must be a probability, got {getattr(self, k)}")
 
     @property
     def names(self) -> tuple[str, ...]:

@@ -14,6 +14,7 @@ from pathlib import Path
 import yaml
 
 from airpose_lib.atomic import atomic_path
+from airpose_lib.errors import UserError
 
 from .shards import sha256_file
 
@@ -38,7 +39,7 @@ MANIFEST_NAME = "manifest.yaml"
 DATASET_KIND = "airpose-still-frames"
 
 
-class DatasetError(RuntimeError):
+class DatasetError(UserError, RuntimeError):
     """A dataset folder is missing, incomplete or was made with other settings."""
 
 

@@ -50,6 +50,7 @@ import numpy as np
 from airpose_lib import __version__  # the package root holds only the version
 from airpose_lib import safe_pickle
 from airpose_lib.atomic import atomic_path
+from airpose_lib.errors import UserError
 
 __all__ = [
     "SequenceFormatError",
@@ -73,7 +74,7 @@ DETECTOR_FILES: dict[str, tuple[str, int]] = {"openpose": ("openpose_res.pkl", 2
 _FRAME_RE = re.compile(r"^(\d+)\.(jpg|jpeg|png)$", re.IGNORECASE)
 
 
-class SequenceFormatError(ValueError):
+class SequenceFormatError(UserError, ValueError):
     """A sequence folder does not follow the layout; the message names the offending file."""
 
 

@@ -22,6 +22,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from airpose_lib.body.genders import GENDER_CODES
+from airpose_lib.errors import ConfigError
 
 __all__ = [
     "SceneConfig",
@@ -99,15 +100,15 @@ class SceneConfig:
 
     def __post_init__(self) -> None:
         if self.num_views < 1:
-            raise ValueError(f"num_views must be >= 1, got {self.num_views}")
+            raise ConfigError(f"num_views must be >= 1, got {self.num_views}")
         if self.bbox_from not in ("joints", "vertices"):
-            raise ValueError(f"bbox_from must be 'joints' or 'vertices', got {self.bbox_from!r}")
+            raise ConfigError(f"bbox_from must be 'joints' or 'vertices', got {self.bbox_from!r}")
         bad = [g for g in self.genders if g not in GENDER_CODES]
         if bad or not self.genders:
-            raise ValueError(f"genders must be a non-empty subset of {tuple(GENDER_CODES)}, got {self.genders}")
+            raise ConfigError(f"genders must be a non-empty subset of {tuple(GENDER_CODES)}, got {self.genders}")
         lo, hi = self.pitch_range_deg
         if not -89.0 <= lo <= hi <= 89.0:
-            raise ValueError(f"pitch_range_deg must satisfy -89 <= lo <= hi <= 89, got {self.pitch_range_deg}")
+            raise ConfigError(f"pitch_range_deg must satisfy -89 <= lo <= hi <= 89, got {self.pitch_range_deg}")
 
     @property
     def K(self) -> np.ndarray:

@@ -9,6 +9,7 @@ import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from airpose_lib.errors import ConfigError
 from airpose_lib.paths import cache_dir
 from airpose_lib.profiles import ProfileError, profile_path, profile_section
 
@@ -70,15 +71,15 @@ class GenerationConfig:
 
     def __post_init__(self) -> None:
         if self.num_samples < 1 or self.shard_size < 1:
-            raise ValueError("num_samples and shard_size must be positive")
+            raise ConfigError("num_samples and shard_size must be positive")
         if self.test_crops not in ("jittered", "tight"):
-            raise ValueError(f"test_crops must be 'jittered' or 'tight', got {self.test_crops!r}")
+            raise ConfigError(f"test_crops must be 'jittered' or 'tight', got {self.test_crops!r}")
         if self.image_format not in ("jpg", "png"):
-            raise ValueError(f"image_format must be 'jpg' or 'png', got {self.image_format!r}")
+            raise ConfigError(f"image_format must be 'jpg' or 'png', got {self.image_format!r}")
         if not 0.0 <= self.test_fraction < 1.0:
-            raise ValueError(f"test_fraction must be in [0, 1), got {self.test_fraction}")
+            raise ConfigError(f"test_fraction must be in [0, 1), got {self.test_fraction}")
         if self.crop_size < 8:
-            raise ValueError(f"crop_size too small: {self.crop_size}")
+            raise ConfigError(f"crop_size too small: {self.crop_size}")
 
     # -- shards -----------------------------------------------------------------------------------
     @property
@@ -134,7 +135,7 @@ def _build(cls, d: dict, where: str, **extra):
     names = {f.name for f in dataclasses.fields(cls)}
     unknown = sorted(set(d) - names)
     if unknown:
-        raise ValueError(f"unknown {where} setting(s) {unknown}; known: {sorted(names)}")
+        raise ProfileError(f"unknown {where} setting(s) {unknown}; known: {sorted(names)}")
     return cls(**{k: _tuplify(v) for k, v in d.items()}, **extra)
 
 

@@ -27,6 +27,7 @@ from typing import Any
 import numpy as np
 import torch
 
+from airpose_lib import __version__  # the package root holds only the version
 from airpose_lib.atomic import atomic_path
 from airpose_lib.errors import UserError, reading
 
@@ -62,13 +63,10 @@ class StaleRunError(UserError, ValueError):
 
 
 def kit_version() -> str:
-    """Installed kit version (``unknown`` when not installed)."""
-    try:
-        from importlib.metadata import version
-
-        return version("airpose_lib")
-    except Exception:  # noqa: BLE001 - any metadata problem
-        return "unknown"
+    """The kit's version recorded in checkpoints: :data:`airpose_lib.__version__`, its one home
+    (the version of the code that runs, also when the kit is used from a checkout without being
+    installed; pyproject.toml reads the installed version from the same attribute)."""
+    return __version__
 
 
 def capture_rng_state() -> dict[str, Any]:

@@ -50,6 +50,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from airpose_lib.body.joint_sets import BODY_25_NAMES, COCO18_NAMES
+from airpose_lib.errors import ConfigError
 
 __all__ = [
     "BODY25_FROM_COCO18",
@@ -136,9 +137,9 @@ def agreement_masks(openpose: np.ndarray, alphapose: np.ndarray, *, threshold_px
     """The per-joint decisions of :func:`agreement_targets` (same arguments)."""
     thr = np.asarray(threshold_px, np.float64)
     if not (thr > 0).all() or thr.ndim > 1:
-        raise ValueError(f"threshold_px must be positive (one value or one per view), got {threshold_px}")
+        raise ConfigError(f"threshold_px must be positive (one value or one per view), got {threshold_px}")
     if unmatched not in _UNMATCHED_CHOICES:
-        raise ValueError(f"unmatched must be one of {_UNMATCHED_CHOICES}, got {unmatched!r}")
+        raise ConfigError(f"unmatched must be one of {_UNMATCHED_CHOICES}, got {unmatched!r}")
     op, ap = _check(openpose, alphapose)
     if thr.ndim == 1 and thr.shape[0] != op.shape[1]:
         raise ValueError(f"threshold_px has {thr.shape[0]} values for {op.shape[1]} views")

@@ -45,6 +45,7 @@ from torch import Tensor, nn
 
 from airpose_lib.body import load_body_model
 from airpose_lib.body.joint_sets import BODY_25_FROM_SMPLX
+from airpose_lib.errors import ConfigError
 from airpose_lib.geometry import matrix_to_axis_angle, project_points
 from airpose_lib.losses import cross_view_mse, view_mse
 from airpose_lib.model import posed_joints_and_vertices
@@ -82,9 +83,9 @@ class FineTuneLossConfig:
 
     def __post_init__(self) -> None:
         if self.vposer_latent not in ("sample", "mean"):
-            raise ValueError(f"vposer_latent must be 'sample' or 'mean', got {self.vposer_latent!r}")
+            raise ConfigError(f"vposer_latent must be 'sample' or 'mean', got {self.vposer_latent!r}")
         if self.view_reduction not in ("sum", "mean"):
-            raise ValueError(f"view_reduction must be 'sum' or 'mean', got {self.view_reduction!r}")
+            raise ConfigError(f"view_reduction must be 'sum' or 'mean', got {self.view_reduction!r}")
 
     @property
     def weights(self) -> dict[str, float]:
@@ -117,7 +118,7 @@ def finetune_loss_config(variant: str, official: bool = False, **overrides) -> F
     names = {f.name for f in dataclasses.fields(FineTuneLossConfig)}
     unknown = sorted(set(values) - names)
     if unknown:
-        raise ValueError(f"unknown fine-tuning loss option(s) {unknown}; known: {sorted(names)}")
+        raise ConfigError(f"unknown fine-tuning loss option(s) {unknown}; known: {sorted(names)}")
     return FineTuneLossConfig(**values)
 
 

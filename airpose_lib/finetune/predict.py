@@ -50,7 +50,8 @@ from torch import Tensor, nn
 
 from airpose_lib import __version__  # the package root holds only the version
 from airpose_lib.atomic import atomic_path
-from airpose_lib.data.official_layout import load_sequence
+from airpose_lib.data.official_layout import SequenceFormatError, load_sequence
+from airpose_lib.errors import ConfigError, UserError
 from airpose_lib.model import to_smplx_params
 from airpose_lib.progress import progress_bar
 from airpose_lib.runtime.offline import offline_inputs
@@ -77,7 +78,7 @@ REQUIRED_PREDICTION_KEYS = ("phi", "tau", "theta", "beta", "frames")
 PREDICTION_KEYS = REQUIRED_PREDICTION_KEYS + ("P", "boxes", "valid", "provenance")
 
 
-class PredictionFormatError(ValueError):
+class PredictionFormatError(UserError, ValueError):
     """A predictions file or dict does not follow the contract; the message names the file."""
 
 
@@ -147,8 +148,8 @@ def detection_boxes(keypoints: np.ndarray, image_sizes: SequenceABC[tuple[int, i
             if last is not None:
                 boxes[f, v] = last
         if not valid[:, v].any():
-            raise ValueError(f"{where}: view {v} has no frame with at least 4 keypoints of confidence >= "
-                             f"{min_confidence}; check the detector files or lower the box confidence")
+            raise SequenceFormatError(f"{where}: view {v} has no frame with at least 4 keypoints of confidence >= "
+                                      f"{min_confidence}; check the detector files or lower the box confidence")
         first = int(np.argmax(valid[:, v]))
         boxes[:first, v] = boxes[first, v]  # leading frames: the first box the view has
     return boxes, valid
@@ -182,13 +183,13 @@ class _Views:
 
 def frames_in_range(root: str | Path, start: int | None, stop: int | None) -> np.ndarray:
     """Image numbers ``start <= n < stop`` present in every view of the recording at ``root``
-    (None: open end), for ``load_sequence(root, frames=...)``. Raises ``ValueError`` if none."""
+    (None: open end), for ``load_sequence(root, frames=...)``. Raises ``ConfigError`` if none."""
     numbers = np.asarray(load_sequence(root, detectors=(), ground_truth=False).frames)  # image numbers only
     lo = numbers[0] if start is None else start
     hi = numbers[-1] + 1 if stop is None else stop
     sel = numbers[(numbers >= lo) & (numbers < hi)]
     if sel.size == 0:
-        raise ValueError(f"{root}: no image numbered in [{lo}, {hi}) (the recording has {numbers[0]}..{numbers[-1]})")
+        raise ConfigError(f"{root}: no image numbered in [{lo}, {hi}) (the recording has {numbers[0]}..{numbers[-1]})")
     return sel
 
 
@@ -267,7 +268,7 @@ def sequence_features(model: nn.Module, sequence, *, input_size: int, detector: 
     if detector not in sequence.keypoints:
         raise ValueError(f"{sequence.root}: no {detector!r} detections loaded (have {sorted(sequence.keypoints)})")
     if batch_size < 1:
-        raise ValueError("batch_size must be >= 1")
+        raise ConfigError("batch_size must be >= 1")
     pos = _positions(sequence, frames)
     V = sequence.num_views
     sizes = []

@@ -22,6 +22,8 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 
+from airpose_lib.errors import ConfigError
+
 __all__ = ["SELECTION_RULES", "Selection", "overfitting_terms", "select_step"]
 
 SELECTION_RULES = ("first_overfit", "min_heldout_j2d")
@@ -58,7 +60,7 @@ def select_step(rows: Sequence[Mapping[str, float]], rule: str, terms: Sequence[
         terms: the loss components that count (``first_overfit``).
     """
     if rule not in SELECTION_RULES:
-        raise ValueError(f"unknown selection rule {rule!r}; use one of {', '.join(SELECTION_RULES)}")
+        raise ConfigError(f"unknown selection rule {rule!r}; use one of {', '.join(SELECTION_RULES)}")
     if not rows:
         return Selection(None)
     if rule == "min_heldout_j2d":

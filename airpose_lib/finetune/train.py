@@ -86,6 +86,7 @@ from airpose_lib.engine import (
     run_engine,
 )
 from airpose_lib.engine.launch import resolve_device
+from airpose_lib.errors import DamagedFileError
 from airpose_lib.folder_lock import folder_lock
 from airpose_lib.model import to_smplx_params
 from airpose_lib.model.record import network_record
@@ -298,8 +299,8 @@ def _load_frames(root: Path, cfg: FineTuneConfig):
     seq = load_sequence(root, frames=frames, detectors=detectors, missing_detections=cfg.missing_detections,
                         ground_truth=cfg.targets == "ground_truth")
     if cfg.targets == "ground_truth" and (seq.ground_truth is None or "kp2d_body25" not in seq.ground_truth):
-        raise ValueError(f"{root}: targets='ground_truth' needs a generated recording's ground_truth.npz "
-                         "(kp2d_body25); real recordings have none: use targets='detections'")
+        raise ConfigError(f"{root}: targets='ground_truth' needs a generated recording's ground_truth.npz "
+                          "(kp2d_body25); real recordings have none: use targets='detections'")
     return seq
 
 
@@ -565,8 +566,7 @@ class _FineTuneTask(TrainingTask):
 
     def resume(self, state: Mapping) -> None:
         if "finetune" not in state:
-            raise ValueError(f"{checkpoint_dir(self.out_dir) / 'last.pt'} is not a fine-tuning checkpoint; "
-                             f"{AFRESH_HINT}")
+            raise DamagedFileError(checkpoint_dir(self.out_dir) / "last.pt", "a fine-tuning checkpoint", AFRESH_HINT)
         _check_resume(state["finetune"], self.cfg, self.info["base_fingerprint"])
         self.info["initial"] = state["finetune"]["initial"]
         self.selection = dict(state["finetune"].get("selection") or self.selection)
@@ -647,9 +647,9 @@ def _finetune(inputs: tuple, checkpoint: Path, root: Path, out_dir: Path, cfg: F
     held = held_pos[has_targets[held_pos]]
     n = len(usable)
     if n < cfg.batch_size and cfg.steps > 0:
-        raise ValueError(f"{root}: {n} training frames have kept 2D targets (after holding out "
-                         f"{len(held_pos)} for model selection), fewer than one batch of {cfg.batch_size}; "
-                         "lower batch_size or holdout_fraction, select more frames or relax the agreement filter")
+        raise ConfigError(f"{root}: {n} training frames have kept 2D targets (after holding out "
+                          f"{len(held_pos)} for model selection), fewer than one batch of {cfg.batch_size}; "
+                          "lower batch_size or holdout_fraction, select more frames or relax the agreement filter")
 
     dtype = model.init_beta.dtype
     as_t = lambda a: torch.as_tensor(np.asarray(a)).to(device=device, dtype=dtype)  # noqa: E731

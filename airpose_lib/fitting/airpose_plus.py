@@ -62,6 +62,7 @@ from torch import Tensor
 
 from airpose_lib.body import BODY_25_FROM_SMPLX, COCO18_FROM_SMPLX, load_body_model
 from airpose_lib.body.forward import BodyForward
+from airpose_lib.errors import ConfigError, ProfileError
 from airpose_lib.geometry import (
     axis_angle_to_matrix,
     matrix_to_axis_angle,
@@ -136,7 +137,7 @@ def fitting_profile(profile: str, **overrides) -> AirPosePlusConfig:
     names = {f.name for f in fields(AirPosePlusConfig)}
     unknown = set(section) - names
     if unknown:
-        raise ValueError(f"{profile_path(profile)}: unknown keys in `fitting:`: {sorted(unknown)}")
+        raise ProfileError(f"{profile_path(profile)}: unknown keys in `fitting:`: {sorted(unknown)}")
     return AirPosePlusConfig(**{**section, **overrides})
 
 
@@ -444,7 +445,7 @@ def airpose_plus(
     """
     cfg = replace(config or AirPosePlusConfig(), **overrides)
     if cfg.latent_start < 0 or cfg.iterations < 0 or cfg.chunk_size < 1:
-        raise ValueError("iterations, latent_start must be >= 0 and chunk_size >= 1")
+        raise ConfigError("iterations, latent_start must be >= 0 and chunk_size >= 1")
     xy, w, idx, _ = _prepare_keypoints(keypoints, joint_maps)
     F, V = xy.shape[:2]
     if F == 0:
@@ -456,8 +457,8 @@ def airpose_plus(
     conf = w.sum(dim=(1, 2))  # (F,)
     kept = conf >= cfg.min_frame_confidence
     if not kept.any():
-        raise ValueError(f"no frame reaches min_frame_confidence={cfg.min_frame_confidence} "
-                         f"(largest summed confidence {conf.max().item():.3g}); nothing to fit")
+        raise ConfigError(f"no frame reaches min_frame_confidence={cfg.min_frame_confidence} "
+                          f"(largest summed confidence {conf.max().item():.3g}); nothing to fit")
     start = init_from_views(init["phi"], init["tau"], init["theta"], init["beta"], num_frames=F,
                             weights=kept.float())
     if prior is None:

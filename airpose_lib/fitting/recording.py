@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from airpose_lib.atomic import atomic_path
-from airpose_lib.errors import reading
+from airpose_lib.errors import ConfigError, DamagedFileError, reading
 
 from .airpose_plus import AirPosePlusConfig, AirPosePlusResult, fitting_profile
 
@@ -74,13 +74,14 @@ def initialisation_for(pred: np.lib.npyio.NpzFile, path: str | os.PathLike,
     Returns:
         ``phi, tau, theta, beta`` at ``frames`` (all F' rows when the file has no ``frames``).
     Raises:
-        ValueError: an array is missing, or the file's ``frames`` do not include every one of
-            ``frames``.
+        DamagedFileError: an array is missing.
+        ConfigError: the file's ``frames`` do not include every one of ``frames``.
     """
     files = set(pred.files)
     missing = set(INIT_ARRAYS) - files
     if missing:
-        raise ValueError(f"{path}: missing arrays {sorted(missing)} (need phi, tau, theta, beta)")
+        detail = ValueError(f"missing arrays {sorted(missing)}; need phi, tau, theta, beta")
+        raise DamagedFileError(path, _WHAT, _FIX, detail)
     with reading(path, _WHAT, _FIX):
         init = {k: pred[k] for k in INIT_ARRAYS}
         pf = np.asarray(pred["frames"]) if "frames" in files else None
@@ -88,7 +89,8 @@ def initialisation_for(pred: np.lib.npyio.NpzFile, path: str | os.PathLike,
         return init
     sel = np.searchsorted(pf, frames)
     if np.any(sel >= len(pf)) or np.any(pf[np.minimum(sel, len(pf) - 1)] != frames):
-        raise ValueError(f"{path}: its `frames` do not cover the sequence's frames")
+        raise ConfigError(f"{path}: its `frames` do not cover the sequence's frames; give the .npz that "
+                          "`airpose predict` wrote for this recording, or --frames within its frames")
     return {k: v[sel] if v.ndim and v.shape[0] == len(pf) else v for k, v in init.items()}
 
 

@@ -74,6 +74,7 @@ from torch import Tensor, nn
 from airpose_lib.body.forward import BodyForward
 from airpose_lib.body.genders import GENDER_NAMES
 from airpose_lib.body.joint_sets import NUM_BODY_JOINTS, NUM_POSE_JOINTS
+from airpose_lib.errors import ConfigError
 from airpose_lib.geometry import (
     axis_angle_to_matrix,
     full_to_crop_pixels,
@@ -163,18 +164,18 @@ class LossConfig:
 
     def __post_init__(self) -> None:
         if self.j2d_frame not in ("full", "crop"):
-            raise ValueError(f"j2d_frame must be 'full' or 'crop', got {self.j2d_frame!r}")
+            raise ConfigError(f"j2d_frame must be 'full' or 'crop', got {self.j2d_frame!r}")
         object.__setattr__(self, "cross_view_terms", tuple(self.cross_view_terms))
         if not set(self.cross_view_terms) <= {"theta", "beta", "V"}:
-            raise ValueError(f"cross_view_terms must be a subset of theta, beta, V, got {self.cross_view_terms}")
+            raise ConfigError(f"cross_view_terms must be a subset of theta, beta, V, got {self.cross_view_terms}")
         if self.view_reduction not in ("sum", "mean"):
-            raise ValueError(f"view_reduction must be 'sum' or 'mean', got {self.view_reduction!r}")
+            raise ConfigError(f"view_reduction must be 'sum' or 'mean', got {self.view_reduction!r}")
         if self.cross_vertex_frame not in ("model", "own_phi"):
-            raise ValueError(f"cross_vertex_frame must be 'model' or 'own_phi', got {self.cross_vertex_frame!r}")
+            raise ConfigError(f"cross_vertex_frame must be 'model' or 'own_phi', got {self.cross_vertex_frame!r}")
         if self.rotation_space not in ("matrix", "6d"):
-            raise ValueError(f"rotation_space must be 'matrix' or '6d', got {self.rotation_space!r}")
+            raise ConfigError(f"rotation_space must be 'matrix' or '6d', got {self.rotation_space!r}")
         if self.vertex_subsample is not None and self.vertex_subsample <= 0:
-            raise ValueError(f"vertex_subsample must be positive or None, got {self.vertex_subsample}")
+            raise ConfigError(f"vertex_subsample must be positive or None, got {self.vertex_subsample}")
 
     @property
     def weights(self) -> dict[str, float]:

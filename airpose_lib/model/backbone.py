@@ -15,6 +15,8 @@ from collections.abc import Mapping
 import torch
 from torch import Tensor, nn
 
+from airpose_lib.errors import ConfigError
+
 __all__ = [
     "BasicBlock",
     "Bottleneck",
@@ -234,4 +236,4 @@ def build_backbone(name: str = "resnet50", channels_last: bool = False) -> ResNe
     try:
         return BACKBONES[name](channels_last=channels_last)
     except KeyError:
-        raise ValueError(f"unknown backbone {name!r}; choose one of {sorted(BACKBONES)}") from None
+        raise ConfigError(f"unknown backbone {name!r}; choose one of {sorted(BACKBONES)}") from None

@@ -67,6 +67,7 @@ import torch
 from torch import Tensor
 
 from airpose_lib.atomic import atomic_path
+from airpose_lib.errors import UserError
 from airpose_lib.safe_pickle import torch_pickle_module
 
 from .backbone import BACKBONES
@@ -115,7 +116,7 @@ _LAYOUTS = {("Bottleneck", (3, 4, 6, 3)): "resnet50", ("BasicBlock", (3, 4, 6, 3
             ("BasicBlock", (2, 2, 2, 2)): "resnet18"}
 
 
-class OfficialCheckpointError(ValueError):
+class OfficialCheckpointError(UserError, ValueError):
     """An official checkpoint cannot be converted (names the file and what is wrong)."""
 
 

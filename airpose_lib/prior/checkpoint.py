@@ -30,7 +30,7 @@ import torch
 from airpose_lib import __version__  # the package root holds only the version
 from airpose_lib.atomic import atomic_path
 from airpose_lib.body.loader import _located
-from airpose_lib.errors import reading
+from airpose_lib.errors import ConfigError, UserError, reading
 from airpose_lib.paths import cache_dir
 from airpose_lib.safe_pickle import torch_pickle_module
 
@@ -58,7 +58,7 @@ KIT_TAGS = ("paper", "cpu", "smoke")
 _OFFICIAL_PREFIX = "vp_model."
 
 
-class PriorError(FileNotFoundError):
+class PriorError(UserError, FileNotFoundError):
     """A prior checkpoint is missing or unusable; the message says what to do."""
 
 
@@ -66,7 +66,7 @@ class PriorError(FileNotFoundError):
 def kit_prior_path(tag: str = "cpu") -> Path:
     """``<cache>/prior/<tag>/vposer.pt`` (not created)."""
     if not tag or "/" in tag or tag.startswith("."):
-        raise ValueError(f"invalid prior tag {tag!r}")
+        raise ConfigError(f"invalid prior tag {tag!r}")
     return cache_dir() / "prior" / tag / "vposer.pt"
 
 

@@ -28,6 +28,7 @@ import torch
 from torch import Tensor
 
 from airpose_lib.engine import Schedule, TrainingTask, run_engine
+from airpose_lib.errors import ProfileError
 from airpose_lib.geometry import axis_angle_to_matrix, geodesic_angle
 from airpose_lib.profiles import profile_path, profile_section
 
@@ -94,7 +95,7 @@ def prior_profile(profile: str) -> tuple[PriorTrainConfig, CorpusConfig]:
     corpus_keys = {f.name for f in fields(CorpusConfig)}
     unknown = set(section) - train_keys - corpus_keys
     if unknown:
-        raise ValueError(f"{profile_path(profile)}: unknown keys in `prior:`: {sorted(unknown)}")
+        raise ProfileError(f"{profile_path(profile)}: unknown keys in `prior:`: {sorted(unknown)}")
     train = PriorTrainConfig(**{k: v for k, v in section.items() if k in train_keys})
     corpus = CorpusConfig(**{k: v for k, v in section.items() if k in corpus_keys})
     return train, corpus

@@ -43,6 +43,7 @@ import nbformat
 import yaml
 
 from airpose_lib import __version__  # the package root holds only the version
+from airpose_lib.errors import UserError
 from airpose_lib.folder_lock import folder_lock
 from airpose_lib.paths import figures_root, runs_root
 from airpose_lib.profiles import PROFILES_DIR, ProfileError, profile_path, read_profile
@@ -81,7 +82,7 @@ RESERVED_PARAMETERS = ("profile", "output_dir")
 DATA_SOURCES = ("generated", "official")
 
 
-class ReproductionError(RuntimeError):
+class ReproductionError(UserError, RuntimeError):
     """A notebook failed, lacks a parameters cell, or did not write an expected figure."""
 
 
@@ -425,10 +426,6 @@ def _socket_dir() -> Path:
     return _SOCKET_DIR
 
 
-def _kit_version() -> str:
-    return __version__
-
-
 def _select(catalog: list[CatalogEntry], only: Sequence[str] | None) -> list[CatalogEntry]:
     if not only:
         return list(catalog)
@@ -612,7 +609,7 @@ def run_profile(
     run_dir = (out_dir / prof["name"]).resolve()
     figures_dir = figures_dir.resolve()
 
-    report = RunReport(profile=prof["name"], description=prof["description"], kit_version=_kit_version(),
+    report = RunReport(profile=prof["name"], description=prof["description"], kit_version=__version__,
                        kernel_name=kernel_name,
                        started_at=_dt.datetime.now().isoformat(timespec="seconds"),
                        run_dir=str(run_dir), figures_dir=str(figures_dir))

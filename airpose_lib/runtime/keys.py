@@ -22,12 +22,14 @@ from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from airpose_lib.errors import UserError
+
 __all__ = ["KEYS_ENV", "SwarmKeys", "SwarmKeyError", "create_swarm_keys", "load_swarm_keys", "keys_folder"]
 
 KEYS_ENV = "AIRPOSE_SWARM_KEYS"
 
 
-class SwarmKeyError(ValueError):
+class SwarmKeyError(UserError, ValueError):
     """Missing or unreadable swarm keys; the message names the file and how to make it."""
 
 

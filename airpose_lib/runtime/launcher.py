@@ -21,13 +21,15 @@ import time
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 
+from airpose_lib.errors import UserError
+
 from .keys import create_swarm_keys
 from .transport import free_ports
 
 __all__ = ["Fleet", "launch", "node_options", "format_summaries", "LaunchError"]
 
 
-class LaunchError(RuntimeError):
+class LaunchError(UserError, RuntimeError):
     pass
 
 

@@ -28,6 +28,8 @@ from typing import Protocol, runtime_checkable
 
 import numpy as np
 
+from airpose_lib.errors import UserError
+
 __all__ = [
     "ViewSource",
     "SyntheticSource",
@@ -152,7 +154,7 @@ class SyntheticSource:
         return self.views[v]
 
 
-class SourceError(ValueError):
+class SourceError(UserError, ValueError):
     """A ``--source`` a drone cannot replay: an unknown or malformed ``synthetic:`` option, or a
     camera the source does not have. The message names the option and the fix."""
 
@@ -205,7 +207,7 @@ class _SequenceView:
         self.K = np.asarray(seq.K[v], np.float64)
         self.numbers = np.asarray(seq.frames)  # the image numbers of the official layout
         if detector not in seq.keypoints:
-            raise ValueError(f"{seq.root}: no {detector!r} detections (have {sorted(seq.keypoints)})")
+            raise SourceError(f"{seq.root}: no {detector!r} detections (have {sorted(seq.keypoints)})")
         self._kp = seq.keypoints[detector]  # (F, V, J, 3), missing = 0
 
     def image(self, i: int) -> np.ndarray:

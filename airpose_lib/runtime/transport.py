@@ -32,7 +32,9 @@ from dataclasses import dataclass
 import numpy as np
 import zmq
 
-from .keys import SwarmKeys
+from airpose_lib.errors import ConfigError
+
+from .keys import SwarmKeyError, SwarmKeys
 
 __all__ = ["LinkConfig", "LinkEmulator", "Transport", "free_ports", "endpoint", "parse_peers"]
 
@@ -43,7 +45,7 @@ def endpoint(port: int, host: str = "127.0.0.1") -> str:
 
 def parse_peers(items: list[str], host: str = "127.0.0.1") -> dict[int, str]:
     """``["2@5002", "3@127.0.0.1:5003", "4@tcp://10.0.0.4:5004"]`` -> ``{2: "tcp://127.0.0.1:5002", ...}``
-    (commas also separate)."""
+    (commas also separate); a malformed entry raises :class:`~airpose_lib.errors.ConfigError`."""
     out = {}
     for item in items:
         for part in filter(None, item.split(",")):
@@ -51,8 +53,8 @@ def parse_peers(items: list[str], host: str = "127.0.0.1") -> dict[int, str]:
             port = addr.rpartition(":")[2]
             if not (sep and ident.isdigit() and 1 <= int(ident) <= 255 and port.isdigit()
                     and 1 <= int(port) <= 65535):
-                raise ValueError(f"peer {part!r}: expected ID@PORT, ID@HOST:PORT or ID@tcp://HOST:PORT with a "
-                                 "drone id 1..255 and a port 1..65535 (e.g. 2@5002)")
+                raise ConfigError(f"peer {part!r}: expected ID@PORT, ID@HOST:PORT or ID@tcp://HOST:PORT with a "
+                                  "drone id 1..255 and a port 1..65535 (e.g. 2@5002)")
             if addr.startswith("tcp://"):
                 ep = addr
             elif ":" in addr:
@@ -195,7 +197,7 @@ class Transport:
             sub.setsockopt(zmq.RCVHWM, hwm)
             if keys is not None:
                 if ident not in keys.peers:
-                    raise ValueError(f"no public key of drone {ident} in the swarm keys")
+                    raise SwarmKeyError(f"no public key of drone {ident} in the swarm keys")
                 sub.curve_secretkey = keys.secret
                 sub.curve_publickey = keys.public
                 sub.curve_serverkey = keys.peers[ident]

@@ -69,6 +69,7 @@ from airpose_lib.data.official_synthetic import OfficialSyntheticDataset
 from airpose_lib.data.training_input import training_input
 from airpose_lib.engine import EngineRun, Schedule, StaleRunError, TrainingTask, process_rank, run_engine, run_folder
 from airpose_lib.engine.launch import check_precision, launch_env, resolve_device, single_process
+from airpose_lib.errors import ConfigError
 from airpose_lib.folder_lock import file_lock
 from airpose_lib.losses import SupervisedLoss, loss_config
 from airpose_lib.losses.pretrain import PretrainLoss, PretrainLossConfig
@@ -114,7 +115,7 @@ def default_model_factory(cfg: TrainConfig) -> nn.Module:
     if cfg.pretrained is not None:  # for pretrain: a later stage (new heads on the earlier backbone)
         backbone, meta = load_backbone_file(cfg.pretrained)
         if meta["backbone"] != cfg.backbone:
-            raise ValueError(f"{cfg.pretrained} is a {meta['backbone']}, the config asks for {cfg.backbone}")
+            raise ConfigError(f"{cfg.pretrained} is a {meta['backbone']}, the config asks for {cfg.backbone}")
         model.backbone.load_state_dict(backbone.state_dict())
     if cfg.task == "regressor":
         for p in model.backbone.parameters():
@@ -151,15 +152,15 @@ def prepare_data(cfg: TrainConfig, progress: bool | None = None, device: str | t
         if data.get("root") is None:
             data["root"] = str(locate("official_synthetic").path)
         if cfg.body_source != "smplx":
-            raise ValueError("training on the official synthetic data needs body_source='smplx' (its betas "
-                             "are SMPL-X v1.1 shape coefficients; see data_manifests/smplx_v1_1.yaml)")
+            raise ConfigError("training on the official synthetic data needs body_source='smplx' (its betas "
+                              "are SMPL-X v1.1 shape coefficients; see data_manifests/smplx_v1_1.yaml)")
         return cfg.replace(data=data)
     show = cfg.progress if progress is None else progress
     if data.get("root") is None:
         source = data.pop("profile", None) or cfg.profile
         if source is None:
-            raise ValueError("no still-frame dataset: set data.root, or train with a profile that has a "
-                             "`data: still:` section")
+            raise ConfigError("no still-frame dataset: set data.root, or train with a profile that has a "
+                              "`data: still:` section")
 
         data["root"] = str(ensure_still_dataset(source, progress=show))
     else:
@@ -174,7 +175,7 @@ def prepare_data(cfg: TrainConfig, progress: bool | None = None, device: str | t
                                                          device=str(device))))
     if cfg.task == "regressor":
         if cfg.pretrained is None:
-            raise ValueError("the regressor task trains on the features of a pretrained backbone: set pretrained")
+            raise ConfigError("the regressor task trains on the features of a pretrained backbone: set pretrained")
         for split in {cfg.train_split, cfg.val_split}:
             ensure_features(cfg.pretrained, data["root"], split, progress=show, cut=cfg.trainable_from,
                             device=device)
@@ -545,7 +546,7 @@ class StillFrameTask(TrainingTask):
                 self.model, device_ids=[self.device] if self.device.type == "cuda" else None)
         n_train, cfg = len(self.train_ds), self.cfg
         if ResumableBatchSampler(n_train, cfg.batch_size, cfg.seed, 0).num_batches() == 0 and run.step < cfg.steps:
-            raise ValueError(f"training split has {n_train} samples, fewer than one batch of {cfg.batch_size}")
+            raise ConfigError(f"training split has {n_train} samples, fewer than one batch of {cfg.batch_size}")
 
     def validate(self, run: EngineRun) -> dict[str, float] | None:
         if self.rank != 0 or self.val_ds is None or len(self.val_ds) == 0:

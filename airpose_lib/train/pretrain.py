@@ -37,7 +37,7 @@ from airpose_lib.data.manifest import load_manifest
 from airpose_lib.data.shards import sha256_file
 from airpose_lib.engine.checkpoint import kit_version, load_checkpoint
 from airpose_lib.engine.launch import resolve_device, single_process
-from airpose_lib.errors import reading
+from airpose_lib.errors import DamagedFileError, ProfileError, reading
 from airpose_lib.eval.metrics import rotation_error
 from airpose_lib.folder_lock import file_lock
 from airpose_lib.geometry import axis_angle_to_matrix, rot6d_to_matrix
@@ -72,8 +72,8 @@ def pretrain_stages(profile: str, **overrides) -> list[TrainConfig]:
     chain = [settings]
     while (earlier := chain[-1].pop("continue_from", None)) is not None:
         if not isinstance(earlier, dict):
-            raise ValueError(f"profile {profile}: `pretrain: continue_from:` must be a mapping of settings "
-                             f"(e.g. {{steps: 4000}}), not {earlier!r}")
+            raise ProfileError(f"profile {profile}: `pretrain: continue_from:` must be a mapping of settings "
+                               f"(e.g. {{steps: 4000}}), not {earlier!r}")
         chain.append({**chain[-1], **earlier})
     name = Path(str(profile)).stem
 
@@ -83,8 +83,8 @@ def pretrain_stages(profile: str, **overrides) -> list[TrainConfig]:
         cfg = load_train_config(None, "pretrain", task="pretrain", **values).replace(profile=name)
         if "still" in data:
             if set(data) != {"still"}:
-                raise ValueError(f"profile {profile}: a pretraining stage's `data:` takes only `still:` "
-                                 f"(changes to the profile's `data: still:`), not {sorted(set(data) - {'still'})}")
+                raise ProfileError(f"profile {profile}: a pretraining stage's `data:` takes only `still:` "
+                                   f"(changes to the profile's `data: still:`), not {sorted(set(data) - {'still'})}")
             cfg = cfg.replace(data=_stage_dataset(profile, name, data["still"] or {}))
         return cfg
 
@@ -195,8 +195,8 @@ def import_torchvision_backbone(weights: str | Path, backbone: str = "resnet50",
         out: the file to write (default ``<cache>/backbones/imagenet-<backbone>-<sha256[:12]>.pt``).
 
     Raises:
-        ValueError: not a state dict of that architecture (the missing/unexpected keys or the
-            shape mismatch, one line).
+        DamagedFileError: not a state dict of that architecture (the missing/unexpected keys or
+            the shape mismatch, one line).
     """
     weights = Path(weights)
     with reading(weights, f"a torchvision {backbone} state dict (torch.save of model.state_dict())",
@@ -206,14 +206,13 @@ def import_torchvision_backbone(weights: str | Path, backbone: str = "resnet50",
         if isinstance(blob, dict) and isinstance(blob.get(key), dict):
             blob = blob[key]
     if not isinstance(blob, dict) or not all(isinstance(v, torch.Tensor) for v in blob.values()):
-        raise ValueError(f"{weights} is not a state dict of tensors; save one with torch.save(model.state_dict(), FILE)")
+        raise DamagedFileError(weights, "a state dict of tensors", "save one with torch.save(model.state_dict(), FILE)")
     net = build_backbone(backbone)
     try:
         net.load_torchvision_state_dict({k: v.float() if v.is_floating_point() else v for k, v in blob.items()})
     except RuntimeError as e:
-        first = " ".join(str(e).split())[:300]
-        raise ValueError(f"{weights} is not a torchvision {backbone} state dict ({first}); give the weights of a "
-                         f"{backbone} or choose the matching --backbone") from None
+        raise DamagedFileError(weights, f"a torchvision {backbone} state dict",
+                               f"give the weights of a {backbone} or choose the matching --backbone", e) from None
     digest = sha256_file(weights)
     path = Path(out) if out is not None else cache_dir() / "backbones" / f"imagenet-{backbone}-{digest[:12]}.pt"
     meta = {"backbone": backbone, "key": f"imported-{digest[:16]}", "source": str(weights.absolute()),

@@ -18,6 +18,8 @@ import numpy as np
 import torch
 from torch.utils.data import Dataset
 
+from airpose_lib.errors import ConfigError
+
 __all__ = ["share_bounds", "sample_seed", "epoch_permutation", "ResumableBatchSampler", "SeededDataset", "seeded_rngs",
            "seed_everything", "worker_init_fn"]
 
@@ -116,8 +118,8 @@ class ResumableBatchSampler:
     def __init__(self, n: int, batch_size: int, seed: int, epoch: int, start_batch: int = 0, rank: int = 0,
                  world_size: int = 1, drop_last: bool = True, shuffle: bool = True) -> None:
         if batch_size < world_size:
-            raise ValueError(f"batch_size {batch_size} is smaller than world_size {world_size}: a process "
-                             "would get no sample")
+            raise ConfigError(f"batch_size {batch_size} is smaller than world_size {world_size}: a process "
+                              "would get no sample")
         self.n, self.batch_size, self.seed, self.epoch = n, batch_size, seed, epoch
         self.start_batch, self.rank, self.world_size = start_batch, rank, world_size
         self.drop_last, self.shuffle = drop_last, shuffle

@@ -30,7 +30,6 @@ __all__ = [
     "figure_footer",
     "use_kit_style",
     "save_figure",
-    "kit_version",
 ]
 
 #: One colour per method of the paper's tables and plots, plus the ground truth.
@@ -101,11 +100,6 @@ def use_kit_style() -> None:
     })
 
 
-def kit_version() -> str:
-    """Version string of the kit, recorded in every figure's metadata."""
-    return __version__
-
-
 def figure_footer(params: Mapping | None) -> str:
     """``"profile smoke · data generated · airpose_lib 0.1.0"`` from a figure's ``params``
     (``profile``, ``data_source``, else ``source``; absent keys are left out)."""
@@ -118,7 +112,7 @@ def figure_footer(params: Mapping | None) -> str:
     data = params.get("data_source", params.get("source"))
     if data is not None:
         parts.append(f"data {data}")
-    parts.append(f"airpose_lib {kit_version()}")
+    parts.append(f"airpose_lib {__version__}")
     return " \u00b7 ".join(parts)
 
 
@@ -157,7 +151,7 @@ def save_figure(fig, path: str | Path, *, params: Mapping | None = None, show: b
     path.parent.mkdir(parents=True, exist_ok=True)
     if footer and params is not None:
         _add_footer(fig, figure_footer(params))
-    meta = {"Software": f"airpose_lib {kit_version()}"}
+    meta = {"Software": f"airpose_lib {__version__}"}
     if params is not None and path.suffix.lower() == ".png":
         meta["Description"] = json.dumps(dict(params), default=str, sort_keys=True)
     fig.savefig(path, metadata=meta if path.suffix.lower() == ".png" else None)

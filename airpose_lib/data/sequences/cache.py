@@ -7,6 +7,7 @@ import shutil
 from collections.abc import Mapping
 from pathlib import Path
 
+from airpose_lib.errors import ConfigError
 from airpose_lib.folder_lock import MAKER_WAIT_S, folder_lock
 from airpose_lib.paths import cache_dir
 
@@ -76,7 +77,7 @@ def ensure_sequences(profile: str | None = None, root: str | Path | None = None,
     names = list(configs) if only is None else list(only)
     unknown = [n for n in names if n not in configs]
     if unknown:
-        raise ValueError(f"unknown recording(s) {unknown}; available: {list(configs)}")
+        raise ConfigError(f"unknown recording(s) {unknown}; available: {list(configs)}")
     def current(name: str) -> bool:
         folder = root / name
         return not force and _is_complete(folder, configs[name]) and _detections_current(folder)

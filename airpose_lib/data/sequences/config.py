@@ -9,6 +9,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from airpose_lib.body.genders import GENDER_CODES
+from airpose_lib.errors import ConfigError, ProfileError
 from airpose_lib.profiles import profile_section
 
 __all__ = [
@@ -100,9 +101,9 @@ class PersonSpec:
 
     def __post_init__(self) -> None:
         if self.gender not in GENDER_CODES:
-            raise ValueError(f"gender must be one of {tuple(GENDER_CODES)}, got {self.gender!r}")
+            raise ConfigError(f"gender must be one of {tuple(GENDER_CODES)}, got {self.gender!r}")
         if len(self.betas) != 10:
-            raise ValueError(f"betas must have 10 values, got {len(self.betas)}")
+            raise ConfigError(f"betas must have 10 values, got {len(self.betas)}")
 
 
 PERSONS: dict[str, PersonSpec] = {
@@ -180,22 +181,22 @@ class SequenceConfig:
 
     def __post_init__(self) -> None:
         if self.n_frames < 1:
-            raise ValueError(f"n_frames must be >= 1, got {self.n_frames}")
+            raise ConfigError(f"n_frames must be >= 1, got {self.n_frames}")
         if not self.fps > 0:
-            raise ValueError(f"fps must be > 0, got {self.fps}")
+            raise ConfigError(f"fps must be > 0, got {self.fps}")
         if len(self.time_offsets) != len(self.cameras):
-            raise ValueError(f"{len(self.time_offsets)} time offsets for {len(self.cameras)} cameras")
+            raise ConfigError(f"{len(self.time_offsets)} time offsets for {len(self.cameras)} cameras")
         if min(self.time_offsets) < 0:
-            raise ValueError("time offsets must be >= 0")
+            raise ConfigError("time offsets must be >= 0")
         if not 0 < self.render_scale <= 1:
-            raise ValueError(f"render_scale must be in (0, 1], got {self.render_scale}")
+            raise ConfigError(f"render_scale must be in (0, 1], got {self.render_scale}")
 
     @property
     def person_spec(self) -> PersonSpec:
         if isinstance(self.person, PersonSpec):
             return self.person
         if self.person not in PERSONS:
-            raise ValueError(f"unknown person {self.person!r}; choose from {tuple(PERSONS)}")
+            raise ConfigError(f"unknown person {self.person!r}; choose from {tuple(PERSONS)}")
         return PERSONS[self.person]
 
     @property
@@ -215,7 +216,7 @@ class SequenceConfig:
         known = {f.name for f in dataclasses.fields(cls)}
         unknown = sorted(set(d) - known)
         if unknown:
-            raise ValueError(f"unknown sequence setting(s) {unknown}; known: {sorted(known)}")
+            raise ProfileError(f"unknown sequence setting(s) {unknown}; known: {sorted(known)}")
         if isinstance(d.get("person"), Mapping):
             p = dict(d["person"])
             p["betas"] = tuple(p["betas"])
@@ -243,7 +244,7 @@ def sequence_configs_from_profile(profile_section: Mapping) -> dict[str, Sequenc
     section = dict(profile_section)
     recordings = section.pop("recordings", None)
     if not recordings:
-        raise ValueError("a `sequences:` profile section needs a `recordings:` mapping")
+        raise ProfileError("a `sequences:` profile section needs a `recordings:` mapping")
     out = {}
     for name, rec in recordings.items():
         d = {**section, **(rec or {})}

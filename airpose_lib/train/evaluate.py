@@ -29,7 +29,8 @@ from airpose_lib.geometry import axis_angle_to_matrix
 from airpose_lib.model import build_model, to_smplx_params
 
 from .config import TrainConfig
-from .loop import default_dataset_factory, prepare_data
+from .loop import default_dataset_factory
+from .run import prepare_data
 
 __all__ = ["predict", "evaluate", "load_trained_model", "evaluate_checkpoint"]
 

@@ -59,7 +59,7 @@ from airpose_lib.eval.recordings import (
     recording_table,
 )
 from airpose_lib.finetune.keypoints import resolution_scales
-from airpose_lib.finetune.network import load_network
+from airpose_lib.finetune.network import load_sized_network
 from airpose_lib.finetune.predict import (image_sizes, network_camera_of, predict_sequence, regress_features,
                                           sequence_features)
 from airpose_lib.finetune.train import finetune, finetune_config, finetune_done
@@ -196,7 +196,7 @@ def _network_estimate(checkpoint: Path, sequence, out: Path) -> dict:
     if Path(checkpoint).suffix == ".ckpt":  # an official Lightning checkpoint: ResNet-50 at 224 px
         model, size = load_official_checkpoint(checkpoint, backbone=None), OFFICIAL_INPUT_SIZE
     else:
-        model, _, size = load_network(checkpoint)
+        model, _, size = load_sized_network(checkpoint)
     pred = predict_sequence(model, sequence, input_size=size)
     arrays = {k: np.asarray(v) for k, v in pred.items() if k != "provenance"}
     _save_npz(out, key, arrays)
@@ -376,7 +376,7 @@ def _finetune_logged(pre: Path, tuning, tests: dict, ft_cfg, run_dir: Path, prio
     summary row of :attr:`RecordingExperiment.finetune_info`."""
     diagnostics = {}
     if tests and not finetune_done(run_dir, pre, ft_cfg):
-        net, _, size = load_network(pre)
+        net, _, size = load_sized_network(pre)
         for name, seq in tests.items():  # the frozen backbone's features, once per network
             feats = sequence_features(net, seq, input_size=size)
             diagnostics[name] = ground_truth_diagnostic(net, seq, input_size=size, features=feats)

@@ -73,7 +73,8 @@ def main() -> int:
     from airpose_lib.runtime.networks import make_stage_model
     from airpose_lib.runtime.edge import ensure_export
     from airpose_lib.train.evaluate import load_trained_model, predict
-    from airpose_lib.train.loop import default_dataset_factory, prepare_data
+    from airpose_lib.train.loop import default_dataset_factory
+    from airpose_lib.train.run import prepare_data
 
     model, cfg = load_trained_model(args.checkpoint)
     cfg = prepare_data(cfg, progress=False)

@@ -122,7 +122,8 @@ def test_body_joints_match_a_smplx_forward(open_model_files, dtype):
 
 
 def test_depth_summary_and_checks():
-    from airpose_lib.experiments.recordings import RecordingExperiment, airpose_plus_checks, depth_summary
+    from airpose_lib.experiments.recording_tables import airpose_plus_checks, depth_summary
+    from airpose_lib.experiments.recordings import RecordingExperiment
 
     class Seq:
         def __init__(self, gt):

@@ -83,7 +83,8 @@ def test_recording_prior_uses_vposer_when_installed(tmp_path, monkeypatch):
 
 
 def test_transfer_table_reads_the_selection_logs():
-    from airpose_lib.experiments.recordings import CONTROL_LABEL, RecordingExperiment, transfer_table
+    from airpose_lib.experiments.recording_tables import transfer_table
+    from airpose_lib.experiments.recordings import CONTROL_LABEL, RecordingExperiment
 
     def info(targets, selected, mpjpe, heldout):
         return {"targets": targets, "selected_step": selected,

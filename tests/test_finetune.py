@@ -22,7 +22,7 @@ from airpose_lib.finetune import (
     finetune,
     finetune_config,
     finetune_loss_config,
-    load_network,
+    load_sized_network,
     load_predictions,
     predict_sequence,
     regress_features,
@@ -263,7 +263,7 @@ def test_loss_rejects_bad_targets(open_model):
 
 # -- predictions ----------------------------------------------------------------------------------
 def test_regress_features_equals_forward(tiny_ckpt):
-    model, _, size = load_network(tiny_ckpt)
+    model, _, size = load_sized_network(tiny_ckpt)
     assert size == S and model.input_size == S
     g = torch.Generator().manual_seed(0)
     images = torch.randn(2, 2, 3, S, S, generator=g)
@@ -302,7 +302,7 @@ def test_predict_sequence_roundtrip_and_airpose_plus_init(variant, request, smok
     from airpose_lib.runtime.source import open_source
 
     tiny_ckpt = request.getfixturevalue("tiny_ckpt" if variant == "airpose" else "baseline_ckpt")
-    model, _, _ = load_network(tiny_ckpt)
+    model, _, _ = load_sized_network(tiny_ckpt)
     seq = load_sequence(smoke_root, frames=range(4), detectors=("openpose",), ground_truth=False)
     pred = predict_sequence(model, seq, batch_size=3, provenance={"checkpoint": str(tiny_ckpt)})
     F, V = 4, 2
@@ -390,11 +390,11 @@ def test_finetune_freezes_backbone_and_lowers_the_2d_loss(tiny_ckpt, smoke_root,
     assert res.final["j2d"] < 0.5 * res.initial["j2d"]
     assert res.keypoints["kept"] > 0 and res.keypoints["disagree"] + res.keypoints["unconfirmed"] > 0
     model, cfg = load_trained_model(res.checkpoint)  # the kit checkpoint format
-    assert cfg.variant == "airpose" and load_network(res.checkpoint)[2] == S
+    assert cfg.variant == "airpose" and load_sized_network(res.checkpoint)[2] == S
     net = load_checkpoint(res.checkpoint)["network"]  # the record of what rebuilds the network
     assert (net["variant"], net["backbone"], net["input_size"], net["camera_rule"]) == ("airpose", "resnet18", S,
                                                                                          "virtual_crop")
-    np.testing.assert_allclose(net["camera_K"], load_network(tiny_ckpt)[0].camera_K)
+    np.testing.assert_allclose(net["camera_K"], load_sized_network(tiny_ckpt)[0].camera_K)
     assert [int(r["step"]) for r in read_log(tmp_path / "ft" / "log.csv")] == list(range(1, 9))
     assert res.history["step"] == list(range(1, 9)) and len(res.history["j2d"]) == 8
 
@@ -603,7 +603,7 @@ def test_model_selection_never_reads_the_test_person(tiny_ckpt, smoke_root, tmp_
     from airpose_lib.finetune.predict import sequence_features
     from airpose_lib.train import load_checkpoint
 
-    model, _, _ = load_network(tiny_ckpt)
+    model, _, _ = load_sized_network(tiny_ckpt)
     test = load_sequence(smoke_root, frames=range(40, 46), detectors=("openpose",))
     feats = sequence_features(model, test, input_size=S)
     nan = types.SimpleNamespace(root=test.root, K=test.K, num_views=test.num_views, image=test.image,
@@ -627,7 +627,7 @@ def test_model_selection_never_reads_the_test_person(tiny_ckpt, smoke_root, tmp_
         wa, wb = load_checkpoint(getattr(a, which))["model"], load_checkpoint(getattr(b, which))["model"]
         assert all(torch.equal(wa[k], wb[k]) for k in wa), which
     best = load_checkpoint(a.best_checkpoint)
-    assert best["step"] == a.best_step and load_network(a.best_checkpoint)[2] == S
+    assert best["step"] == a.best_step and load_sized_network(a.best_checkpoint)[2] == S
     assert (tmp_path / "real" / "selection.csv").is_file()
 
 

@@ -46,11 +46,7 @@ ALLOWED: dict[str, set[str]] = {
 }
 
 # Circles that are real recursion, each broken by a commented import inside a function.
-ACCEPTED_MODULE_CYCLES: dict[frozenset[str], str] = {
-    # pretraining is a run of the training loop, and the loop starts a variant from the profile's
-    # pretrained backbone, which it pretrains on demand
-    frozenset({"airpose_lib.train.loop", "airpose_lib.train.pretrain"}): "pretraining <-> training loop",
-}
+ACCEPTED_MODULE_CYCLES: dict[frozenset[str], str] = {}
 
 
 def _package_of(module: str) -> str | None:

@@ -81,7 +81,8 @@ def test_missing_checkpoint_names_the_folder_and_the_manifest(tmp_path):
 def test_training_config_switches_to_the_official_dataset(official_assets):
     from airpose_lib.data.official_synthetic import OfficialSyntheticDataset
     from airpose_lib.train.config import load_train_config
-    from airpose_lib.train.loop import default_dataset_factory, prepare_data
+    from airpose_lib.train.loop import default_dataset_factory
+    from airpose_lib.train.run import prepare_data
 
     data, _, _ = official_assets
     cfg = load_train_config("smoke", "airpose", task="supervised", pretrained=None)  # end to end on the images

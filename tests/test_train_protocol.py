@@ -181,7 +181,7 @@ def test_a_second_pretraining_stage_starts_from_the_first(tmp_path, monkeypatch,
     its backbone; the later key depends on the earlier one; a second call trains nothing."""
     import yaml
 
-    import airpose_lib.train.loop as loop
+    import airpose_lib.train.pretrain as pretrain
     from airpose_lib.data.generate import GenerationConfig, generate_still_dataset
     from airpose_lib.data.manifest import load_manifest
     from airpose_lib.train.features import load_backbone_file
@@ -219,7 +219,7 @@ def test_a_second_pretraining_stage_starts_from_the_first(tmp_path, monkeypatch,
     assert 0 < step < 0.01  # one Adam step of lr 1e-3 (fp16 file) from the first stage's weights
     assert float((fresh.conv1.weight.detach() - w1).abs().max()) > 10 * step
 
-    monkeypatch.setattr(loop, "train", lambda *a, **k: pytest.fail("trained again"))
+    monkeypatch.setattr(pretrain, "start_training", lambda *a, **k: pytest.fail("trained again"))
     assert ensure_backbone(str(profile), root, fp, out_root=tmp_path / "runs") == path
 
 
@@ -309,7 +309,9 @@ def test_regressor_with_its_last_backbone_block_trainable(tmp_path, monkeypatch,
         on_crops = loop.forward_loss(model, loss_fn, ib)["total"]
     assert float(on_feats) == pytest.approx(float(on_crops), rel=1e-4)
 
-    result = loop.train("airpose", config=cfg, out_dir=tmp_path / "run", resume=False)
+    from airpose_lib.train import train
+
+    result = train("airpose", config=cfg, out_dir=tmp_path / "run", resume=False)
     state = torch.load(result.checkpoint, map_location="cpu", weights_only=False)["model"]
     start = model.state_dict()
     moved = lambda k: not torch.equal(state[k], start[k])  # noqa: E731

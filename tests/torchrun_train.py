@@ -1,7 +1,7 @@
 """One process of the torchrun test (tests/test_torchrun.py): ``python -m torch.distributed.run
 --nproc_per_node=N tests/torchrun_train.py OUT STEPS [BATCH]`` trains test_train_loop's tiny
 configuration on its fake still frames; rank, world size and the process group come from torchrun's
-environment (airpose_lib.train.loop.train), nothing else tells this script it is distributed."""
+environment (airpose_lib.train.run.train), nothing else tells this script it is distributed."""
 import sys
 
 from test_train_loop import FAKES, tiny_config  # this file's folder is sys.path[0]

@@ -97,12 +97,12 @@ def add_finetune(sub) -> None:
 # -- predict --------------------------------------------------------------------------------------
 def _cmd_predict(args: argparse.Namespace) -> int:
     from airpose_lib.data.official_layout import load_sequence
-    from airpose_lib.finetune.network import load_network
+    from airpose_lib.finetune.network import load_sized_network
     from airpose_lib.finetune.predict import frames_in_range, predict_sequence, save_predictions
 
     require_file(args.checkpoint, "--checkpoint", "a checkpoint of `airpose train` or `airpose finetune`")
     require_folder(args.sequence, "--sequence", SEQUENCE_FOLDER)
-    model, cfg, size = load_network(args.checkpoint, args.device, args.input_size)
+    model, cfg, size = load_sized_network(args.checkpoint, args.device, args.input_size)
     if args.threads:
         import torch
 

@@ -15,6 +15,7 @@ from .checkpoint import (
     load_checkpoint,
     restore_rng_state,
     save_checkpoint,
+    write_checkpoint,
 )
 from .logger import RunLogger, read_log
 from .loop import EngineResult, EngineRun, Schedule, TrainingTask, process_rank, run_engine, run_folder
@@ -22,5 +23,5 @@ from .loop import EngineResult, EngineRun, Schedule, TrainingTask, process_rank,
 __all__ = [
     "run_engine", "run_folder", "process_rank", "Schedule", "TrainingTask", "EngineRun", "EngineResult",
     "AFRESH_HINT", "FORMAT_VERSION", "StaleRunError", "kit_version", "capture_rng_state", "restore_rng_state",
-    "save_checkpoint", "load_checkpoint", "checkpoint_dir", "last_checkpoint", "RunLogger", "read_log",
+    "save_checkpoint", "write_checkpoint", "load_checkpoint", "checkpoint_dir", "last_checkpoint", "RunLogger", "read_log",
 ]

@@ -29,7 +29,7 @@ import torch
 
 from airpose_lib import __version__  # the package root holds only the version
 from airpose_lib.atomic import atomic_path
-from airpose_lib.errors import UserError, reading
+from airpose_lib.errors import DamagedFileError, UserError, reading
 
 __all__ = [
     "StaleRunError",
@@ -37,6 +37,7 @@ __all__ = [
     "kit_version",
     "capture_rng_state",
     "restore_rng_state",
+    "write_checkpoint",
     "save_checkpoint",
     "load_checkpoint",
     "checkpoint_dir",
@@ -114,20 +115,31 @@ def last_checkpoint(out_dir: str | Path) -> Path | None:
     return p if p.is_file() else None
 
 
+def write_checkpoint(path: str | Path, state: dict[str, Any]) -> Path:
+    """Write ``state`` with the format's ``format_version`` and ``kit_version`` in front as one
+    checkpoint file ``path`` (atomically): every kit checkpoint is written here (the engine's
+    ``last.pt`` and ``step_<n>.pt``, fine-tuning's ``best.pt``, converted official weights).
+
+    Returns:
+        ``path``.
+    """
+    path = Path(path)
+    with atomic_path(path) as tmp:
+        torch.save({"format_version": FORMAT_VERSION, "kit_version": kit_version(), **state}, tmp)
+    return path
+
+
 def save_checkpoint(out_dir: str | Path, state: dict[str, Any], keep: int = 2) -> Path:
-    """Write ``state`` as ``last.pt`` and ``step_<step>.pt`` (atomically), prune old step files.
+    """Write ``state`` as ``last.pt`` and ``step_<step>.pt`` (:func:`write_checkpoint`), prune old
+    step files.
 
     Returns:
         the path of ``last.pt``.
     """
     folder = checkpoint_dir(out_dir)
-    state = {"format_version": FORMAT_VERSION, "kit_version": kit_version(), **state}
-    last = folder / "last.pt"
-    with atomic_path(last) as tmp:
-        torch.save(state, tmp)
+    last = write_checkpoint(folder / "last.pt", state)
     if keep > 0:
-        with atomic_path(folder / f"step_{state['step']:08d}.pt") as tmp:
-            torch.save(state, tmp)
+        write_checkpoint(folder / f"step_{state['step']:08d}.pt", state)
         numbered = sorted(folder.glob("step_*.pt"))
         for old in numbered[:-keep]:
             old.unlink(missing_ok=True)
@@ -139,6 +151,9 @@ def load_checkpoint(path: str | Path, map_location: str | torch.device = "cpu") 
     with reading(path, "a checkpoint of `airpose train` or `airpose finetune`",
                  "use another checkpoint (e.g. the newest checkpoints/step_*.pt) or train again"):
         state = torch.load(Path(path), map_location=map_location, weights_only=True)
-    if state.get("format_version") != FORMAT_VERSION:
-        raise ValueError(f"{path}: unsupported checkpoint format {state.get('format_version')!r}")
+    if not isinstance(state, dict) or state.get("format_version") != FORMAT_VERSION:
+        found = state.get("format_version") if isinstance(state, dict) else type(state).__name__
+        raise DamagedFileError(path, "a checkpoint of `airpose train` or `airpose finetune`",
+                               f"its format is {found!r}, this kit reads {FORMAT_VERSION}; use a checkpoint of "
+                               "this kit version or train again")
     return state

@@ -289,7 +289,7 @@ def paper_claims(table: pd.DataFrame, depth: pd.DataFrame, *, tuning: str = "per
         table: :func:`recording_table` rows of every person (``sequence``, ``method``, ``mpjpe_m``,
             ``rel_t_err_m``, ``rel_rot_deg``); may be empty (no ground truth).
         depth: ``sequence, method, view, dz_per_frame_m`` and, with ground truth, ``z_err_m``
-            (``experiments.recordings.depth_summary``) with methods ``airpose`` and ``spin``.
+            (``experiments.recording_tables.depth_summary``) with methods ``airpose`` and ``spin``.
         tuning, test: the fine-tuning and the test person (the paper's person 1 and 2).
 
     Returns:

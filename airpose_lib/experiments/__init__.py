@@ -2,7 +2,8 @@
 
 - :mod:`.recordings`: the paper's real-data section on two-drone recordings: networks of Table I,
   fine-tuning on person 1, estimates on both persons, AirPose+, and the error tables against the
-  ground truth of the kit's generated recordings (notebooks 03, 04, 05).
+  ground truth of the kit's generated recordings (notebooks 03, 04, 05); :mod:`.recording_tables`:
+  the tables and figure inputs those notebooks show of it.
 - :mod:`.ablation`: Table I, the variants trained (or the official checkpoints) and evaluated,
   the oracle, the claims, the results bundle and the qualitative samples (notebook 02).
 - :mod:`.online`: drone fleets over a recording, online = offline, faults, float16 (notebook 06).

@@ -1,4 +1,5 @@
-"""A trained network, the crop size and the camera it expects, from a kit training checkpoint.
+"""A trained network, the crop size and the camera it expects, from a kit training checkpoint
+(:func:`airpose_lib.train.evaluate.load_network`, with the crop size a caller may give).
 
 The checkpoint's network record (:mod:`airpose_lib.model.record`) says both; for checkpoints
 written before it, :func:`airpose_lib.data.training_input.training_input` reconstructs them from
@@ -13,16 +14,15 @@ from typing import Any
 import torch
 from torch import nn
 
-from airpose_lib.data.training_input import training_input
-from airpose_lib.model.record import read_network
-from airpose_lib.engine.checkpoint import load_checkpoint
-from airpose_lib.train.evaluate import load_trained_model
+from airpose_lib.errors import ConfigError
+from airpose_lib.train.config import TrainConfig
+from airpose_lib.train.evaluate import load_network
 
-__all__ = ["load_network"]
+__all__ = ["load_sized_network"]
 
 
-def load_network(checkpoint: str | Path, device: str | torch.device = "cpu",
-                 input_size: int | None = None) -> tuple[nn.Module, Any, int]:
+def load_sized_network(checkpoint: str | Path, device: str | torch.device = "cpu",
+                       input_size: int | None = None) -> tuple[nn.Module, Any, int]:
     """The network of a kit checkpoint (training or fine-tuning), in eval mode.
 
     Args:
@@ -40,12 +40,11 @@ def load_network(checkpoint: str | Path, device: str | torch.device = "cpu",
     path = Path(checkpoint)
     if not path.is_file():
         raise FileNotFoundError(f"no checkpoint at {path}")
-    record = read_network(load_checkpoint(path), legacy=training_input)
+    model, record, state = load_network(path, device)  # the file, read once
     size = input_size if input_size is not None else record.input_size
     if size is None:
-        raise ValueError(f"{path}: the checkpoint does not record its crop size (no network record, input_size, "
-                         "config.data crop_size, dataset manifest or profile); pass input_size")
-    model, cfg = load_trained_model(path, device)
+        raise ConfigError(f"{path}: the checkpoint does not record its crop size (no network record, input_size, "
+                          "config.data crop_size, dataset manifest or profile); pass --input-size (input_size=)")
     model.input_size = int(size)
     model.camera_K = record.camera_K
-    return model, cfg, int(size)
+    return model, TrainConfig(**state["config"]), int(size)

@@ -8,7 +8,7 @@ exchange their messages, as :meth:`AirPoseNet.forward`), and returns camera-fram
 view (:func:`airpose_lib.model.to_smplx_params`).
 
 Any camera: the crops and P are formed in the network's virtual camera ``K_net`` (the camera it
-was trained with, ``model.camera_K`` from :func:`~airpose_lib.finetune.network.load_network`,
+was trained with, ``model.camera_K`` from :func:`~airpose_lib.finetune.network.load_sized_network`,
 else ``runtime.source.network_camera()``: f = 1475 px at 1920x1080), see
 ``geometry.virtual_crop``. The network's translation is then already in the real camera's frame;
 a weak camera is converted with ``K_net`` (the camera its P refers to). The provenance records
@@ -214,7 +214,7 @@ def _positions(sequence, frames) -> np.ndarray:
 
 def network_camera_of(model: nn.Module, K_net=None) -> np.ndarray:
     """``(3, 3)`` virtual camera of a network: ``K_net`` if given, else ``model.camera_K`` (set by
-    ``load_network``), else ``runtime.source.network_camera()``."""
+    ``load_sized_network``), else ``runtime.source.network_camera()``."""
     if K_net is None:
         K_net = getattr(model, "camera_K", None)
     return np.asarray(network_camera() if K_net is None else K_net, np.float64).reshape(3, 3)
@@ -246,7 +246,7 @@ def _resolve_input_size(model: nn.Module, input_size: int | None) -> int:
     size = input_size if input_size is not None else getattr(model, "input_size", None)
     if size is None:
         raise ValueError("input_size unknown: pass the crop size the network was trained with "
-                         "(airpose_lib.finetune.load_network returns it from a checkpoint)")
+                         "(airpose_lib.finetune.load_sized_network returns it from a checkpoint)")
     return int(size)
 
 

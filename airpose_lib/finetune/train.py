@@ -45,7 +45,7 @@ from its last checkpoint ends with exactly the weights of an uninterrupted one (
 thread count). The caller's RNG states and torch thread count are restored on return.
 
 Output folder: ``checkpoints/last.pt`` (+ ``step_<n>.pt``) in the kit checkpoint format (read by
-``airpose_lib.train.load_trained_model`` and :func:`~airpose_lib.finetune.network.load_network`;
+``airpose_lib.train.load_trained_model`` and :func:`~airpose_lib.finetune.network.load_sized_network`;
 the base ``config`` is kept and a ``finetune`` entry records this run), ``log.csv``,
 ``config.json``, ``result.json``, ``selection.csv`` (loss terms, held-out and training, and
 diagnostics per checkpoint, ``checkpoints/best.pt`` the selected one) and the feature cache.
@@ -71,19 +71,18 @@ from airpose_lib.config_fields import ConfigError, check_fields, config_from, fi
 from airpose_lib.data.official_layout import load_sequence
 from airpose_lib.engine import (
     AFRESH_HINT,
-    FORMAT_VERSION as CHECKPOINT_FORMAT,
     EngineRun,
     Schedule,
     StaleRunError,
     TrainingTask,
     capture_rng_state,
     checkpoint_dir,
-    kit_version,
     last_checkpoint,
     load_checkpoint,
     read_log,
     restore_rng_state,
     run_engine,
+    write_checkpoint,
 )
 from airpose_lib.engine.launch import resolve_device
 from airpose_lib.errors import DamagedFileError
@@ -97,7 +96,7 @@ from airpose_lib.train.sampling import epoch_permutation, seed_everything
 from .keypoints import (agreement_masks, agreement_summary, kept_targets, pixel_settings, resolution_scales,
                         true_targets)
 from .loss import FineTuneLoss, finetune_loss_config
-from .network import load_network
+from .network import load_sized_network
 from .predict import frames_in_range, image_sizes, regress_features, sequence_features
 from .selection import SELECTION_RULES, select_step
 
@@ -454,7 +453,7 @@ def finetune_done(out_dir: str | Path, checkpoint: str | Path, cfg: FineTuneConf
         state = load_checkpoint(last) if last is not None else None
         if state is None or int(state["step"]) < cfg.steps:
             return False
-        model, _, _ = load_network(checkpoint)
+        model, _, _ = load_sized_network(checkpoint)
         _check_resume(state["finetune"], cfg, _tensor_digest(model.state_dict()))
     except (OSError, ValueError, KeyError, RuntimeError):  # StaleRunError is a ValueError
         return False
@@ -588,9 +587,7 @@ class _FineTuneTask(TrainingTask):
         rows = [r for r in self.selection["rows"] if r["step"] != run.step] + [row]
         choice = select_step(rows, self.cfg.selection, self.terms)
         if choice.step == run.step:
-            with atomic_path(self.best_path) as tmp:
-                torch.save({"format_version": CHECKPOINT_FORMAT, "kit_version": kit_version(),
-                            **run.checkpoint_state()}, tmp)
+            write_checkpoint(self.best_path, run.checkpoint_state())
         chosen = next(r for r in rows if r["step"] == choice.step)
         self.selection.update(best_step=choice.step, best_heldout_j2d=chosen["heldout_j2d"],
                               overfit_step=choice.overfit_step, overfit_terms=choice.overfit_terms)
@@ -617,7 +614,7 @@ def _read_inputs(checkpoint: Path, root: Path, cfg: FineTuneConfig) -> tuple:
     """
     device = resolve_device(cfg.device)
     seed_everything(cfg.seed)  # first, as before the split: the network's build draws from it
-    model, train_cfg, input_size = load_network(checkpoint, device, cfg.input_size)
+    model, train_cfg, input_size = load_sized_network(checkpoint, device, cfg.input_size)
     seq = _load_frames(root, cfg)
     scales = resolution_scales(image_sizes(seq), cfg.reference_width)  # (V,)
     threshold = cfg.threshold_px * scales

@@ -16,7 +16,8 @@ Every training and fine-tuning checkpoint holds ``state["network"]`` (plain type
 ``camera_K``       ``(3, 3)`` intrinsics ``K_net`` of the training camera, nested lists
 =================  ===============================================================================
 
-:func:`read_network` reads it back. Checkpoints written before the record (the kit's earlier
+:func:`read_network` reads it back; :func:`network_from_checkpoint` makes the network of a
+checkpoint (every loader: ``train.evaluate.load_network``, the drones' ``runtime.backends``). Checkpoints written before the record (the kit's earlier
 runs, tests' fixtures) hold only the training config and, from fine-tuning, ``input_size`` and
 ``camera_K``; for them the caller passes ``legacy``, which reconstructs the crop size and camera
 from the config's data (``data.training_input.training_input``: the data settings, the dataset's
@@ -29,8 +30,12 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+from torch import nn
 
-__all__ = ["NETWORK_KEY", "NORMALISATIONS", "CAMERA_RULES", "NetworkRecord", "network_record", "read_network"]
+from .variants import build_model
+
+__all__ = ["NETWORK_KEY", "NORMALISATIONS", "CAMERA_RULES", "NetworkRecord", "network_record", "read_network",
+           "network_from_checkpoint"]
 
 #: Key of the record in a checkpoint dict.
 NETWORK_KEY = "network"
@@ -108,3 +113,22 @@ def read_network(state: Mapping[str, Any], legacy: LegacyInput | None = None) ->
     return NetworkRecord(variant=cfg.get("variant", "airpose"), backbone=cfg.get("backbone", "resnet50"),
                          model=dict(cfg.get("model") or {}), input_size=None if size is None else int(size),
                          camera_K=K)
+
+
+def network_from_checkpoint(state: Mapping[str, Any], legacy: LegacyInput | None = None
+                            ) -> tuple[nn.Module, NetworkRecord]:
+    """The network of a loaded checkpoint dict, with its weights (CPU, eval mode), and its record.
+
+    Args:
+        state: a checkpoint of ``airpose train`` or ``airpose finetune`` (``torch.load``-ed): its
+            record (or, before the record, its config) gives ``build_model``'s arguments,
+            ``state["model"]`` the weights.
+        legacy: as for :func:`read_network`.
+
+    Returns:
+        ``(model, record)``.
+    """
+    record = read_network(state, legacy)
+    model = build_model(record.variant, backbone=record.backbone, **record.model)
+    model.load_state_dict(state["model"])
+    return model.eval(), record

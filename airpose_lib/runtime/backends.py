@@ -197,15 +197,16 @@ class BackendSpec:
 _CKPT_FIX = "give another --checkpoint (e.g. the newest checkpoints/step_*.pt of the run)"
 
 
-def checkpoint_settings(path: str | Path) -> dict:
-    """Network settings of a training or fine-tuning checkpoint (its network record,
-    :func:`airpose_lib.model.record.read_network`): ``variant``, ``backbone``, ``model`` (extra
-    ``build_model`` kwargs) and ``input_size`` (the crop size) when known; empty for a bare
-    ``state_dict``."""
-    import torch
+def _read_checkpoint(path: str | Path):
+    """The loaded file of a ``--checkpoint`` (a checkpoint dict or a bare ``state_dict``)."""
+    import torch  # lazy: a fake drone starts without torch
 
     with reading(path, "a model checkpoint (a state_dict or a checkpoint of `airpose train`)", _CKPT_FIX):
-        state = torch.load(path, map_location="cpu", weights_only=True)
+        return torch.load(path, map_location="cpu", weights_only=True)
+
+
+def _state_settings(state) -> dict:
+    """:func:`checkpoint_settings` of a loaded file."""
     if not isinstance(state, dict) or not isinstance(state.get("config"), dict):
         return {}
     # lazy: only a drone with a checkpoint needs the data readers (a drone's start-up stays short)
@@ -219,10 +220,18 @@ def checkpoint_settings(path: str | Path) -> dict:
     return out
 
 
+def checkpoint_settings(path: str | Path) -> dict:
+    """Network settings of a training or fine-tuning checkpoint (its network record,
+    :func:`airpose_lib.model.record.read_network`): ``variant``, ``backbone``, ``model`` (extra
+    ``build_model`` kwargs) and ``input_size`` (the crop size) when known; empty for a bare
+    ``state_dict``."""
+    return _state_settings(_read_checkpoint(path))
+
+
 def build_torch_model(spec: BackendSpec):
     """The torch :class:`~airpose_lib.model.AirPoseNet` of ``spec`` (eval mode): random weights
-    from ``spec.seed``, or the checkpoint's (a training checkpoint's own variant and backbone win
-    over the spec's)."""
+    from ``spec.seed``, or the checkpoint's, read once (a training checkpoint's own variant and
+    backbone win over the spec's: :func:`airpose_lib.model.record.network_from_checkpoint`)."""
     import torch  # lazy, with the model: a fake drone starts without torch
 
     from airpose_lib.model import build_model
@@ -230,12 +239,16 @@ def build_torch_model(spec: BackendSpec):
     torch.manual_seed(spec.seed)  # identical random weights in every drone process
     if not spec.checkpoint:
         return build_model(spec.variant, spec.backbone).eval()
-    settings = checkpoint_settings(spec.checkpoint)
+    state = _read_checkpoint(spec.checkpoint)
+    settings = _state_settings(state)
+    if settings and isinstance(state.get("model"), dict):  # a kit checkpoint: the one loader
+        from airpose_lib.data.training_input import training_input
+        from airpose_lib.model.record import network_from_checkpoint
+
+        return network_from_checkpoint(state, legacy=training_input)[0]
     model = build_model(settings.get("variant", spec.variant), settings.get("backbone", spec.backbone),
                         **settings.get("model", {}))
-    with reading(spec.checkpoint, "a model checkpoint", _CKPT_FIX):
-        state = torch.load(spec.checkpoint, map_location="cpu", weights_only=True)
-    for key in ("model", "state_dict"):
+    for key in ("model", "state_dict"):  # a state_dict wrapped in a dict
         if isinstance(state, dict) and key in state and isinstance(state[key], dict):
             state = state[key]
     model.load_state_dict(state)

@@ -14,12 +14,11 @@ from .loop import (
     default_loss_factory,
     default_model_factory,
     default_out_dir,
-    prepare_data,
     forward_loss,
     run_training,
-    train,
     validation_loss,
 )
+from .run import prepare_data, train
 from .sampling import ResumableBatchSampler, SeededDataset, epoch_permutation, sample_seed, seed_everything
 
 __all__ = [

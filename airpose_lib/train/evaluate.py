@@ -26,12 +26,15 @@ from airpose_lib.engine.checkpoint import load_checkpoint
 from airpose_lib.engine.launch import resolve_device
 from airpose_lib.eval import per_joint_table, per_view_table, relative_camera_table
 from airpose_lib.geometry import axis_angle_to_matrix
-from airpose_lib.model import build_model, to_smplx_params
+from airpose_lib.data.training_input import training_input
+from airpose_lib.model import to_smplx_params
+from airpose_lib.model.record import NetworkRecord, network_from_checkpoint
 
 from .config import TrainConfig
-from .loop import default_dataset_factory, prepare_data
+from .loop import default_dataset_factory
+from .run import prepare_data
 
-__all__ = ["predict", "evaluate", "load_trained_model", "evaluate_checkpoint"]
+__all__ = ["predict", "evaluate", "load_network", "load_trained_model", "evaluate_checkpoint"]
 
 
 @torch.no_grad()
@@ -105,15 +108,33 @@ def evaluate(model: nn.Module, dataset, method: str = "", **predict_kwargs) -> d
     return tables
 
 
-def load_trained_model(checkpoint: str | Path, device: str | torch.device = "cpu") -> tuple[nn.Module, TrainConfig]:
-    """The network of a training checkpoint (built with ``airpose_lib.model.build_model``) on
-    ``device`` (``auto``, ``cpu``, ``cuda``, ``cuda:N``: :func:`airpose_lib.engine.launch.resolve_device`)."""
+def load_network(checkpoint: str | Path, device: str | torch.device = "cpu") -> tuple[nn.Module, NetworkRecord, dict]:
+    """The network of a kit checkpoint (training or fine-tuning), its network record and the
+    checkpoint, from one read of the file.
+
+    Args:
+        checkpoint: a ``checkpoints/*.pt`` of ``airpose train`` or ``airpose finetune`` (or a
+            converted official file, ``train.official.save_kit_checkpoint``).
+        device: ``auto``, ``cpu``, ``cuda``, ``cuda:N`` (:func:`airpose_lib.engine.launch.resolve_device`).
+
+    Returns:
+        ``(model, record, state)``: the network in eval mode on ``device``
+        (:func:`airpose_lib.model.record.network_from_checkpoint`), its
+        :class:`~airpose_lib.model.record.NetworkRecord` (old checkpoints: crop size and camera
+        from their data, :func:`airpose_lib.data.training_input.training_input`) and the loaded
+        checkpoint dict (``config``, ``step``, ...).
+    """
     device = resolve_device(str(device))
     state = load_checkpoint(checkpoint)
-    cfg = TrainConfig(**state["config"])
-    model = build_model(cfg.variant, backbone=cfg.backbone, **cfg.model)
-    model.load_state_dict(state["model"])
-    return model.to(device).eval(), cfg
+    model, record = network_from_checkpoint(state, legacy=training_input)
+    return model.to(device).eval(), record, state
+
+
+def load_trained_model(checkpoint: str | Path, device: str | torch.device = "cpu") -> tuple[nn.Module, TrainConfig]:
+    """The network of a training checkpoint (:func:`load_network`) on ``device`` and its
+    :class:`TrainConfig`."""
+    model, _, state = load_network(checkpoint, device)
+    return model, TrainConfig(**state["config"])
 
 
 def evaluate_checkpoint(checkpoint: str | Path, split: str = "test", method: str | None = None,

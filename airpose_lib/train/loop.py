@@ -1,6 +1,7 @@
 """The still-frame trainings of every variant: deterministic, resumable, single process or DDP.
 
-``train(variant, profile, seed, out_dir, resume=True)`` builds the model
+``train(variant, profile, seed, out_dir, resume=True)`` (:mod:`airpose_lib.train.run`: the
+prerequisites first, then :func:`start_training` here) builds the model
 (``airpose_lib.model.build_model``), the still-frame datasets (``airpose_lib.data``) and the
 supervised loss of the variant (``airpose_lib.losses``), and optimises with Adam (AMSGrad) in the
 kit's one training loop (:func:`airpose_lib.engine.run_engine`); :class:`StillFrameTask` is its
@@ -21,12 +22,13 @@ its rank, local rank (its GPU, ``cuda:<LOCAL_RANK>``) and the world size from th
 (:func:`airpose_lib.engine.launch.launch_env`); ``world_size > 1`` without torchrun spawns that
 many processes on this machine (``torch.multiprocessing``). ``gloo`` on CPU, ``nccl`` on CUDA.
 
-The prerequisites (the dataset, the pretrained backbone, the feature caches) are resolved before
-the process group exists, each process alone (:func:`airpose_lib.engine.launch.single_process`)
-and one after the other (a file lock in the run folder): the first builds what is missing, a
-nested pretraining included, the others find it made. Several nodes therefore need the run folder
-and the cache on a shared file system (or the prerequisites made beforehand: ``airpose
-pretrain``). Rank 0 is the run folder's one writer (lock, checkpoints, log).
+The prerequisites (the dataset, the pretrained backbone, the feature caches) are resolved by
+:func:`airpose_lib.train.run.train` before the loop starts and before the process group exists,
+each process alone (:func:`airpose_lib.engine.launch.single_process`) and one after the other (a
+file lock in the run folder): the first builds what is missing, a nested pretraining included, the
+others find it made. Several nodes therefore need the run folder and the cache on a shared file
+system (or the prerequisites made beforehand: ``airpose pretrain``). Rank 0 is the run folder's
+one writer (lock, checkpoints, log).
 
 The global batch B is split over the W processes in contiguous slices whose sizes differ by at
 most one (:func:`airpose_lib.train.sampling.share_bounds`: 30 over 4 GPUs is 8, 8, 7, 7), and
@@ -61,16 +63,13 @@ import torch.distributed as dist
 from torch import nn
 from torch.utils.data import DataLoader
 
-from airpose_lib.assets import locate
 from airpose_lib.data.dataset import StillFrameDataset
-from airpose_lib.data.generate import ensure_still_dataset
-from airpose_lib.data.manifest import load_manifest, verify_dataset
+from airpose_lib.data.manifest import verify_dataset
 from airpose_lib.data.official_synthetic import OfficialSyntheticDataset
 from airpose_lib.data.training_input import training_input
 from airpose_lib.engine import EngineRun, Schedule, StaleRunError, TrainingTask, process_rank, run_engine, run_folder
-from airpose_lib.engine.launch import check_precision, launch_env, resolve_device, single_process
+from airpose_lib.engine.launch import check_precision, launch_env, resolve_device
 from airpose_lib.errors import ConfigError
-from airpose_lib.folder_lock import file_lock
 from airpose_lib.losses import SupervisedLoss, loss_config
 from airpose_lib.losses.pretrain import PretrainLoss, PretrainLossConfig
 from airpose_lib.model import build_model, to_smplx_params
@@ -78,18 +77,17 @@ from airpose_lib.model.pretrain import PretrainNet
 from airpose_lib.model.record import NETWORK_KEY, network_record
 from airpose_lib.paths import run_path
 
-from .config import TrainConfig, load_train_config
+from .config import TrainConfig
 from .features import FeatureDataset, ensure_features, load_backbone_file
 from .sampling import ResumableBatchSampler, SeededDataset, _mix, seed_everything, worker_init_fn
 
 __all__ = [
     "TrainResult",
-    "train",
+    "start_training",
     "run_training",
     "default_out_dir",
     "default_model_factory",
     "default_dataset_factory",
-    "prepare_data",
     "default_loss_factory",
     "forward_loss",
     "regressor_forward_loss",
@@ -134,52 +132,6 @@ def check_data_root(cfg: TrainConfig) -> None:
     Raises :class:`~airpose_lib.data.manifest.DatasetError` (a damaged shard: ``ShardIntegrityError``)."""
     if cfg.data.get("root") is not None and cfg.data.get("source", "generated") == "generated":
         verify_dataset(Path(cfg.data["root"]))
-
-
-def prepare_data(cfg: TrainConfig, progress: bool | None = None, device: str | torch.device = "cpu"
-                 ) -> TrainConfig:
-    """Resolve the dataset folder: ``cfg.data["root"]``, or the ``data: still:`` dataset of
-    ``cfg.data["profile"]`` / ``cfg.profile``, generated (``airpose_lib.data``) if missing; a
-    pretraining or feature cache it needs runs on ``device`` (the caller's: a checkpoint's
-    recorded device may not exist where it is evaluated).
-
-    Returns the config with ``data["root"]`` set. Called once by :func:`train` before any training
-    process opens the data.
-    """
-    data = dict(cfg.data)
-    if data.get("source", "generated") == "official_synthetic":
-        # The official release (data_manifests/official_synthetic.yaml): nothing to generate.
-        if data.get("root") is None:
-            data["root"] = str(locate("official_synthetic").path)
-        if cfg.body_source != "smplx":
-            raise ConfigError("training on the official synthetic data needs body_source='smplx' (its betas "
-                              "are SMPL-X v1.1 shape coefficients; see data_manifests/smplx_v1_1.yaml)")
-        return cfg.replace(data=data)
-    show = cfg.progress if progress is None else progress
-    if data.get("root") is None:
-        source = data.pop("profile", None) or cfg.profile
-        if source is None:
-            raise ConfigError("no still-frame dataset: set data.root, or train with a profile that has a "
-                              "`data: still:` section")
-
-        data["root"] = str(ensure_still_dataset(source, progress=show))
-    else:
-        check_data_root(cfg)
-    cfg = cfg.replace(data=data)
-    if cfg.pretrained == "profile":
-        # lazy: the pretraining module runs this engine itself
-        from .pretrain import ensure_backbone
-
-        fingerprint = load_manifest(Path(data["root"]))["fingerprint"]
-        cfg = cfg.replace(pretrained=str(ensure_backbone(cfg.profile, data["root"], fingerprint, progress=show,
-                                                         device=str(device))))
-    if cfg.task == "regressor":
-        if cfg.pretrained is None:
-            raise ConfigError("the regressor task trains on the features of a pretrained backbone: set pretrained")
-        for split in {cfg.train_split, cfg.val_split}:
-            ensure_features(cfg.pretrained, data["root"], split, progress=show, cut=cfg.trainable_from,
-                            device=device)
-    return cfg
 
 
 def default_dataset_factory(cfg: TrainConfig, split: str):
@@ -336,43 +288,23 @@ def default_out_dir(profile: str | Path | None, variant: str, seed: int) -> Path
 
 
 # -- entry point ----------------------------------------------------------------------------------
-def train(variant: str, profile: str | Path | None = "smoke", seed: int | None = None,
-          out_dir: str | Path | None = None, resume: bool = True, *, config: TrainConfig | None = None,
-          overrides: Mapping | None = None, model_factory: Callable | None = None,
-          dataset_factory: Callable | None = None, loss_factory: Callable | None = None,
-          stop_at: int | None = None) -> TrainResult:
-    """Train a variant with a profile's sizes.
-
-    Args:
-        variant: ``baseline``, ``multiview``, ``fullcam`` or ``airpose``.
-        profile: profile name or YAML path (its ``train:`` section); None: defaults only.
-        seed: overrides the profile's seed.
-        out_dir: run folder (default :func:`default_out_dir`): ``config.json``, ``log.csv``,
-            ``checkpoints/``, ``result.json``.
-        resume: continue from ``<out_dir>/checkpoints/last.pt`` if present; otherwise (or with
-            False) start afresh, deleting earlier checkpoints in ``out_dir``.
-        config: a ready :class:`TrainConfig` (then profile, seed and overrides are ignored).
-        overrides: TrainConfig fields, applied after the profile.
-        model_factory: ``cfg -> nn.Module`` (default :func:`default_model_factory`).
-        dataset_factory: ``(cfg, split) -> Dataset`` (default :func:`default_dataset_factory`).
-        loss_factory: ``cfg -> nn.Module`` (default :func:`default_loss_factory`).
-        stop_at: stop (with a checkpoint) once this step is reached, as if interrupted there;
-            a later call with ``resume=True`` continues to ``cfg.steps``.
+def start_training(cfg: TrainConfig, out: Path, resume: bool = True, *, model_factory: Callable | None = None,
+                   dataset_factory: Callable | None = None, loss_factory: Callable | None = None,
+                   stop_at: int | None = None) -> TrainResult:
+    """Train ``cfg``, whose prerequisites are resolved (:func:`airpose_lib.train.run.prepare_data`),
+    into ``out``: in this process, in torchrun's process group, or in ``cfg.world_size`` spawned
+    processes. The arguments are :func:`airpose_lib.train.run.train`'s.
 
     Returns:
         :class:`TrainResult`.
     """
-    cfg = config if config is not None else load_train_config(profile, variant, seed, **dict(overrides or {}))
-    out = Path(out_dir) if out_dir is not None else default_out_dir(profile, cfg.variant, cfg.seed)
     factories = (model_factory or default_model_factory, dataset_factory or default_dataset_factory,
                  loss_factory or default_loss_factory)
     launch = launch_env()
-    check_precision(cfg.precision, resolve_device(cfg.device, launch[1] if launch else 0))  # before any data
-    if launch is not None:  # torchrun: prerequisites alone, then join the process group
+    check_precision(cfg.precision, resolve_device(cfg.device, launch[1] if launch else 0))
+    if launch is not None:  # torchrun: join the process group
         rank, local_rank, world = launch
         cfg = cfg.replace(world_size=world)
-        if dataset_factory is None:
-            cfg = _prepare_alone(cfg, out, show=cfg.progress and rank == 0)
         if dist.is_initialized():
             return run_training(cfg, out, resume, *factories, stop_at=stop_at)
         device = resolve_device(cfg.device, local_rank)
@@ -383,20 +315,9 @@ def train(variant: str, profile: str | Path | None = "smoke", seed: int | None =
             return run_training(cfg, out, resume, *factories, stop_at=stop_at)
         finally:
             dist.destroy_process_group()
-    if dataset_factory is None:
-        cfg = prepare_data(cfg, device=resolve_device(cfg.device))
     if cfg.world_size > 1:
         return _spawn(cfg, out, resume, factories, stop_at)
     return run_training(cfg, out, resume, *factories, stop_at=stop_at)
-
-
-def _prepare_alone(cfg: TrainConfig, out: Path, show: bool) -> TrainConfig:
-    """:func:`prepare_data` in each torchrun process before the process group exists, one process
-    at a time (a waiting lock in the run folder): a nested pretraining runs in that one process
-    and no collective waits on it (see the module docstring)."""
-    device = resolve_device(cfg.device, launch_env()[1])
-    with single_process(), file_lock(Path(out) / ".prerequisites.lock"):
-        return prepare_data(cfg, progress=show, device=device)
 
 
 def _backend(cfg: TrainConfig, local_rank: int = 0) -> str:

@@ -11,11 +11,9 @@ import hashlib
 from pathlib import Path
 from typing import Any
 
-import torch
 
-from airpose_lib.atomic import atomic_path
 from airpose_lib.data.official_synthetic import OfficialSyntheticDataset
-from airpose_lib.engine.checkpoint import FORMAT_VERSION, kit_version
+from airpose_lib.engine.checkpoint import write_checkpoint
 from airpose_lib.model import AirPoseNet
 from airpose_lib.model.official import backbone_name, load_official_checkpoint
 
@@ -119,7 +117,7 @@ def official_ablation(checkpoints_root: str | Path, data_root: str | Path, varia
 def save_kit_checkpoint(model: AirPoseNet, path: str | Path, *, source: str | Path | None = None,
                         **config: Any) -> Path:
     """Write ``model`` (e.g. converted official weights) as a kit checkpoint (atomically) that
-    :func:`~.evaluate.load_trained_model` and :func:`~.checkpoint.load_checkpoint` read.
+    :func:`~.evaluate.load_network` reads (:func:`airpose_lib.engine.checkpoint.write_checkpoint`).
 
     It holds ``model``, ``step`` 0 and a ``config`` (``TrainConfig`` with the model's variant and
     backbone, ``steps=0``, plus ``config`` overrides), an empty optimiser state and no RNG state:
@@ -129,14 +127,10 @@ def save_kit_checkpoint(model: AirPoseNet, path: str | Path, *, source: str | Pa
     """
     cfg = TrainConfig(**{"variant": model.variant, "backbone": backbone_name(model), "steps": 0,
                          "model": {"num_iterations": model.num_iterations}, **config})
-    state = {"format_version": FORMAT_VERSION, "kit_version": kit_version(),
-             "model": {k: v.detach().cpu().contiguous().clone() for k, v in model.state_dict().items()},
+    state = {"model": {k: v.detach().cpu().contiguous().clone() for k, v in model.state_dict().items()},
              "optimizer": {}, "rng": [], "step": 0, "epoch": 0, "batch_in_epoch": 0, "world_size": 1,
              "config": cfg.to_dict()}
     if source is not None:
         src = Path(source)
         state["source"] = {"file": str(src), "sha256": hashlib.sha256(src.read_bytes()).hexdigest()}
-    path = Path(path)
-    with atomic_path(path) as tmp:
-        torch.save(state, tmp)
-    return path
+    return write_checkpoint(path, state)

@@ -4,7 +4,7 @@
 order, in the kit cache (``<cache>/backbones/<key>.pt``), in the repository's committed reference
 (``results/<profile>/pretrained_backbone.pt``, used when its recorded key matches and its SHA-256
 is the recorded one), and otherwise trained with the profile's ``pretrain:`` section by the one
-training engine (:func:`airpose_lib.train.loop.train`, task ``"pretrain"``;
+training engine (:func:`airpose_lib.train.loop.start_training`, task ``"pretrain"``;
 :mod:`airpose_lib.model.pretrain` has the network, :mod:`airpose_lib.losses.pretrain` the
 objective). The key hashes the ``pretrain:`` settings and the dataset's configuration fingerprint,
 so a change of either trains a new backbone.
@@ -47,6 +47,7 @@ from airpose_lib.paths import cache_dir, run_path
 from airpose_lib.profiles import profile_section
 
 from .config import TrainConfig, load_train_config
+from .loop import check_data_root, default_model_factory, start_training
 
 __all__ = ["PRETRAIN_VERSION", "pretrain_config", "pretrain_stages", "backbone_key", "stage_keys", "ensure_backbone",
            "profile_backbone", "profile_backbone_key", "export_backbone", "import_torchvision_backbone", "gate_metrics", "reference_backbone_path", "write_reference_backbone"]
@@ -298,8 +299,6 @@ def _train_stage(profile: str, cfg: TrainConfig, key: str, start: Path | None, o
                  progress: bool) -> Path:
     """Train one stage (from ``start``'s backbone, or from scratch) on its dataset (``cfg.data``),
     gate it on that dataset's test split, export it as ``key``."""
-    from .loop import train  # the engine imports this module for its "regressor" task
-
     target = cache_dir() / "backbones" / f"{key}.pt"
     target.parent.mkdir(parents=True, exist_ok=True)
     with file_lock(target.with_suffix(".lock")):
@@ -316,7 +315,9 @@ def _train_stage(profile: str, cfg: TrainConfig, key: str, start: Path | None, o
         # One process trains a backbone (the others, torchrun's ranks included, wait on the lock
         # above): a pretraining nested in a distributed training must not join its process group.
         with single_process():
-            run = train("pretrain", profile, out_dir=out / key, config=cfg.replace(progress=progress))
+            run_cfg = cfg.replace(progress=progress)
+            check_data_root(run_cfg)  # its data is made: the check that train.run.prepare_data does
+            run = start_training(run_cfg, out / key)
         wall = time.time() - t0
         model = _load_pretrain_model(run.checkpoint, cfg)
         gate = gate_metrics(model, StillFrameDataset(data_root, "test", augment=False),  # the whole test split
@@ -335,8 +336,6 @@ def _train_stage(profile: str, cfg: TrainConfig, key: str, start: Path | None, o
 
 
 def _load_pretrain_model(checkpoint: str | Path, cfg: TrainConfig) -> torch.nn.Module:
-    from .loop import default_model_factory  # lazy: a real circle, see train() above
-
     model = default_model_factory(cfg)
     model.load_state_dict(load_checkpoint(checkpoint)["model"])
     return model.eval()

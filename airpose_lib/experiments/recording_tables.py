@@ -1,0 +1,216 @@
+"""The tables and figure inputs that notebooks 03, 04 and 05 show of a recording experiment
+(:class:`~airpose_lib.experiments.recordings.RecordingExperiment`, which
+:mod:`airpose_lib.experiments.recordings` runs and caches): depth per method, AirPose+'s checks,
+the fine-tuning and selection logs, transfer to the test persons, the method comparisons, the
+paper's claims, mesh overlays, and a Markdown writer for the notebooks' reports.
+"""
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+
+from airpose_lib.body import load_body_model
+from airpose_lib.eval.recordings import compare_methods, paper_claims, recording_frame_table
+
+from .recordings import RecordingExperiment, body_vertices, scored_frames
+
+__all__ = ["depth_summary", "overlay_inputs", "airpose_plus_checks", "finetune_table", "selection_table",
+           "transfer_table", "COMPARISONS", "comparisons_table", "claims_table", "markdown_table"]
+
+
+def depth_summary(exp: RecordingExperiment, methods: dict[str, str]) -> pd.DataFrame:
+    """Depth (z of the person in each camera frame) per person, method and UAV.
+
+    Args:
+        exp: the experiment.
+        methods: label -> estimate name (e.g. ``{"SPIN-style": "Baseline (pre-trained)"}``).
+
+    Returns:
+        columns ``sequence, method, view, z_mean_m, z_err_m`` (mean |z error|, NaN without ground
+        truth), ``z_err_std_m`` and ``dz_per_frame_m`` (mean |z_t - z_{t-1}|: the smoothness the
+        paper's figure shows), and ``dz_per_frame_gt_m``.
+    """
+    rows = []
+    for person in exp.persons:
+        gt = exp.sequences[person].ground_truth
+        for label, name in methods.items():
+            z = exp.estimates[person][name]["tau"][..., 2]  # (F, V)
+            for v in range(z.shape[1]):
+                row = {"sequence": person, "method": label, "view": f"UAV{v + 1}",
+                       "z_mean_m": float(z[:, v].mean()),
+                       "dz_per_frame_m": float(np.abs(np.diff(z[:, v])).mean())}
+                if gt is not None:
+                    zg = gt["tau"][:, v, 2]
+                    row.update(z_err_m=float(np.abs(z[:, v] - zg).mean()),
+                               z_err_std_m=float(np.std(z[:, v] - zg)),
+                               dz_per_frame_gt_m=float(np.abs(np.diff(zg)).mean()))
+                rows.append(row)
+    return pd.DataFrame(rows)
+
+
+def overlay_inputs(exp: RecordingExperiment, person: str, methods, n_frames: int = 3):
+    """Frames, camera-frame vertices and zoom points for :func:`airpose_lib.viz.trajectories.plot_mesh_overlays`.
+
+    Frames are spread evenly over the recording (first and last excluded).
+
+    Returns:
+        ``images (n, V, H, W, 3)``, ``vertices {method: (n, V, N, 3)}``, ``faces (M, 3)``,
+        ``K (V, 3, 3)``, frame labels, ``zoom (n, V, J, 2)`` (the detections' confident joints).
+    """
+    seq = exp.sequences[person]
+    F, V = seq.num_frames, seq.num_views
+    idx = np.linspace(0, F - 1, n_frames + 2).round().astype(int)[1:-1]
+    images = np.stack([np.stack([seq.image(int(i), v) for v in range(V)]) for i in idx])
+    body = load_body_model("open", "neutral")
+    vertices = {m: np.stack([body_vertices(exp.estimates[person][m], body, idx, v) for v in range(V)], axis=1)
+                for m in methods}
+    kp = seq.keypoints["openpose"][idx].copy()  # (n, V, 25, 3)
+    zoom = np.where(kp[..., 2:3] > 0.2, kp[..., :2], np.nan)
+    for i in range(len(idx)):  # no confident joint: zoom on the first method's projected mesh
+        for v in range(V):
+            if np.all(np.isnan(zoom[i, v])):
+                vv = vertices[methods[0]][i, v]
+                uv = (vv @ seq.K[v].T)[:, :2] / vv[:, 2:3]
+                zoom[i, v, :2] = [uv.min(0), uv.max(0)]
+    labels = [f"frame {int(seq.frames[i])}" for i in idx]
+    return images, vertices, np.asarray(body.faces, dtype=np.int64), seq.K, labels, zoom
+
+
+def airpose_plus_checks(table: pd.DataFrame, person: str | None = None) -> pd.DataFrame:
+    """The paper's expectations about AirPose+, as measured (one row per claim and person).
+
+    AirPose+ vs AirPose: lower MPJPE, lower relative-camera translation and rotation errors, lower
+    jitter; fine-tuning: lower MPJPE than the pre-trained network on the test person.
+    """
+    rows = []
+    persons = [person] if person else list(table["sequence"].unique())
+    claims = [("AirPose+ MPJPE < AirPose", "AirPose+", "AirPose", "mpjpe_m"),
+              ("AirPose+ relative-camera translation error < AirPose", "AirPose+", "AirPose", "rel_t_err_m"),
+              ("AirPose+ relative-camera rotation error < AirPose", "AirPose+", "AirPose", "rel_rot_deg"),
+              ("AirPose+ jitter < AirPose", "AirPose+", "AirPose", "jitter_mps2"),
+              ("fine-tuned AirPose MPJPE < pre-trained", "AirPose", "AirPose (pre-trained)", "mpjpe_m"),
+              ("fine-tuned Baseline MPJPE < pre-trained", "Baseline", "Baseline (pre-trained)", "mpjpe_m"),
+              ("AirPose position error < Baseline (UAV1)", "AirPose", "Baseline", "mpe_uav1_m")]
+    for p in persons:
+        t = table[table["sequence"] == p].set_index("method")
+        for claim, a, b, col in claims:
+            if a in t.index and b in t.index and col in t:
+                va, vb = float(t.loc[a, col]), float(t.loc[b, col])
+                rows.append({"sequence": p, "claim": claim, "value": va, "reference": vb,
+                             "holds": bool(va < vb)})
+    out = pd.DataFrame(rows)
+    return out[["sequence", "claim", "value", "reference", "holds"]] if not out.empty else out
+
+
+def finetune_table(exp: RecordingExperiment) -> pd.DataFrame:
+    """One row per fine-tuned network: steps, the selection rule, the selected step and its
+    held-out 2D loss, where a loss term first started overfitting (and which), the per-view
+    agreement threshold and how many OpenPose keypoints the two-detector filter kept or dropped
+    (and why)."""
+    rows = []
+    for label, info in exp.finetune_info.items():
+        k = info.get("keypoints") or {}
+        seen = sum(k.get(x, 0) for x in ("kept", "disagree", "unconfirmed", "low_confidence"))
+        rows.append({"network": label, "targets": info.get("targets", "detections"), "steps": info.get("steps"),
+                     "selection_rule": info.get("selection_rule"),
+                     "selected_step": info.get("selected_step"), "overfit_step": info.get("overfit_step"),
+                     "overfit_terms": ", ".join(info.get("overfit_terms") or []),
+                     "heldout_j2d": info.get("heldout_j2d"), "train_frames": info.get("frames"),
+                     "heldout_frames": info.get("heldout_frames"),
+                     "threshold_px": ", ".join(f"{t:.0f}" for t in info.get("threshold_px") or []),
+                     "kept": k.get("kept"), "dropped_disagree": k.get("disagree"),
+                     "dropped_unconfirmed": k.get("unconfirmed"), "dropped_low_conf": k.get("low_confidence"),
+                     "missing": k.get("missing"),
+                     "dropped_share": (seen - k.get("kept", 0)) / seen if seen else float("nan")})
+    return pd.DataFrame(rows)
+
+
+def selection_table(exp: RecordingExperiment) -> pd.DataFrame:
+    """The model-selection log of every fine-tuned network (long format): per checkpoint step the
+    loss terms on person 1's held-out and training frames (the only inputs of the choice) and the
+    test persons' errors (``diag_*``, diagnostics)."""
+    parts = []
+    for label, info in exp.finetune_info.items():
+        sel = info.get("selection") or {}
+        if sel:
+            parts.append(pd.DataFrame(sel).assign(network=label))
+    return pd.concat(parts, ignore_index=True) if parts else pd.DataFrame()
+
+
+def transfer_table(exp: RecordingExperiment) -> pd.DataFrame:
+    """Does fine-tuning on the tuning person help the test persons? From the selection logs.
+
+    One row per fine-tuned network and test person: the 2D targets it was tuned on, the tuning
+    person's held-out 2D loss before tuning and at its best later checkpoint (fitting works), and
+    the test person's MPJPE and 2D error (diagnostics, px at 1920 wide) before tuning, at the kept
+    checkpoint and over all later checkpoints (min, max). ``helps_test`` is True when some later
+    checkpoint has a lower test MPJPE than the network before tuning.
+    """
+    rows = []
+    for label, info in exp.finetune_info.items():
+        sel = pd.DataFrame(info.get("selection") or {})
+        if sel.empty or "step" not in sel:
+            continue
+        first, later = sel[sel["step"] == sel["step"].min()].iloc[0], sel[sel["step"] > sel["step"].min()]
+        kept = sel[sel["step"] == info.get("selected_step")]
+        tests = sorted({c[len("diag_"):-len("_mpjpe_m")] for c in sel
+                        if c.startswith("diag_") and c.endswith("_mpjpe_m")})
+        for test in tests:
+            mp, px = f"diag_{test}_mpjpe_m", f"diag_{test}_j2d_px"
+            rows.append({"network": label, "targets": info.get("targets", "detections"), "test": test,
+                         "tuning_heldout_j2d_before": first["heldout_j2d"],
+                         "tuning_heldout_j2d_best_later": later["heldout_j2d"].min() if len(later) else np.nan,
+                         "test_mpjpe_before_m": first[mp],
+                         "test_mpjpe_kept_m": kept[mp].iloc[0] if len(kept) else np.nan,
+                         "test_mpjpe_later_min_m": later[mp].min() if len(later) else np.nan,
+                         "test_mpjpe_later_max_m": later[mp].max() if len(later) else np.nan,
+                         "test_j2d_px_before": first[px] if px in sel else np.nan,
+                         "test_j2d_px_later_min": later[px].min() if px in sel and len(later) else np.nan,
+                         "helps_test": bool(len(later) and later[mp].min() < first[mp])})
+    return pd.DataFrame(rows)
+
+
+#: The method comparisons of :func:`comparisons_table` (method, reference): what fine-tuning on
+#: person 1 changes for each network, and what AirPose+ adds to AirPose.
+COMPARISONS = (("AirPose", "AirPose (pre-trained)"), ("Baseline", "Baseline (pre-trained)"), ("AirPose+", "AirPose"))
+
+
+def comparisons_table(exp: RecordingExperiment, pairs=COMPARISONS, block_s: float = 1.0) -> pd.DataFrame:
+    """:func:`airpose_lib.eval.recordings.compare_methods` on every recording with ground truth,
+    over the frames every network estimated (as the error table), blocks of ``block_s`` seconds.
+
+    Returns:
+        the comparison rows with a ``sequence`` column first (empty without ground truth).
+    """
+    parts = []
+    for person in exp.persons:
+        seq, est = exp.sequences[person], exp.estimates[person]
+        if seq.ground_truth is None:
+            continue
+        keep = np.flatnonzero(scored_frames(est))
+        methods = [m for m in dict.fromkeys(x for pair in pairs for x in pair) if m in est]
+        frames = {}
+        for m in methods:
+            t = recording_frame_table(est[m], seq.ground_truth, exp.joints[person][m], m)
+            frames[m] = t[t["frame"].isin(keep)]
+        fps = float(seq.ground_truth.get("fps", 30.0))
+        usable = [(a, b) for a, b in pairs if a in frames and b in frames]
+        part = compare_methods(frames, usable, block=max(1, round(block_s * fps)))
+        parts.append(part.assign(sequence=person)[["sequence", *part.columns]])
+    return pd.concat(parts, ignore_index=True) if parts else pd.DataFrame()
+
+
+def claims_table(exp: RecordingExperiment, spin: str = "Baseline (pre-trained)") -> pd.DataFrame:
+    """:func:`airpose_lib.eval.recordings.paper_claims` of the experiment (SPIN-style = ``spin``)."""
+    depth = depth_summary(exp, {"SPIN-style": spin, "AirPose": "AirPose"})
+    persons = exp.persons
+    return paper_claims(exp.tables, depth, tuning=persons[0], test=persons[-1])
+
+
+def markdown_table(table: pd.DataFrame, digits: int = 3) -> str:
+    """A GitHub-flavoured Markdown table of a flat DataFrame (no ``tabulate`` needed)."""
+    def fmt(v):
+        return f"{v:.{digits}f}" if isinstance(v, float) else str(v)
+    lines = ["| " + " | ".join(map(str, table.columns)) + " |", "|" + "---|" * len(table.columns)]
+    lines += ["| " + " | ".join(fmt(v) for v in row) + " |" for row in table.astype(object).itertuples(index=False)]
+    return "\n".join(lines) + "\n"

@@ -2,7 +2,7 @@
 VENV ?= .venv
 PROFILE ?= smoke
 
-.PHONY: setup smoke reproduce report test test-all test-browser bench
+.PHONY: setup smoke reproduce report test test-all test-browser bench lint
 
 setup:
 	bash scripts/setup.sh
@@ -27,6 +27,10 @@ test: setup
 test-browser: setup
 	bash scripts/setup_browser.sh
 	AIRPOSE_REQUIRE_BROWSER=1 $(VENV)/bin/python -m pytest -q -m browser tests/browser
+
+# pyflakes, import order and bugbear (pyproject.toml [tool.ruff]); CI runs it after the tests
+lint: setup
+	$(VENV)/bin/ruff check .
 
 test-all: setup
 	$(VENV)/bin/python -m pytest -q

@@ -68,7 +68,7 @@ def main() -> None:
         kw = dict(betas=torch.randn(batch, 10), body_pose=0.3 * torch.randn(batch, 63),
                   global_orient=torch.randn(batch, 3), transl=torch.randn(batch, 3))
         with torch.no_grad():
-            t = _median_time(lambda: model(**kw), args.repeat)
+            t = _median_time(lambda model=model, kw=kw: model(**kw), args.repeat)
         rows.append(("smplx forward (full mesh)", str(batch), f"{t * 1e3:.1f} ms"))
 
     batch, chunk = 2000, 250

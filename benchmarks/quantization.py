@@ -20,7 +20,6 @@ import sys
 import time
 from pathlib import Path
 
-import numpy as np
 import torch
 from torch import nn
 
@@ -70,8 +69,8 @@ def main() -> int:
     from airpose_lib.eval import paper_table, per_view_table
     from airpose_lib.model.quantize import QuantSettings
     from airpose_lib.runtime.backends import BackendSpec
-    from airpose_lib.runtime.networks import make_stage_model
     from airpose_lib.runtime.edge import ensure_export
+    from airpose_lib.runtime.networks import make_stage_model
     from airpose_lib.train.evaluate import load_trained_model, predict
     from airpose_lib.train.loop import default_dataset_factory
     from airpose_lib.train.run import prepare_data

@@ -35,8 +35,8 @@ from airpose_lib.assets import (
     resolve_data_source,
     verify,
 )
-from airpose_lib.cli.assets import add_asset_commands
 from airpose_lib.assets.manifest import manifest_dir
+from airpose_lib.cli.assets import add_asset_commands
 
 REPO_MANIFESTS = Path(__file__).resolve().parents[1] / "data_manifests"
 OFFICIAL = ("official_synthetic", "official_real", "official_checkpoints", "smplx_v1_1", "vposer_v02_05")

@@ -158,7 +158,7 @@ def test_appearance_colours_follow_regions(open_model):
     rng = np.random.default_rng(4)
     looks = [sample_appearance(rng) for _ in range(20)]
     cols = [paint.colors(a, shading_strength=0.0) for a in looks]
-    assert all(c.shape == (len(v := open_model.v_template), 3) and c.dtype == np.uint8 for c in cols)
+    assert all(c.shape == (len(open_model.v_template), 3) and c.dtype == np.uint8 for c in cols)
     a, c = looks[0], cols[0]
     regions = paint.regions_for(a)
     for r in range(len(REGIONS)):

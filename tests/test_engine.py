@@ -126,7 +126,7 @@ def test_resume_after_a_crash_equals_straight_run(straight, tmp_path):
     assert load_checkpoint(tmp_path / "checkpoints" / "last.pt")["step"] == 8
     assert max(int(r["step"]) for r in _rows(tmp_path)) == 10  # rows after the checkpoint ...
     again = ToyTask()
-    resumed = run_engine(again, SCHEDULE, tmp_path)
+    run_engine(again, SCHEDULE, tmp_path)
     _same_weights(again.model, task.model)
     assert _rows(tmp_path) == _rows(out)  # ... are dropped on resume
     assert again.validated == [10, 15]

@@ -1,6 +1,5 @@
 """The mean-body oracle of Table I: exact on the mean body, off by the stature ratio otherwise."""
 import numpy as np
-import pytest
 
 from airpose_lib.eval.oracle import ORACLE_LABEL, oracle_per_view, solve_translation
 

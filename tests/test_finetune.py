@@ -22,8 +22,8 @@ from airpose_lib.finetune import (
     finetune,
     finetune_config,
     finetune_loss_config,
-    load_sized_network,
     load_predictions,
+    load_sized_network,
     predict_sequence,
     regress_features,
     save_predictions,
@@ -50,9 +50,9 @@ def smoke_root():
 
 
 def _save_tiny(folder, variant: str):
+    from airpose_lib.engine.checkpoint import save_checkpoint
     from airpose_lib.model import build_model
     from airpose_lib.train import TrainConfig
-    from airpose_lib.engine.checkpoint import save_checkpoint
 
     torch.manual_seed(0)
     model = build_model(variant, "resnet18")

@@ -23,8 +23,8 @@ from airpose_lib.model import DroneNode  # noqa: E402
 from airpose_lib.model.onnx_export import OnnxDroneNode  # noqa: E402
 from airpose_lib.model.quantize import QuantSettings, calibration_digest  # noqa: E402
 from airpose_lib.runtime.backends import BackendSpec, build_torch_model  # noqa: E402
-from airpose_lib.runtime.networks import make_stage_model  # noqa: E402
 from airpose_lib.runtime.edge import calibration_crops, ensure_export, export_key  # noqa: E402
+from airpose_lib.runtime.networks import make_stage_model  # noqa: E402
 
 S = 128
 SPEC = BackendSpec(kind="onnx-int8", variant="airpose", backbone="resnet18", input_size=S, seed=3)

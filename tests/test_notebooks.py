@@ -71,7 +71,7 @@ def test_setup_notebook_fills_parameters_and_records_the_source(monkeypatch, tmp
                                                "train_workers": 2, "n_qualitative": 5, "variants": ["airpose"]}
     assert "generated data" in capsys.readouterr().out
     with pytest.raises(AttributeError, match="no parameter"):
-        ctx.backbone
+        _ = ctx.backbone
 
 
 def test_setup_notebook_falls_back_to_generated_data_and_says_why(monkeypatch, tmp_path, capsys):

@@ -18,13 +18,13 @@ import numpy as np
 import pytest
 import roma
 import torch
-
-from airpose_lib.data.dataset import PER_VIEW_KEYS, SAMPLE_KEYS, denormalize_images
 from official_fixtures import (
     AUTHOR_ROOT,
     write_official_real_fixture,
     write_official_synthetic_fixture,
 )
+
+from airpose_lib.data.dataset import PER_VIEW_KEYS, SAMPLE_KEYS, denormalize_images
 from airpose_lib.data.official_layout import OfficialLayoutWriter, SequenceFormatError
 from airpose_lib.data.official_real import (
     REAL_DATA_SPLITS,

@@ -2,8 +2,8 @@
 from __future__ import annotations
 
 import argparse
-import warnings
 import math
+import warnings
 
 import numpy as np
 import pytest
@@ -21,7 +21,6 @@ from airpose_lib.prior import (
     save_prior,
     train_prior,
 )
-
 
 
 @pytest.fixture(autouse=True)

@@ -285,7 +285,6 @@ def test_a_signal_stops_the_run_and_its_kernel_at_once_and_quietly(tmp_path, sig
     """Issue 33: SIGINT to the process alone was ignored until the notebook ended; Ctrl-C printed a
     19-line ZMQ traceback. Now either signal kills the kernel's process group within seconds, the
     run says one line, and the report keeps the finished notebook."""
-    import os
     import signal
     import subprocess
     import sys

@@ -163,8 +163,14 @@ def test_online_figures_draw_from_node_records(tmp_path):
     import matplotlib.pyplot as plt
 
     from airpose_lib.runtime import results as R
-    from airpose_lib.viz.online import (SLOT_STATES, plot_fault_states, plot_latency, plot_online_vs_offline,
-                                        plot_timeline, slot_states)
+    from airpose_lib.viz.online import (
+        SLOT_STATES,
+        plot_fault_states,
+        plot_latency,
+        plot_online_vs_offline,
+        plot_timeline,
+        slot_states,
+    )
 
     class Node(types.SimpleNamespace):
         def __len__(self):

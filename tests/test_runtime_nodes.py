@@ -12,10 +12,9 @@ import zlib
 import numpy as np
 import zmq
 
-from airpose_lib import cli
+from airpose_lib.runtime import launcher
 from airpose_lib.runtime import results as R
 from airpose_lib.runtime.backends import BackendSpec, FakeStageModel
-from airpose_lib.runtime import launcher
 from airpose_lib.runtime.launcher import launch
 from airpose_lib.runtime.offline import offline_batched, offline_inputs, offline_staged
 from airpose_lib.runtime.transport import free_ports

@@ -11,8 +11,16 @@ import pytest
 
 from airpose_lib.runtime import results as R
 from airpose_lib.runtime.backends import FakeStageModel, fresh_copy
-from airpose_lib.runtime.source import (IMAGENET_MEAN, IMAGENET_STD, SyntheticSource, crop_input, network_box_margin,
-                                        network_camera, open_source, person_box)
+from airpose_lib.runtime.source import (
+    IMAGENET_MEAN,
+    IMAGENET_STD,
+    SyntheticSource,
+    crop_input,
+    network_box_margin,
+    network_camera,
+    open_source,
+    person_box,
+)
 from airpose_lib.runtime.sync import CameraReplay, Mailbox, PeerTable, Schedule
 from airpose_lib.runtime.transport import LinkConfig, LinkEmulator, Transport, endpoint, free_ports
 from airpose_lib.runtime.wire import DATA, HELLO, decode_packet, encode_packet
@@ -87,7 +95,7 @@ def test_peer_table_liveness():
 # -- link emulation and transport -------------------------------------------------------------------
 def test_link_emulator_latency_bandwidth_loss():
     em = LinkEmulator(LinkConfig(latency_ms=5.0, bandwidth_mbps=1.0))
-    for i in range(10):
+    for _ in range(10):
         em.admit(2, bytes(1250), now=0.0)  # 10 kbit each: 10 ms on a 1 Mbps link, queued
     assert em.release(0.0149) == []
     assert len(em.release(0.0151)) == 1

@@ -97,9 +97,9 @@ def test_predict_on_a_crafted_recording_is_one_line_and_runs_nothing(tmp_path, c
 
 
 def test_official_synthetic_list_and_sample_files_run_nothing(tmp_path):
-    from airpose_lib.data.official_synthetic import OfficialDataError, official_split_files, read_official_sample
-
     from official_fixtures import write_official_synthetic_fixture
+
+    from airpose_lib.data.official_synthetic import OfficialDataError, official_split_files, read_official_sample
 
     fx = write_official_synthetic_fixture(tmp_path / "syn", n_subjects=2, n_positions=1)
     marker = tmp_path / "ran"
@@ -116,10 +116,10 @@ def test_official_synthetic_list_and_sample_files_run_nothing(tmp_path):
 
 
 def test_official_marker_poses_run_nothing(tmp_path):
+    from official_fixtures import write_official_real_fixture
+
     from airpose_lib.data.official_layout import SequenceFormatError
     from airpose_lib.data.official_real import read_marker_poses
-
-    from official_fixtures import write_official_real_fixture
 
     write_official_real_fixture(tmp_path / "real", n_frames=2)
     marker = tmp_path / "ran"

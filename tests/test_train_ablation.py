@@ -23,8 +23,8 @@ def tiny_profile(tmp_path_factory, open_model_files):
 
 
 def test_parallel_training_equals_sequential_and_is_reused(tiny_profile, tmp_path):
-    from airpose_lib.train.ablation import _train_parallel, trained_checkpoint
     from airpose_lib.engine.checkpoint import load_checkpoint
+    from airpose_lib.train.ablation import _train_parallel, trained_checkpoint
 
     variants, seeds = ["baseline", "airpose"], [1]
     _train_parallel(tiny_profile, variants, seeds, tmp_path / "parallel", workers=2)

@@ -44,8 +44,8 @@ def body_model(gender: str):
 def make_samples(n: int, seed: int = 0, views: int = 2, genders: int = 3) -> dict[str, torch.Tensor]:
     """Ground truth of n two-view samples, consistent with the open body model (genders: 1 =
     neutral only, 3 = neutral, male and female at random)."""
-    from airpose_lib.geometry import axis_angle_to_matrix, crop_vector, project_points
     from airpose_lib.body.forward import BodyForward
+    from airpose_lib.geometry import axis_angle_to_matrix, crop_vector, project_points
 
     g = torch.Generator().manual_seed(seed)
     theta = torch.randn(n, 21, 3, generator=g) * 0.2
@@ -158,7 +158,7 @@ def test_resume_after_interruption_equals_straight_run(straight_run, tmp_path):
     assert res2.step == 4 and not res2.stopped_early
     sa, sb = load_checkpoint(res_a.checkpoint), load_checkpoint(res2.checkpoint)
     _assert_same_state(sa["model"], sb["model"])
-    for (ka, va), (kb, vb) in zip(sa["optimizer"]["state"].items(), sb["optimizer"]["state"].items()):
+    for (ka, va), (_, vb) in zip(sa["optimizer"]["state"].items(), sb["optimizer"]["state"].items()):
         for name in va:
             assert torch.equal(va[name], vb[name]), (ka, name)
     assert (sa["epoch"], sa["batch_in_epoch"]) == (sb["epoch"], sb["batch_in_epoch"]) == (1, 1)

@@ -9,6 +9,7 @@ import torch
 @pytest.fixture(scope="module")
 def official_assets(tmp_path_factory, open_model_files):
     from official_fixtures import write_official_synthetic_fixture
+
     from airpose_lib.model import build_model, write_official_checkpoint
     from airpose_lib.train.official import OFFICIAL_CHECKPOINT_FOLDERS
 

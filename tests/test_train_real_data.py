@@ -28,10 +28,10 @@ def test_ground_truth_matches_loss_convention(tiny_root):
     """The dataset's j3d_cam / j2d are phi J0(theta, beta) + tau of the gendered model, projected
     with K: a perfect prediction has zero supervised terms (up to float32 rounding)."""
     from airpose_lib.body import load_body_model
-    from airpose_lib.data.dataset import StillFrameDataset
-    from airpose_lib.geometry import axis_angle_to_matrix, project_points
     from airpose_lib.body.forward import BodyForward
     from airpose_lib.body.genders import GENDER_NAMES
+    from airpose_lib.data.dataset import StillFrameDataset
+    from airpose_lib.geometry import axis_angle_to_matrix, project_points
 
     ds = StillFrameDataset(tiny_root, "all", augment=False)
     for i in range(len(ds)):

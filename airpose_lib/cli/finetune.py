@@ -5,8 +5,16 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from .common import (PROFILES, SEQUENCE_FOLDER, CLIError, parse_range, parse_sets, require_file, require_folder,
-                     require_path)
+from .common import (
+    PROFILES,
+    SEQUENCE_FOLDER,
+    CLIError,
+    parse_range,
+    parse_sets,
+    require_file,
+    require_folder,
+    require_path,
+)
 
 __all__ = ["add_finetune", "add_predict"]
 

@@ -17,8 +17,13 @@ def _cmd_fit(args: argparse.Namespace) -> int:
     from airpose_lib.data.official_layout import load_sequence
     from airpose_lib.finetune.predict import frames_in_range
     from airpose_lib.fitting import fit_sequence
-    from airpose_lib.fitting.recording import (fit_config, initialisation_for, open_initialisation, refined_path,
-                                               save_refinement)
+    from airpose_lib.fitting.recording import (
+        fit_config,
+        initialisation_for,
+        open_initialisation,
+        refined_path,
+        save_refinement,
+    )
     from airpose_lib.prior import load_prior
 
     require_folder(args.sequence, "--sequence", SEQUENCE_FOLDER)

@@ -58,9 +58,8 @@ def _check_ranges(args: argparse.Namespace) -> None:
 
 def _peers_from_flags(args: argparse.Namespace) -> dict[int, str]:
     """``--peers`` -> ``{id: endpoint}``, or a :class:`CLIError` naming the bad entry."""
-    from airpose_lib.runtime.transport import parse_peers
-
     from airpose_lib.errors import ConfigError  # standard library only
+    from airpose_lib.runtime.transport import parse_peers
 
     try:
         peers = parse_peers(args.peers, args.host)

@@ -29,7 +29,6 @@ def print_report_result(result) -> int:
 
 def _cmd_report(args: argparse.Namespace) -> int:
     from airpose_lib.paths import runs_root
-
     from airpose_lib.reproduce.report import DEFAULT_MAX_IMAGE_PX, build_report
 
     run_dir = (args.runs if args.runs is not None else runs_root()) / args.profile

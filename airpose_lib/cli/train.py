@@ -19,8 +19,8 @@ __all__ = ['add_pretrain', 'add_train']
 
 
 def _cmd_train(args: argparse.Namespace) -> int:
-    from airpose_lib.losses import LossConfig
     from airpose_lib.engine.launch import launch_env
+    from airpose_lib.losses import LossConfig
     from airpose_lib.train import TrainConfig, default_out_dir, load_train_config
     from airpose_lib.train.loop import check_data_root
 
@@ -49,8 +49,8 @@ def _cmd_train(args: argparse.Namespace) -> int:
 
 
 def _train_locked(args: argparse.Namespace, cfg, out: Path) -> int:
-    from airpose_lib.train import train
     from airpose_lib.engine.checkpoint import last_checkpoint, load_checkpoint
+    from airpose_lib.train import train
 
     last = last_checkpoint(out) if args.resume else None
     if last is not None:

@@ -42,7 +42,7 @@ from .manifest import (
     shard_problem,
     write_manifest,
 )
-from .shards import sha256_file, shard_name
+from .shards import sha256_file
 from .still_config import GENERATOR_VERSION, GenerationConfig, default_root, profile_config
 
 __all__ = [
@@ -221,9 +221,9 @@ def generate_still_dataset(
 def _run_inprocess(config, root, todo, bar, finished) -> None:
     # still_frames pulls in torch and smplx: imported here, not at the top, because a drone's
     # start-up imports this module (default_root) and must stay light
-    from .still_frames import StillFrameGenerator, _limit_threads
-
     import torch
+
+    from .still_frames import StillFrameGenerator, _limit_threads
 
     threads = torch.get_num_threads()
     _limit_threads()

@@ -41,14 +41,17 @@ import math
 import pickle
 import re
 import warnings
-from collections.abc import Iterable, Mapping, Sequence as SequenceABC
+from collections.abc import Iterable, Mapping
+from collections.abc import Sequence as SequenceABC
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from airpose_lib import __version__  # the package root holds only the version
-from airpose_lib import safe_pickle
+from airpose_lib import (
+    __version__,  # the package root holds only the version
+    safe_pickle,
+)
 from airpose_lib.atomic import atomic_path
 from airpose_lib.errors import UserError
 

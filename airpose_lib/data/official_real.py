@@ -39,7 +39,8 @@ corrected is not in the repository.
 """
 from __future__ import annotations
 
-from collections.abc import Iterable, Mapping, Sequence as SequenceABC
+from collections.abc import Iterable, Mapping
+from collections.abc import Sequence as SequenceABC
 from dataclasses import dataclass
 from pathlib import Path
 

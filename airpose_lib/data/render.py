@@ -20,13 +20,13 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pyvista as pv  # noqa: E402
+from vtkmodules.vtkCommonMath import vtkMatrix4x4  # noqa: E402  (not `import vtk`: 1.5 s saved)
+from vtkmodules.vtkRenderingCore import vtkTexture  # noqa: E402
 
 # Importing viz.render selects the EGL window (no X server) and sets pyvista off-screen before
 # VTK creates a window; keep this import first.
 import airpose_lib.viz.render  # noqa: F401  (side effects)
-import pyvista as pv  # noqa: E402
-from vtkmodules.vtkCommonMath import vtkMatrix4x4  # noqa: E402  (not `import vtk`: 1.5 s saved)
-from vtkmodules.vtkRenderingCore import vtkTexture  # noqa: E402
 
 from .scene import EnvironmentSample  # noqa: E402
 

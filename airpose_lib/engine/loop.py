@@ -248,7 +248,7 @@ class EngineRun:
                 restore_rng_state(state["rng"][self.rank])
             else:
                 warnings.warn(f"checkpoint written by {len(state['rng'])} process(es), resuming with {self.world}: "
-                              "RNG streams are re-seeded, the run will not match an uninterrupted one")
+                              "RNG streams are re-seeded, the run will not match an uninterrupted one", stacklevel=2)
                 self.task.reseed(self.rank, self.step)
         else:
             if self.out_dir is not None and self.rank == 0:

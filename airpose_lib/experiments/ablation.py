@@ -28,6 +28,7 @@ import torch
 
 from airpose_lib.assets import DataSource
 from airpose_lib.body import load_body_model
+from airpose_lib.body.genders import GENDER_NAMES
 from airpose_lib.data import StillFrameDataset, default_root
 from airpose_lib.data.official_synthetic import OfficialSyntheticDataset
 from airpose_lib.eval.ablation import per_seed_table
@@ -35,7 +36,6 @@ from airpose_lib.eval.oracle import oracle_per_view
 from airpose_lib.eval.reference import train_wall_s, write_reference
 from airpose_lib.eval.significance import claims_table
 from airpose_lib.geometry import axis_angle_to_matrix, crop_intrinsics, full_to_crop_pixels, project_points
-from airpose_lib.body.genders import GENDER_NAMES
 from airpose_lib.model import posed_joints_and_vertices
 from airpose_lib.model.official import load_official_checkpoint
 from airpose_lib.train import load_trained_model, predict

@@ -57,8 +57,13 @@ from airpose_lib.eval.recordings import (
 )
 from airpose_lib.finetune.keypoints import resolution_scales
 from airpose_lib.finetune.network import load_sized_network
-from airpose_lib.finetune.predict import (image_sizes, network_camera_of, predict_sequence, regress_features,
-                                          sequence_features)
+from airpose_lib.finetune.predict import (
+    image_sizes,
+    network_camera_of,
+    predict_sequence,
+    regress_features,
+    sequence_features,
+)
 from airpose_lib.finetune.train import finetune, finetune_config, finetune_done
 from airpose_lib.fitting import airpose_plus, fitting_profile
 from airpose_lib.folder_lock import folder_lock

@@ -8,9 +8,9 @@ import numpy as np
 import torch
 
 from airpose_lib.body import load_body_model
+from airpose_lib.body.genders import GENDER_NAMES
 from airpose_lib.experiments.recordings import body_vertices
 from airpose_lib.geometry import axis_angle_to_matrix
-from airpose_lib.body.genders import GENDER_NAMES
 from airpose_lib.viz.scene3d import RecordingScene
 
 __all__ = ["recording_scene"]

@@ -41,7 +41,8 @@ five keys). Parameters follow the paper's convention ``X_cam = phi X0(theta, bet
 from __future__ import annotations
 
 import json
-from collections.abc import Mapping, Sequence as SequenceABC
+from collections.abc import Mapping
+from collections.abc import Sequence as SequenceABC
 from pathlib import Path
 
 import numpy as np

@@ -93,8 +93,7 @@ from airpose_lib.prior import load_prior
 from airpose_lib.profiles import profile_path, profile_section
 from airpose_lib.train.sampling import epoch_permutation, seed_everything
 
-from .keypoints import (agreement_masks, agreement_summary, kept_targets, pixel_settings, resolution_scales,
-                        true_targets)
+from .keypoints import agreement_masks, agreement_summary, kept_targets, pixel_settings, resolution_scales, true_targets
 from .loss import FineTuneLoss, finetune_loss_config
 from .network import load_sized_network
 from .predict import frames_in_range, image_sizes, regress_features, sequence_features

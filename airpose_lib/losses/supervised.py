@@ -71,6 +71,7 @@ from typing import Literal
 import torch
 from torch import Tensor, nn
 
+from airpose_lib.body import load_body_model
 from airpose_lib.body.forward import BodyForward
 from airpose_lib.body.genders import GENDER_NAMES
 from airpose_lib.body.joint_sets import NUM_BODY_JOINTS, NUM_POSE_JOINTS
@@ -82,7 +83,6 @@ from airpose_lib.geometry import (
     project_points,
     transform_points,
 )
-from airpose_lib.body import load_body_model
 
 __all__ = [
     "LIMB_JOINTS_X1",

@@ -28,8 +28,8 @@ import numpy as np
 import torch
 from torch import Tensor, nn
 
-from .staged import _to_numpy, _wire_dtype
 from .message import MESSAGE_DIM
+from .staged import _to_numpy, _wire_dtype
 from .variants import STATE_DIM, AirPoseNet, decode_state, unpack_state
 
 __all__ = ["Stage1Graph", "IterationGraph", "export_onnx", "OnnxDroneNode", "OPSET"]

@@ -26,7 +26,6 @@ from __future__ import annotations
 
 import math
 
-import torch
 from torch import Tensor, nn
 
 from .backbone import ResNet, build_backbone

@@ -192,7 +192,7 @@ class Transport:
             self.pub.curve_publickey = keys.public
             self.pub.curve_server = True
         self.subs: dict = {}  # SUB socket -> the peer id at its other end
-        for ident, ep in pairs:
+        for ident, _ in pairs:  # each SUB connects to its endpoint below, after every socket option
             sub = self.ctx.socket(zmq.SUB)
             sub.setsockopt(zmq.RCVHWM, hwm)
             if keys is not None:

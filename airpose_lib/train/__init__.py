@@ -5,7 +5,6 @@ trained networks. The checkpoint and log functions are re-exported here from the
 
 from airpose_lib.engine import RunLogger, kit_version, last_checkpoint, load_checkpoint, read_log, save_checkpoint
 
-
 from .config import TrainConfig, load_train_config
 from .evaluate import evaluate, evaluate_checkpoint, load_trained_model, predict
 from .loop import (

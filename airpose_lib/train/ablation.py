@@ -15,8 +15,8 @@ from airpose_lib.process_guard import die_with_parent
 from .config import load_train_config
 from .evaluate import evaluate_checkpoint
 from .loop import TrainResult, default_out_dir
-from .run import prepare_data, train
 from .pretrain import profile_backbone_key
+from .run import prepare_data, train
 
 __all__ = ["AblationRun", "run_ablation", "trained_checkpoint"]
 

@@ -22,11 +22,11 @@ from torch.utils.data import DataLoader
 
 from airpose_lib.body import load_body_model
 from airpose_lib.body.forward import BodyForward
+from airpose_lib.data.training_input import training_input
 from airpose_lib.engine.checkpoint import load_checkpoint
 from airpose_lib.engine.launch import resolve_device
 from airpose_lib.eval import per_joint_table, per_view_table, relative_camera_table
 from airpose_lib.geometry import axis_angle_to_matrix
-from airpose_lib.data.training_input import training_input
 from airpose_lib.model import to_smplx_params
 from airpose_lib.model.record import NetworkRecord, network_from_checkpoint
 

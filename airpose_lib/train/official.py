@@ -11,7 +11,6 @@ import hashlib
 from pathlib import Path
 from typing import Any
 
-
 from airpose_lib.data.official_synthetic import OfficialSyntheticDataset
 from airpose_lib.engine.checkpoint import write_checkpoint
 from airpose_lib.model import AirPoseNet

@@ -2,7 +2,7 @@
 each variant's estimate on a few test samples (skeletons, positions, meshes)."""
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Mapping
 
 import numpy as np
 import pandas as pd

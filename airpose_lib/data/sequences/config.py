@@ -6,6 +6,7 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+
 import numpy as np
 
 from airpose_lib.body.genders import GENDER_CODES

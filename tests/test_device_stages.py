@@ -5,11 +5,27 @@ precision of each training in the results provenance. Runs on a CPU-only machine
 comparisons run where a GPU is visible."""
 from __future__ import annotations
 
+import importlib
+import sys
+from pathlib import Path
+
 import pytest
 import torch
 
+from airpose_lib.body import load_body_model
 from airpose_lib.devices import resolve_device
 from airpose_lib.errors import ConfigError
+from airpose_lib.fitting import AirPosePlusConfig, airpose_plus
+from airpose_lib.prior import VPoser
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from test_fitting_airpose_plus import _perturbed, _scene  # noqa: E402
+
+# the modules (their package re-exports functions of the same names)
+plus_module = importlib.import_module("airpose_lib.fitting.airpose_plus")
+CUDA = torch.cuda.is_available()
+RESULT_TENSORS = ("theta", "v", "beta", "phi", "tau", "R_body_cam", "t_body_cam", "R_12", "t_12", "kept",
+                  "frame_confidence")
 
 
 @pytest.fixture(autouse=True)
@@ -48,3 +64,49 @@ def test_engine_launch_uses_the_same_rule():
     from airpose_lib.engine import launch
 
     assert launch.resolve_device is resolve_device
+
+
+# -- AirPose+ -------------------------------------------------------------------------------------
+@pytest.fixture(scope="module")
+def problem(open_model_files):
+    body = load_body_model("open", dtype=torch.float64)
+    kps, K, gt = _scene(body, F=4)
+    torch.manual_seed(0)
+    return kps, K, _perturbed(gt), VPoser().eval(), body
+
+
+def _fit(problem, **cfg):
+    kps, K, init, prior, body = problem
+    return airpose_plus(kps, K, init, prior=prior, body=body, iterations=3, latent_start=1, progress=False, **cfg)
+
+
+def test_airpose_plus_asks_the_rule_for_its_device_and_answers_on_the_cpu(problem, monkeypatch):
+    """The config's device reaches the rule; the default (cpu) and auto without CUDA give the
+    same numbers as before; every result tensor and the prior stay on the CPU."""
+    asked = []
+    monkeypatch.setattr(plus_module, "resolve_device", lambda d, *a: asked.append(d) or resolve_device(d, *a))
+    _gpus(monkeypatch, 0)
+    ref = _fit(problem)
+    auto = _fit(problem, device="auto")
+    assert asked == ["cpu", "auto"] and AirPosePlusConfig().device == "cpu"
+    for name in RESULT_TENSORS:
+        a, b = getattr(ref, name), getattr(auto, name)
+        assert a.device.type == "cpu" and b.device.type == "cpu", name
+        assert torch.equal(a, b), name
+    assert all(p.device.type == "cpu" for p in problem[3].parameters())
+
+
+@pytest.mark.skipif(CUDA, reason="checks the error of a CPU-only torch")
+def test_airpose_plus_on_cuda_without_cuda_is_a_one_line_error(problem):
+    with pytest.raises(ConfigError, match="--device cpu"):
+        _fit(problem, device="cuda")
+
+
+@pytest.mark.skipif(not CUDA, reason="needs a CUDA GPU")
+def test_airpose_plus_on_cuda_matches_the_cpu(problem):
+    ref, gpu = _fit(problem), _fit(problem, device="cuda")
+    for name in RESULT_TENSORS:
+        assert getattr(gpu, name).device.type == "cpu", name
+    torch.testing.assert_close(gpu.theta, ref.theta, atol=1e-3, rtol=0)
+    torch.testing.assert_close(gpu.tau, ref.tau, atol=1e-3, rtol=0)
+    problem[3].cpu()

@@ -9,6 +9,7 @@ import importlib
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 import torch
 
@@ -16,13 +17,14 @@ from airpose_lib.body import load_body_model
 from airpose_lib.devices import resolve_device
 from airpose_lib.errors import ConfigError
 from airpose_lib.fitting import AirPosePlusConfig, airpose_plus
-from airpose_lib.prior import VPoser
+from airpose_lib.prior import PriorTrainConfig, VPoser, train_prior
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from test_fitting_airpose_plus import _perturbed, _scene  # noqa: E402
 
 # the modules (their package re-exports functions of the same names)
 plus_module = importlib.import_module("airpose_lib.fitting.airpose_plus")
+prior_train_module = importlib.import_module("airpose_lib.prior.train")
 CUDA = torch.cuda.is_available()
 RESULT_TENSORS = ("theta", "v", "beta", "phi", "tau", "R_body_cam", "t_body_cam", "R_12", "t_12", "kept",
                   "frame_confidence")
@@ -110,3 +112,43 @@ def test_airpose_plus_on_cuda_matches_the_cpu(problem):
     torch.testing.assert_close(gpu.theta, ref.theta, atol=1e-3, rtol=0)
     torch.testing.assert_close(gpu.tau, ref.tau, atol=1e-3, rtol=0)
     problem[3].cpu()
+
+
+# -- the prior ------------------------------------------------------------------------------------
+@pytest.fixture(scope="module")
+def corpus():
+    from airpose_lib.data.poses import sample_body_pose
+
+    return sample_body_pose(np.random.default_rng(0), 300).astype(np.float32)
+
+
+def test_prior_training_asks_the_rule_and_returns_a_cpu_model(corpus, monkeypatch):
+    asked = []
+    monkeypatch.setattr(prior_train_module, "resolve_device", lambda d, *a: asked.append(d) or resolve_device(d, *a))
+    _gpus(monkeypatch, 0)
+    cfg = dict(steps=4, batch_size=32, kl_anneal_steps=2)
+    m1, h1 = train_prior(corpus, PriorTrainConfig(**cfg))
+    m2, h2 = train_prior(corpus, PriorTrainConfig(**cfg, device="auto"))
+    assert asked == ["cpu", "auto"] and h1["config"]["device"] == "cpu" and h2["config"]["device"] == "auto"
+    assert h1["loss"] == h2["loss"]
+    for (k, a), b in zip(m1.state_dict().items(), m2.state_dict().values(), strict=True):
+        assert a.device.type == "cpu" and b.device.type == "cpu" and torch.equal(a, b), k
+
+
+@pytest.mark.skipif(CUDA, reason="checks the error of a CPU-only torch")
+def test_prior_train_on_cuda_without_cuda_is_a_one_line_error(tmp_path, capsys):
+    from airpose_lib.cli import main
+
+    assert main(["prior", "train", "--profile", "smoke", "--steps", "2", "--device", "cuda",
+                 "--out", str(tmp_path / "p.pt"), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "--device cpu" in err and not (tmp_path / "p.pt").exists()
+
+
+@pytest.mark.skipif(not CUDA, reason="needs a CUDA GPU")
+def test_prior_training_on_cuda_is_close_to_the_cpu(corpus):
+    cfg = dict(steps=4, batch_size=32, kl_anneal_steps=2)
+    m1, h1 = train_prior(corpus, PriorTrainConfig(**cfg))
+    m2, h2 = train_prior(corpus, PriorTrainConfig(**cfg, device="cuda"))
+    assert all(p.device.type == "cpu" for p in m2.parameters())
+    np.testing.assert_allclose(h2["loss"], h1["loss"], rtol=1e-3)

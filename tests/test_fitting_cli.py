@@ -25,7 +25,7 @@ def test_prior_train_and_info(tmp_path, capsys, open_model_files):
     assert "held-out reconstruction" in text and "joint limits" in text and out.is_file()
     assert main(["prior", "info", "--path", str(out)]) == 0
     prov = json.loads(capsys.readouterr().out)
-    assert prov["profile"] == "smoke" and prov["train"]["steps"] == 5
+    assert prov["profile"] == "smoke" and prov["train"]["steps"] == 5 and prov["train"]["device"] == "cpu"
     assert {"rot_err_deg", "joint_err_mm", "samples_within_joint_limits"} <= set(prov["validation"])
 
 

@@ -2,7 +2,8 @@
 
 ``auto`` means the process's own GPU when CUDA is available, else the CPU; ``cuda`` (no index)
 the process's own GPU; ``cuda:N``, ``cpu``, ``mps`` as given. A process's own GPU is
-``cuda:<local_rank>`` under ``torchrun`` (:mod:`airpose_lib.engine.launch`).
+``cuda:<local_rank>`` under ``torchrun`` (:mod:`airpose_lib.engine.launch`) and
+``cuda:<k mod GPUs>`` for the k-th parallel worker of the ablation runner (:func:`worker_device`).
 
 A helper every package may use (``fitting`` and ``prior`` may not import ``engine``); torch is
 imported inside the functions so that importing the helpers stays free of torch (the CLI's parser).
@@ -11,7 +12,7 @@ from __future__ import annotations
 
 from airpose_lib.errors import ConfigError
 
-__all__ = ["resolve_device"]
+__all__ = ["resolve_device", "worker_device"]
 
 
 def resolve_device(device: str, local_rank: int = 0) -> "torch.device":  # noqa: F821
@@ -40,3 +41,16 @@ def resolve_device(device: str, local_rank: int = 0) -> "torch.device":  # noqa:
             raise ConfigError(f"device {dev} asked for, but only {torch.cuda.device_count()} GPU(s) are visible; "
                               "use another index or set CUDA_VISIBLE_DEVICES")
     return dev
+
+
+def worker_device(k: int, gpus: int, device: str) -> str:
+    """The device string of the ``k``-th of several parallel workers (k = 0, 1, ...).
+
+    With ``device`` ``auto`` or ``cuda`` (no index) and ``gpus`` > 1 visible GPUs the workers are
+    spread round-robin, ``cuda:(k mod gpus)``; anything else (CPU, one GPU, an explicit
+    ``cuda:N``, which the user chose) is returned unchanged, so a CPU run does not change.
+    Pure: ``gpus`` is ``torch.cuda.device_count()`` (0 without CUDA), read by the caller.
+    """
+    if device in ("auto", "cuda") and gpus > 1:
+        return f"cuda:{k % gpus}"
+    return device

@@ -14,7 +14,7 @@ import pytest
 import torch
 
 from airpose_lib.body import load_body_model
-from airpose_lib.devices import resolve_device
+from airpose_lib.devices import resolve_device, worker_device
 from airpose_lib.errors import ConfigError
 from airpose_lib.fitting import AirPosePlusConfig, airpose_plus
 from airpose_lib.prior import PriorTrainConfig, VPoser, train_prior
@@ -66,6 +66,31 @@ def test_engine_launch_uses_the_same_rule():
     from airpose_lib.engine import launch
 
     assert launch.resolve_device is resolve_device
+
+
+@pytest.mark.parametrize("k,gpus,asked,expected", [
+    (0, 2, "auto", "cuda:0"), (1, 2, "auto", "cuda:1"), (2, 2, "auto", "cuda:0"), (5, 4, "cuda", "cuda:1"),
+    (1, 1, "auto", "auto"),  # one GPU: every worker on it, as asked
+    (1, 0, "auto", "auto"), (3, 0, "cpu", "cpu"),  # no GPU: nothing changes
+    (1, 2, "cpu", "cpu"), (1, 2, "cuda:0", "cuda:0"),  # the user's explicit choice stays
+])
+def test_parallel_workers_are_spread_over_the_visible_gpus(k, gpus, asked, expected):
+    assert worker_device(k, gpus, asked) == expected
+
+
+def test_an_ablation_worker_trains_on_its_own_gpu(monkeypatch):
+    """Worker k of the parallel runner passes cuda:(k mod GPUs) to its training; on a CPU-only
+    machine it passes nothing (the profile's device)."""
+    import airpose_lib.train.ablation as ablation
+
+    asked = []
+    monkeypatch.setattr(ablation, "trained_checkpoint", lambda *a, device=None: asked.append(device) or "x.pt")
+    monkeypatch.setattr(ablation, "_WORKER_INDEX", 3)
+    _gpus(monkeypatch, 2)
+    assert ablation._train_single_thread(("smoke", "airpose", 123, None)) == "x.pt"
+    _gpus(monkeypatch, 0)
+    ablation._train_single_thread(("smoke", "airpose", 123, None))
+    assert asked == ["cuda:1", None]
 
 
 # -- AirPose+ -------------------------------------------------------------------------------------

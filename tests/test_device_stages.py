@@ -6,6 +6,7 @@ comparisons run where a GPU is visible."""
 from __future__ import annotations
 
 import importlib
+import json
 import sys
 from pathlib import Path
 
@@ -177,3 +178,47 @@ def test_prior_training_on_cuda_is_close_to_the_cpu(corpus):
     m2, h2 = train_prior(corpus, PriorTrainConfig(**cfg, device="cuda"))
     assert all(p.device.type == "cpu" for p in m2.parameters())
     np.testing.assert_allclose(h2["loss"], h1["loss"], rtol=1e-3)
+
+
+# -- provenance -----------------------------------------------------------------------------------
+def test_the_provenance_names_each_trainings_device_and_precision(tmp_path):
+    from airpose_lib.eval.reference import train_settings
+
+    class Run:
+        def __init__(self, folder):
+            self.checkpoint = folder / "checkpoints" / "last.pt"
+
+    for name, result in (("a", {"config": {"device": "cuda:1", "precision": "bf16"}}),
+                         ("b", {"config": {"device": "cpu"}}), ("c", [])):
+        (tmp_path / name / "checkpoints").mkdir(parents=True)
+        (tmp_path / name / "result.json").write_text(json.dumps(result))
+    runs = {("airpose", 1): Run(tmp_path / "a"), ("baseline", 1): Run(tmp_path / "b"),
+            ("fullcam", 1): Run(tmp_path / "c"), ("multiview", 1): Run(tmp_path / "missing")}
+    assert train_settings(runs) == {("airpose", 1): {"device": "cuda:1", "precision": "bf16"},
+                                    ("baseline", 1): {"device": "cpu", "precision": None},
+                                    ("fullcam", 1): {"device": None, "precision": None},
+                                    ("multiview", 1): {"device": None, "precision": None}}
+
+
+def test_notebook_02s_bundle_records_the_trainings_device_and_precision(tmp_path):
+    from test_eval_reference import VARIANTS, _oracle, _runs
+
+    from airpose_lib.eval.ablation import ablation_table
+    from airpose_lib.eval.significance import claims_table
+    from airpose_lib.experiments.ablation import AblationExperiment, write_ablation_bundle
+    from airpose_lib.train.ablation import AblationRun
+
+    tables = _runs(seeds=(1,))
+    runs = {}
+    for (variant, seed), per_view in tables.items():
+        folder = tmp_path / "runs" / variant
+        (folder / "checkpoints").mkdir(parents=True)
+        (folder / "result.json").write_text(json.dumps({"wall_s": 2.0, "config": {"device": "cuda:0",
+                                                                                  "precision": "bf16"}}))
+        runs[variant, seed] = AblationRun(variant, seed, folder / "checkpoints" / "last.pt", {"per_view": per_view})
+    exp = AblationExperiment("smoke", "generated", list(VARIANTS), [1], runs, test=None)
+    out = write_ablation_bundle(exp, tmp_path / "bundle", table=ablation_table(exp.per_view, oracle=_oracle()),
+                                claims=claims_table(exp.per_view, n_resamples=50), oracle=_oracle())
+    prov = json.loads((out / "provenance.json").read_text())
+    assert prov["training"] == {f"{v} seed 1": {"device": "cuda:0", "precision": "bf16"} for v in VARIANTS}
+    assert prov["wall_s"]["train airpose seed 1"] == 2.0

@@ -21,7 +21,7 @@ from airpose_lib.fitting import AirPosePlusConfig, airpose_plus
 from airpose_lib.prior import PriorTrainConfig, VPoser, train_prior
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from test_fitting_airpose_plus import _perturbed, _scene  # noqa: E402
+from test_fitting_airpose_plus import _one_thread, _perturbed, _scene  # noqa: E402, F401 - autouse fixture
 
 # the modules (their package re-exports functions of the same names)
 plus_module = importlib.import_module("airpose_lib.fitting.airpose_plus")
@@ -29,14 +29,6 @@ prior_train_module = importlib.import_module("airpose_lib.prior.train")
 CUDA = torch.cuda.is_available()
 RESULT_TENSORS = ("theta", "v", "beta", "phi", "tau", "R_body_cam", "t_body_cam", "R_12", "t_12", "kept",
                   "frame_confidence")
-
-
-@pytest.fixture(autouse=True)
-def _one_thread():
-    n = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(n)
 
 
 def _gpus(monkeypatch, count: int) -> None:

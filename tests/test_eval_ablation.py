@@ -112,6 +112,9 @@ def test_a_finished_run_is_reused_only_with_the_same_config(tmp_path):
               "config": {**cfg, "data": {"root": str(data)}, "progress": False, "pretrained": str(backbone)}}
     (tmp_path / "result.json").write_text(json.dumps(result))
     assert _finished_run(tmp_path, "smoke", "airpose", 7) is not None
+    # the device a run resolved `auto` to, or a parallel worker's own GPU, does not make it another run
+    (tmp_path / "result.json").write_text(json.dumps({**result, "config": {**result["config"], "device": "cuda:1"}}))
+    assert _finished_run(tmp_path, "smoke", "airpose", 7) is not None
     other = tmp_path / "0123456789abcdef.pt"  # a backbone of other pretraining settings
     other.write_bytes(b"x")
     (tmp_path / "result.json").write_text(json.dumps({**result, "config": {**result["config"], "pretrained": str(other)}}))

@@ -25,7 +25,7 @@ def test_prior_train_and_info(tmp_path, capsys, open_model_files):
     assert "held-out reconstruction" in text and "joint limits" in text and out.is_file()
     assert main(["prior", "info", "--path", str(out)]) == 0
     prov = json.loads(capsys.readouterr().out)
-    assert prov["profile"] == "smoke" and prov["train"]["steps"] == 5
+    assert prov["profile"] == "smoke" and prov["train"]["steps"] == 5 and prov["train"]["device"] == "cpu"
     assert {"rot_err_deg", "joint_err_mm", "samples_within_joint_limits"} <= set(prov["validation"])
 
 
@@ -72,13 +72,13 @@ def test_fit_a_sequence_in_the_official_layout(tmp_path, capsys, open_model_file
     prior_file = save_prior(VPoser().eval(), tmp_path / "prior.pt")
     out = tmp_path / "fit.npz"
     code = main(["fit", "--sequence", str(root), "--init", str(init), "--out", str(out), "--profile", "smoke",
-                 "--prior-path", str(prior_file), "--iterations", "5", "--quiet"])
+                 "--prior-path", str(prior_file), "--iterations", "5", "--device", "cpu", "--quiet"])
     assert code == 0, capsys.readouterr().err
     res = np.load(out)
     assert res["theta"].shape == (F, 21, 3, 3) and res["R_12"].shape == (F, 3, 3)
     assert res["kept"].tolist() == [True, True, False, True, True, True]
     prov = json.loads(str(res["provenance"]))
-    assert prov["skipped_frames"] == [2] and prov["config"]["iterations"] == 5
+    assert prov["skipped_frames"] == [2] and prov["config"]["iterations"] == 5 and prov["config"]["device"] == "cpu"
     np.testing.assert_array_equal(res["frames"], np.arange(10, 10 + F))
     # --frames are image numbers, as in `predict` and `finetune` (the images here are numbered 10..15)
     part = tmp_path / "part.npz"

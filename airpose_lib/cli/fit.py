@@ -35,7 +35,7 @@ def _cmd_fit(args: argparse.Namespace) -> int:
     seq = load_sequence(args.sequence, frames=frames, ground_truth=False)
     init = initialisation_for(pred, args.init, seq.frames)
     cfg = fit_config(args.profile, official_temporal=args.official_temporal, iterations=args.iterations,
-                     threads=args.threads)
+                     threads=args.threads, device=args.device)
     prior, prior_prov = load_prior(args.prior, args.prior_path, return_provenance=True)
     res = fit_sequence(seq, init, prior=prior, config=cfg, progress=not args.quiet)
     out = save_refinement(args.out or refined_path(args.init), seq.frames, res, sequence=args.sequence,
@@ -70,5 +70,7 @@ def add_fit(sub) -> None:
                      help="the official code's temporal weights (10 x pose, 100 x root/translation)")
     fit.add_argument("--threads", type=int, default=None,
                      help="torch threads; 1 is faster when other jobs share the CPU cores")
+    fit.add_argument("--device", default=None,
+                     help="auto (CUDA if available), cpu, cuda or cuda:N (default: the profile's, else cpu)")
     fit.add_argument("--quiet", action="store_true", help="no progress bar")
     fit.set_defaults(func=_cmd_fit)

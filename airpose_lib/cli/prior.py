@@ -22,7 +22,7 @@ def _cmd_prior_train(args: argparse.Namespace) -> int:
     if args.threads:
         torch.set_num_threads(args.threads)
     out, val = train_and_save_prior(args.profile, args.out, steps=args.steps, seed=args.seed,
-                                    progress=not args.quiet)
+                                    device=args.device, progress=not args.quiet)
     print(f"corpus: {val['train_poses']} training poses, {val['val_poses']} held out")
     print(f"trained {val['steps']} steps in {val['seconds']:.0f} s")
     print(f"held-out reconstruction: mean {val['rot_err_deg']:.2f} deg per joint "
@@ -58,6 +58,8 @@ def add_prior(sub) -> None:
     tr.add_argument("--seed", type=int, default=None, help="(default: the profile's)")
     tr.add_argument("--threads", type=int, default=None,
                     help="torch threads; 1 is faster when other jobs share the CPU cores")
+    tr.add_argument("--device", default=None,
+                    help="auto (CUDA if available), cpu, cuda or cuda:N (default: the profile's, else cpu)")
     tr.add_argument("--out", type=Path, default=None, help="checkpoint file (default: the kit cache)")
     tr.add_argument("--quiet", action="store_true", help="no progress bar")
     tr.set_defaults(func=_cmd_prior_train)

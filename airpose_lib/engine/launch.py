@@ -26,6 +26,7 @@ import os
 import torch
 import torch.distributed as dist
 
+from airpose_lib.devices import resolve_device
 from airpose_lib.errors import ConfigError
 
 __all__ = ["PRECISIONS", "launch_env", "single_process", "process_rank", "is_distributed", "resolve_device",
@@ -68,35 +69,6 @@ def process_rank() -> tuple[int, int]:
         return dist.get_rank(), dist.get_world_size()
     env = launch_env()
     return (env[0], env[2]) if env is not None else (0, 1)
-
-
-def resolve_device(device: str, local_rank: int = 0) -> torch.device:
-    """The device of the process with ``local_rank`` on its node.
-
-    ``auto``: ``cuda:<local_rank>`` when CUDA is available, else CPU; ``cuda`` (no index): the
-    process's own GPU ``cuda:<local_rank>``; ``cuda:N``, ``cpu``, ``mps`` as given.
-
-    Raises:
-        ConfigError: not a device string, or a CUDA device that this torch or machine does not have
-            (one line: what was asked, what there is, the fix).
-    """
-    if device == "auto":
-        return torch.device(f"cuda:{local_rank}") if torch.cuda.is_available() else torch.device("cpu")
-    try:
-        dev = torch.device(device)
-    except (RuntimeError, TypeError):
-        raise ConfigError(f"device {device!r} is not a device; use auto, cpu, cuda or cuda:N") from None
-    if dev.type == "cuda":
-        if not torch.cuda.is_available():
-            build = "a CPU-only torch" if torch.version.cuda is None else "no visible GPU"
-            raise ConfigError(f"device {device!r} asked for, but this machine has {build} "
-                             f"(torch {torch.__version__}); use --device cpu, or install a CUDA build of torch")
-        if dev.index is None:
-            dev = torch.device(f"cuda:{local_rank}")
-        if dev.index >= torch.cuda.device_count():
-            raise ConfigError(f"device {dev} asked for, but only {torch.cuda.device_count()} GPU(s) are visible; "
-                             "use another index or set CUDA_VISIBLE_DEVICES")
-    return dev
 
 
 def check_precision(precision: str, device: torch.device | str) -> None:

@@ -7,7 +7,8 @@ Notebook 02 writes a results bundle into its output folder with :func:`write_ref
 * ``per_seed.csv``: one row per variant x seed with the metric means (what the check compares);
 * ``claims.csv`` / ``claims.md``: the six ordering claims with difference, interval and verdict;
 * ``oracle.csv``: the mean-body oracle's MPE summary (the floor of the data);
-* ``provenance.json``: kit version, git commit, machine, command and the wall time of each step.
+* ``provenance.json``: kit version, git commit, machine, command and the wall time of each step
+  (notebook 02 adds the device and precision each network trained with, :func:`train_settings`).
 
 ``airpose reproduce --write-reference`` copies that bundle to ``results/<profile>/`` (nothing else
 writes there); without the flag, a run whose profile has a committed bundle prints
@@ -34,7 +35,7 @@ from airpose_lib.atomic import atomic_path
 from .ablation import PER_SEED_METRICS, table_to_markdown
 
 __all__ = ["REFERENCE_FILES", "RESULTS_ROOT", "reference_dir", "machine_description", "git_commit", "provenance_record",
-           "train_wall_s", "oracle_summary", "write_reference", "read_reference_table", "side_by_side",
+           "train_settings", "train_wall_s", "oracle_summary", "write_reference", "read_reference_table", "side_by_side",
            "compare_to_reference", "check_against_reference", "install_reference", "reference_report",
            "RECORDING_FILES", "install_recordings_reference", "recordings_report"]
 
@@ -99,21 +100,49 @@ def git_commit(root: str | Path | None = None) -> dict:
     return {"commit": sha, "dirty": bool(status.strip())}
 
 
+def _run_result(run) -> dict:
+    """A run's ``result.json`` ({} when it has none or it is unreadable: an official checkpoint).
+
+    ``run``: an ``AblationRun`` (its ``out_dir`` if it has one, else the folder above ``checkpoints/``).
+    """
+    folder = getattr(run, "out_dir", None) or Path(run.checkpoint).parent.parent
+    try:
+        result = json.loads((Path(folder) / "result.json").read_text())
+    except (OSError, ValueError):
+        return {}
+    return result if isinstance(result, dict) else {}
+
+
 def train_wall_s(runs: Mapping) -> dict:
     """(variant, seed) -> training wall time from each run folder's ``result.json`` (None if absent).
 
     Args:
-        runs: (variant, seed) -> ``AblationRun`` (its ``out_dir`` if it has one, else the folder
-            above ``checkpoints/``).
+        runs: (variant, seed) -> ``AblationRun`` (see :func:`_run_result`).
     """
     out = {}
     for key, run in runs.items():
-        folder = getattr(run, "out_dir", None) or Path(run.checkpoint).parent.parent
         try:
-            w = json.loads((Path(folder) / "result.json").read_text()).get("wall_s")
+            w = _run_result(run).get("wall_s")
             out[key] = float(w) if w is not None else None
-        except (OSError, ValueError, TypeError):
+        except (ValueError, TypeError):
             out[key] = None
+    return out
+
+
+def train_settings(runs: Mapping) -> dict:
+    """(variant, seed) -> ``{"device", "precision"}`` each network was trained with, from the
+    configuration in its ``result.json`` (the device the run resolved ``auto`` to); None where
+    unknown (no ``result.json``: the authors' checkpoints; a run from before precision existed
+    trained in fp32, the config's default, but its file does not say so).
+
+    Args:
+        runs: (variant, seed) -> ``AblationRun`` (see :func:`_run_result`).
+    """
+    out = {}
+    for key, run in runs.items():
+        config = _run_result(run).get("config")
+        config = config if isinstance(config, dict) else {}
+        out[key] = {"device": config.get("device"), "precision": config.get("precision")}
     return out
 
 

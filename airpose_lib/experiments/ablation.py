@@ -33,7 +33,7 @@ from airpose_lib.data import StillFrameDataset, default_root
 from airpose_lib.data.official_synthetic import OfficialSyntheticDataset
 from airpose_lib.eval.ablation import per_seed_table
 from airpose_lib.eval.oracle import oracle_per_view
-from airpose_lib.eval.reference import train_wall_s, write_reference
+from airpose_lib.eval.reference import train_settings, train_wall_s, write_reference
 from airpose_lib.eval.significance import claims_table
 from airpose_lib.geometry import axis_angle_to_matrix, crop_intrinsics, full_to_crop_pixels, project_points
 from airpose_lib.model import posed_joints_and_vertices
@@ -160,14 +160,16 @@ def write_ablation_bundle(exp: AblationExperiment, folder: str | Path, *, table:
                           claims: pd.DataFrame, oracle: pd.DataFrame | None,
                           eval_max_samples: int | None = None) -> Path:
     """The run's results bundle (:func:`~airpose_lib.eval.reference.write_reference`), with every
-    step's wall time and each network's training time."""
+    step's wall time, each network's training time and the device and precision it trained with."""
     steps = {**exp.wall, **{f"train {v} seed {s}": w for (v, s), w in exp.train_wall().items()}}
+    training = {f"{v} seed {s}": t for (v, s), t in train_settings(exp.runs).items()}
     return write_reference(folder, table=table, per_seed=exp.per_seed(), claims=claims, oracle=oracle,
                            profile=exp.profile,
                            command=f"airpose reproduce --profile {exp.profile} --only 02_ablation_table",
                            step_wall_s=steps, extra={"seeds": list(exp.seeds), "variants": list(exp.variants),
                                                      "data_source": exp.source,
-                                                     "eval_max_samples": eval_max_samples})
+                                                     "eval_max_samples": eval_max_samples,
+                                                     "training": training})
 
 
 @dataclass

@@ -215,7 +215,10 @@ def _airpose_plus(sequence, init: dict, profile: str, prior, prior_info: dict, o
     digest = hashlib.sha256()
     for k in start:  # the whole initialisation, not just one of its arrays
         digest.update(np.ascontiguousarray(start[k]).tobytes())
-    key = _key("airpose+", cfg.to_dict(), prior_info.get("stamp"), str(sequence.root), sequence.frames.tolist(),
+    # The device (the profile's `fitting: device`) is in the key only when it is not the default
+    # CPU, so that the caches written before the option existed stay valid.
+    fit_key = {k: v for k, v in cfg.to_dict().items() if k != "device" or v != "cpu"}
+    key = _key("airpose+", fit_key, prior_info.get("stamp"), str(sequence.root), sequence.frames.tolist(),
                digest.hexdigest(), _sequence_stamp(sequence))
     cached = _cached_npz(out, key)
     if cached is not None:

@@ -62,6 +62,7 @@ from torch import Tensor
 
 from airpose_lib.body import BODY_25_FROM_SMPLX, COCO18_FROM_SMPLX, load_body_model
 from airpose_lib.body.forward import BodyForward
+from airpose_lib.devices import resolve_device
 from airpose_lib.errors import ConfigError, ProfileError
 from airpose_lib.geometry import (
     axis_angle_to_matrix,
@@ -119,6 +120,7 @@ class AirPosePlusConfig:
     chunk_size: int = 2000
     min_depth: float = 0.05  # metres; projected depths are clamped to this (keeps a wild start finite)
     num_threads: int | None = None  # torch intra-op threads during the fit (None: unchanged)
+    device: str = "cpu"  # auto, cpu, cuda, cuda:N (airpose_lib.devices); results come back on the CPU
     history_every: int = 10
 
     @classmethod
@@ -143,7 +145,7 @@ def fitting_profile(profile: str, **overrides) -> AirPosePlusConfig:
 
 @dataclass
 class AirPosePlusResult:
-    """Refined per-frame parameters (float32 CPU tensors).
+    """Refined per-frame parameters (float32 CPU tensors, whatever ``config.device`` the fit ran on).
 
     Attributes:
         theta: ``(F, 21, 3, 3)`` body joint rotations.
@@ -334,9 +336,10 @@ class AirPosePlusLoss:
     Args:
         keypoints: detector name -> ``(F, V, J, 3)`` ``[x, y, confidence]``.
         K: ``(V, 3, 3)``.
-        prior: the pose prior (its decoder maps ``v`` to ``theta``).
+        prior: the pose prior (its decoder maps ``v`` to ``theta``); moved to ``config.device``.
         body: an ``smplx.SMPLX`` (default: the open neutral model).
-        config: the weights (:class:`AirPosePlusConfig`).
+        config: the weights and the device (:class:`AirPosePlusConfig`); the variables passed to
+            the loss must be on that device.
         joint_maps: extra detector maps.
     """
 
@@ -350,7 +353,9 @@ class AirPosePlusLoss:
                              f"the keypoints, got {tuple(K.shape)}")
         uniq, gather = torch.unique(idx, return_inverse=True)
         kbody = _keypoint_body(body, uniq.tolist())
-        self._setup(config or AirPosePlusConfig(), prior, kbody, xy, w, gather, K)
+        cfg = config or AirPosePlusConfig()
+        dev = resolve_device(cfg.device)
+        self._setup(cfg, prior.to(dev), kbody.to(dev), xy.to(dev), w.to(dev), gather.to(dev), K.to(dev))
 
     @classmethod
     def _prepared(cls, cfg, prior, kbody, xy, w, gather, K) -> AirPosePlusLoss:
@@ -432,20 +437,25 @@ def airpose_plus(
         init: per-frame start, keys ``phi``, ``tau``, ``theta``, ``beta`` in any form
             :func:`init_from_views` takes (AirPose's per-view outputs, e.g.
             ``model.to_smplx_params`` over the sequence).
-        prior: the pose prior (default ``load_prior("kit")``).
-        body: an ``smplx.SMPLX`` (default: the open neutral model, as the network predicts).
-        config: weights and schedule; keyword ``overrides`` replace single fields.
+        prior: the pose prior (default ``load_prior("kit")``); moved to ``config.device`` (in place,
+            as ``eval()``; a no-op on the default CPU).
+        body: an ``smplx.SMPLX`` (default: the open neutral model, as the network predicts); the
+            fit uses its own float32 copy on ``config.device``.
+        config: weights, schedule and ``device`` (``auto``: CUDA when available); keyword
+            ``overrides`` replace single fields.
         joint_maps: extra or replacement detector maps (index into the 76 SMPL-X outputs).
         progress: tqdm bar over the iterations.
     Returns:
-        :class:`AirPosePlusResult`.
+        :class:`AirPosePlusResult`, on the CPU.
     Raises:
+        ConfigError: a bad ``device`` (:func:`airpose_lib.devices.resolve_device`).
         ValueError: empty sequence, mismatched frame/view counts, NaN initialisation, or no frame
             above ``min_frame_confidence``.
     """
     cfg = replace(config or AirPosePlusConfig(), **overrides)
     if cfg.latent_start < 0 or cfg.iterations < 0 or cfg.chunk_size < 1:
         raise ConfigError("iterations, latent_start must be >= 0 and chunk_size >= 1")
+    dev = resolve_device(cfg.device)
     xy, w, idx, _ = _prepare_keypoints(keypoints, joint_maps)
     F, V = xy.shape[:2]
     if F == 0:
@@ -471,12 +481,16 @@ def airpose_plus(
     kbody = _keypoint_body(body, uniq.tolist())
     if start["beta"].shape[0] > kbody.num_betas:
         raise ValueError(f"beta has {start['beta'].shape[0]} entries, the body model {kbody.num_betas}")
+    # Inputs are checked on the CPU above; the optimisation runs on ``dev``.
+    prior, kbody = prior.to(dev), kbody.to(dev)
+    start = {k: t.to(dev) for k, t in start.items()}
 
     threads = torch.get_num_threads()
     if cfg.num_threads:
         torch.set_num_threads(cfg.num_threads)
     try:
-        result = _optimise(cfg, prior, kbody, xy[kept], w[kept], gather, K, start, kept, progress)
+        result = _optimise(cfg, prior, kbody, xy[kept].to(dev), w[kept].to(dev), gather.to(dev), K.to(dev),
+                           start, kept.to(dev), progress)
     finally:
         torch.set_num_threads(threads)
     result.frame_confidence = conf
@@ -555,9 +569,10 @@ def _optimise(cfg, prior, kbody, xy, w, gather, K, start, kept, progress) -> Air
         R_12 = t_12 = None
         if phi.shape[1] >= 2:
             R_12, t_12 = relative_camera_pose(phi[:, 0], tau_out[:, 0], phi[:, 1], tau_out[:, 1])
-    return AirPosePlusResult(theta=theta, v=v_out, beta=beta.detach().clone(), phi=phi, tau=tau_out,
-                             R_body_cam=R_bc, t_body_cam=t_bc, R_12=R_12, t_12=t_12, kept=kept.clone(),
-                             frame_confidence=torch.zeros(F), history=hist, seconds=seconds, config=cfg)
+    cpu = {k: None if t is None else t.cpu() for k, t in
+           dict(theta=theta, v=v_out, beta=beta.detach().clone(), phi=phi, tau=tau_out, R_body_cam=R_bc,
+                t_body_cam=t_bc, R_12=R_12, t_12=t_12, kept=kept.clone()).items()}
+    return AirPosePlusResult(**cpu, frame_confidence=torch.zeros(F), history=hist, seconds=seconds, config=cfg)
 
 
 def fit_sequence(sequence, init: Mapping[str, object], **kwargs) -> AirPosePlusResult:

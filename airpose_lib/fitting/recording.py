@@ -27,7 +27,7 @@ _FIX = "write it again with `airpose predict`"
 
 
 def fit_config(profile: str, *, official_temporal: bool = False, iterations: int | None = None,
-               threads: int | None = None) -> AirPosePlusConfig:
+               threads: int | None = None, device: str | None = None) -> AirPosePlusConfig:
     """The profile's ``fitting:`` configuration with the command's overrides.
 
     Args:
@@ -35,6 +35,7 @@ def fit_config(profile: str, *, official_temporal: bool = False, iterations: int
             (:meth:`AirPosePlusConfig.official_code`) in place of the profile's.
         iterations: Adam iterations (None: the profile's).
         threads: torch threads during the fit (None or 0: unchanged).
+        device: ``auto``, ``cpu``, ``cuda`` or ``cuda:N`` (None: the profile's, default cpu).
     Raises:
         ValueError: unknown profile or keys.
     """
@@ -45,6 +46,8 @@ def fit_config(profile: str, *, official_temporal: bool = False, iterations: int
         cfg.iterations = iterations
     if threads:
         cfg.num_threads = threads
+    if device is not None:
+        cfg.device = device
     return cfg
 
 

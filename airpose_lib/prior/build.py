@@ -14,6 +14,7 @@ import torch
 from airpose_lib.body import BodyForward, load_body_model
 from airpose_lib.data.motions import evaluate_motion, sample_script
 from airpose_lib.data.poses import sample_body_pose, within_limits
+from airpose_lib.devices import resolve_device
 from airpose_lib.folder_lock import file_lock_for
 
 from .checkpoint import kit_prior_path, save_prior
@@ -41,8 +42,12 @@ def prior_corpus(corpus: CorpusConfig, stream: int, n_still: int, n_motion: int)
 
 
 def train_and_save_prior(profile: str, out: str | Path | None = None, *, steps: int | None = None,
-                         seed: int | None = None, progress: bool = False) -> tuple[Path, dict]:
+                         seed: int | None = None, device: str | None = None,
+                         progress: bool = False) -> tuple[Path, dict]:
     """Train the prior with a profile's ``prior:`` section, evaluate it on held-out poses, save it.
+
+    ``steps``, ``seed``, ``device`` (``auto``, ``cpu``, ``cuda``, ``cuda:N``) replace the profile's
+    (None: the profile's; the device's default is cpu).
 
     Returns:
         the checkpoint path (default :func:`kit_prior_path` of ``profile``) and a report with
@@ -51,14 +56,17 @@ def train_and_save_prior(profile: str, out: str | Path | None = None, *, steps: 
     """
     path = Path(out) if out is not None else kit_prior_path(profile)
     with file_lock_for(path, "prior checkpoint"):  # one writer per output file
-        return _train_and_save_prior(profile, path, steps, seed, progress)
+        return _train_and_save_prior(profile, path, steps, seed, device, progress)
 
 
-def _train_and_save_prior(profile: str, path: Path, steps: int | None, seed: int | None,
+def _train_and_save_prior(profile: str, path: Path, steps: int | None, seed: int | None, device: str | None,
                           progress: bool) -> tuple[Path, dict]:
     cfg, corpus = prior_profile(profile)
     if steps is not None:
         cfg.steps = steps
+    if device is not None:
+        cfg.device = device
+    dev = resolve_device(cfg.device)  # a bad device fails before the corpus is drawn
     if seed is not None:
         cfg.seed = corpus.seed = seed
     share = corpus.n_poses / max(corpus.n_poses + corpus.n_motion_poses, 1)
@@ -67,9 +75,13 @@ def _train_and_save_prior(profile: str, path: Path, steps: int | None, seed: int
     val_poses = prior_corpus(corpus, 1, val_still, corpus.n_val - val_still)
     joints_fn = None
     if cfg.w_joints > 0:
-        body = BodyForward(load_body_model("open", "neutral"), range(22), vertices=None)
-        zero_beta = torch.zeros(1, body.num_betas)
-        joints_fn = lambda R: body(R, zero_beta)[0]  # noqa: E731 - 22 body joints of the mean shape
+        body = BodyForward(load_body_model("open", "neutral"), range(22), vertices=None).to(dev)
+        zero_beta = torch.zeros(1, body.num_betas, device=dev)
+
+        def joints_fn(R):
+            """22 body joints of the mean shape, on ``R``'s device (training: the run's device;
+            the held-out evaluation: the CPU)."""
+            return body(R.to(dev), zero_beta)[0].to(R.device)
     model, hist = train_prior(train_poses, cfg, joints_fn=joints_fn, progress=progress)
     val = evaluate_prior(model, val_poses, joints_fn=joints_fn, n_samples=1000, seed=cfg.seed)
     samples = val.pop("samples")

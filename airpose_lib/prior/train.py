@@ -27,6 +27,7 @@ import numpy as np
 import torch
 from torch import Tensor
 
+from airpose_lib.devices import resolve_device
 from airpose_lib.engine import Schedule, TrainingTask, run_engine
 from airpose_lib.errors import ProfileError
 from airpose_lib.geometry import axis_angle_to_matrix, geodesic_angle
@@ -59,6 +60,7 @@ class PriorTrainConfig:
     latent_dim: int = LATENT_DIM
     seed: int = 0
     log_every: int = 250
+    device: str = "cpu"  # auto, cpu, cuda, cuda:N (airpose_lib.devices); the model comes back on the CPU
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -142,23 +144,26 @@ def train_prior(
     Args:
         poses: ``(N, 21, 3)`` (or ``(N, 63)``) axis-angle training poses, N >= 2.
         config: sizes and weights (default :class:`PriorTrainConfig`).
-        joints_fn: optional body-model joints for the joint term (``w_joints``).
-        val_poses: optional held-out poses, evaluated at the end (:func:`evaluate_prior`).
+        joints_fn: optional body-model joints for the joint term (``w_joints``); it is called
+            with rotations on ``config.device`` and must answer on the same device.
+        val_poses: optional held-out poses, evaluated at the end (:func:`evaluate_prior`, on the CPU).
         progress: tqdm bar.
         log: called with a line every ``config.log_every`` steps.
     Returns:
-        the trained model (eval mode) and a history dict: ``config``, ``steps``, per-log-step
+        the trained model (eval mode, on the CPU whatever ``config.device``) and a history dict: ``config``, ``steps``, per-log-step
         ``loss``/``rot_deg``/``kl``, ``seconds``, and ``val`` metrics if ``val_poses`` was given.
     """
     cfg = config or PriorTrainConfig()
     data = _as_poses(poses)  # (N, 21, 3)
     if data.shape[0] < 2:
         raise ValueError("need at least 2 training poses (batch norm)")
-    torch.manual_seed(cfg.seed)  # weight initialisation
-    model = VPoser(cfg.num_neurons, cfg.latent_dim)
+    dev = resolve_device(cfg.device)
+    torch.manual_seed(cfg.seed)  # weight initialisation (on the CPU: the same weights on every device)
+    model = VPoser(cfg.num_neurons, cfg.latent_dim).to(dev)
     model.train()
     opt = torch.optim.Adam(model.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
-    gen = torch.Generator().manual_seed(cfg.seed + 1)  # the batch order
+    gen = torch.Generator().manual_seed(cfg.seed + 1)  # the batch order, drawn on the CPU
+    data = data.to(dev)
     R_all = axis_angle_to_matrix(data)  # (N, 21, 3, 3), computed once
     J_all = None
     if joints_fn is not None and cfg.w_joints > 0:
@@ -174,7 +179,7 @@ def train_prior(
     run_engine(task, schedule)
     hist["seconds"] = time.perf_counter() - t0
     hist["steps"] = cfg.steps
-    model.eval()
+    model.eval().cpu()
     if val_poses is not None:
         hist["val"] = evaluate_prior(model, val_poses, joints_fn=joints_fn)
     return model, hist
@@ -215,6 +220,7 @@ class _PriorTask(TrainingTask):
         cfg = self.cfg
         for g in self.optimizer.param_groups:
             g["lr"] = _cosine_lr(cfg, step)
+        idx = idx.to(self.data.device)  # drawn by the CPU generator
         out = self.model(self.data[idx])
         R_rec = out["pose_body_matrot"]
         rot = rotation_geodesic(R_rec, self.R_all[idx]).mean()

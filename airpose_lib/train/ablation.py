@@ -8,6 +8,7 @@ from pathlib import Path
 
 import pandas as pd
 
+from airpose_lib.devices import worker_device
 from airpose_lib.engine import StaleRunError
 from airpose_lib.eval.ablation import VARIANT_LABELS
 from airpose_lib.process_guard import die_with_parent
@@ -49,6 +50,8 @@ def run_ablation(profile: str, variants: Sequence[str] = tuple(VARIANT_LABELS), 
         workers: train this many runs at once, each in its own process on one thread (on a
             2-core CPU two single-thread runs do ~1.5x the steps of one two-thread run, whose
             threads also slow down several-fold when anything else runs). Same results as 1.
+            With several GPUs and the device ``auto`` or ``cuda``, worker k trains on
+            ``cuda:(k mod GPUs)`` (:func:`airpose_lib.devices.worker_device`).
     Returns:
         (variant, seed) -> :class:`AblationRun` (tables of :func:`airpose_lib.train.evaluate.evaluate`
         on the test split: ``per_view``, ``per_joint``, ``relative_camera``, and ``per_view_tight``
@@ -78,12 +81,31 @@ def _run_dir(profile: str, variant: str, seed: int, out_root: str | Path | None)
         else default_out_dir(profile, variant, seed)
 
 
+# This worker process's index k among the parallel workers (set by :func:`_init_worker`).
+_WORKER_INDEX = 0
+
+
+def _init_worker(parent_pid: int, indices) -> None:
+    """Start of a worker of :func:`_train_parallel`: tied to the parent, takes its index k."""
+    global _WORKER_INDEX
+    die_with_parent(parent_pid)
+    _WORKER_INDEX = indices.get()
+
+
 def _train_single_thread(job: tuple) -> str:
-    """Worker of :func:`_train_parallel` (module level: it is pickled into spawned processes)."""
+    """Worker of :func:`_train_parallel` (module level: it is pickled into spawned processes).
+
+    ``job``: ``(profile, variant, seed, out_root)``; the run's device is spread over the visible
+    GPUs by the worker's index (:func:`airpose_lib.devices.worker_device`; unchanged on the CPU).
+    """
     import torch
 
     torch.set_num_threads(1)
-    return str(trained_checkpoint(*job))
+    profile, variant, seed, out_root = job
+    asked = load_train_config(profile, variant, seed).device
+    gpus = torch.cuda.device_count() if torch.cuda.is_available() else 0
+    device = worker_device(_WORKER_INDEX, gpus, asked)
+    return str(trained_checkpoint(profile, variant, seed, out_root, device=None if device == asked else device))
 
 
 def _train_parallel(profile: str, variants: Sequence[str], seeds: Sequence[int],
@@ -97,26 +119,29 @@ def _train_parallel(profile: str, variants: Sequence[str], seeds: Sequence[int],
     if not todo:
         return
     prepare_data(load_train_config(profile, todo[0][1], todo[0][2]))  # generate the data once, here
+    ctx, n = mp.get_context("spawn"), min(workers, len(todo))
+    indices = ctx.Queue()  # each worker takes one k = 0 .. n-1 at its start (its GPU, see above)
+    for k in range(n):
+        indices.put(k)
     # die_with_parent: a worker trains for minutes to hours; it must not outlive a killed parent
-    with ProcessPoolExecutor(min(workers, len(todo)), mp_context=mp.get_context("spawn"),
-                             initializer=die_with_parent, initargs=(os.getpid(),)) as pool:
+    with ProcessPoolExecutor(n, mp_context=ctx, initializer=_init_worker, initargs=(os.getpid(), indices)) as pool:
         for _ in pool.map(_train_single_thread, todo):
             pass
 
 
 def trained_checkpoint(profile: str, variant: str, seed: int, out_root: str | Path | None = None,
-                       progress: bool = False) -> Path:
+                       progress: bool = False, device: str | None = None) -> Path:
     """The final checkpoint of a profile's run of ``variant`` (trained, or resumed, first if needed).
 
     Same run folders as :func:`run_ablation`, so the real-data notebooks reuse Table I's networks.
     A run left there with other settings (e.g. from the backbone the profile asked for before a
     new one was committed) is stale: it is trained afresh, with a line saying so, instead of
-    stopping the reproduction.
+    stopping the reproduction. ``device`` replaces the profile's (None: the profile's).
     """
     out = _run_dir(profile, variant, seed, out_root)
     run = _finished_run(out, profile, variant, seed)
     if run is None:
-        kw = dict(seed=seed, out_dir=out, overrides={"progress": progress})
+        kw = dict(seed=seed, out_dir=out, overrides={"progress": progress, **({"device": device} if device else {})})
         try:
             run = train(variant, profile, resume=True, **kw)
         except StaleRunError as e:
@@ -138,8 +163,9 @@ def _finished_run(out: Path, profile: str, variant: str, seed: int) -> TrainResu
     wanted = load_train_config(profile, variant, seed).to_dict()
     # training fills in the resolved dataset folder when the profile names none, and the
     # profile's backbone file for `pretrained: profile` (named by its key: it must be the key the
-    # profile's `pretrain:` settings give now)
-    ignore = {"progress"} | ({"data"} if not wanted["data"] else set())
+    # profile's `pretrain:` settings give now); the device may be a parallel worker's own GPU
+    # (_train_single_thread) and changes the rounding only
+    ignore = {"progress", "device"} | ({"data"} if not wanted["data"] else set())
     if wanted.get("pretrained") == "profile":
         ignore.add("pretrained")
         used = Path(str(done.config.get("pretrained")))

@@ -1,0 +1,56 @@
+"""Which torch device a process, a worker or a fit runs on: the one rule of the kit.
+
+``auto`` means the process's own GPU when CUDA is available, else the CPU; ``cuda`` (no index)
+the process's own GPU; ``cuda:N``, ``cpu``, ``mps`` as given. A process's own GPU is
+``cuda:<local_rank>`` under ``torchrun`` (:mod:`airpose_lib.engine.launch`) and
+``cuda:<k mod GPUs>`` for the k-th parallel worker of the ablation runner (:func:`worker_device`).
+
+A helper every package may use (``fitting`` and ``prior`` may not import ``engine``); torch is
+imported inside the functions so that importing the helpers stays free of torch (the CLI's parser).
+"""
+from __future__ import annotations
+
+from airpose_lib.errors import ConfigError
+
+__all__ = ["resolve_device", "worker_device"]
+
+
+def resolve_device(device: str, local_rank: int = 0) -> "torch.device":  # noqa: F821
+    """The device of the process with ``local_rank`` on its node (rules: the module docstring).
+
+    Raises:
+        ConfigError: not a device string, or a CUDA device that this torch or machine does not have
+            (one line: what was asked, what there is, the fix).
+    """
+    import torch  # here, not at module level: see the module docstring
+
+    if device == "auto":
+        return torch.device(f"cuda:{local_rank}") if torch.cuda.is_available() else torch.device("cpu")
+    try:
+        dev = torch.device(device)
+    except (RuntimeError, TypeError):
+        raise ConfigError(f"device {device!r} is not a device; use auto, cpu, cuda or cuda:N") from None
+    if dev.type == "cuda":
+        if not torch.cuda.is_available():
+            build = "a CPU-only torch" if torch.version.cuda is None else "no visible GPU"
+            raise ConfigError(f"device {device!r} asked for, but this machine has {build} "
+                              f"(torch {torch.__version__}); use --device cpu, or install a CUDA build of torch")
+        if dev.index is None:
+            dev = torch.device(f"cuda:{local_rank}")
+        if dev.index >= torch.cuda.device_count():
+            raise ConfigError(f"device {dev} asked for, but only {torch.cuda.device_count()} GPU(s) are visible; "
+                              "use another index or set CUDA_VISIBLE_DEVICES")
+    return dev
+
+
+def worker_device(k: int, gpus: int, device: str) -> str:
+    """The device string of the ``k``-th of several parallel workers (k = 0, 1, ...).
+
+    With ``device`` ``auto`` or ``cuda`` (no index) and ``gpus`` > 1 visible GPUs the workers are
+    spread round-robin, ``cuda:(k mod gpus)``; anything else (CPU, one GPU, an explicit
+    ``cuda:N``, which the user chose) is returned unchanged, so a CPU run does not change.
+    Pure: ``gpus`` is ``torch.cuda.device_count()`` (0 without CUDA), read by the caller.
+    """
+    if device in ("auto", "cuda") and gpus > 1:
+        return f"cuda:{k % gpus}"
+    return device

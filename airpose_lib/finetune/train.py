@@ -133,8 +133,8 @@ class FineTuneConfig:
         frames: ``[start, stop)`` image numbers to train on (paper: ``[0, 7000]``); None: all.
         input_size: crop side S (default: from the checkpoint).
         detector, box_min_confidence, margin_px: where the crops' boxes come from
-            (``predict_sequence``; the runtime's defaults: a margin of None frames the person as
-            the training crops do, ``runtime.source.network_box_margin``).
+            (``predict_sequence``; the drones' defaults: a margin of None frames the person as
+            the training crops do, ``data.network_input.network_box_margin``).
         feature_batch_size: frames per backbone batch when caching the features.
         checkpoint_every, keep_checkpoints, log_every: as ``TrainConfig``.
         prior, prior_path, prior_tag: the pose prior (``airpose_lib.prior.load_prior``).

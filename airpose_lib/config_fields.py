@@ -8,7 +8,8 @@ profile used to end in a ``TypeError`` deep in the training loop). Ranges stay n
 they concern, in the dataclass's own ``__post_init__`` (:func:`require`).
 
 The same check reads a profile section (:func:`check_keys` for unknown keys, with the closest
-known one) and ``--set KEY=VALUE`` on the command line. Imports nothing of the kit but ``errors``.
+known one; :func:`config_from` under ``profiles.section_config``) and ``--set KEY=VALUE`` on the
+command line. Imports nothing of the kit but ``errors``.
 """
 from __future__ import annotations
 
@@ -21,7 +22,7 @@ from collections.abc import Iterable, Mapping
 from pathlib import Path
 from typing import Any
 
-from airpose_lib.errors import ConfigError
+from airpose_lib.errors import ConfigError, ProfileError
 
 __all__ = ["ConfigError", "check_type", "check_fields", "check_keys", "config_from", "field_types", "require", "finite"]
 
@@ -84,20 +85,26 @@ def check_fields(config: Any) -> None:
             object.__setattr__(config, name, checked)
 
 
-def check_keys(keys: Iterable[str], cls, where: str) -> None:
-    """Raise :class:`ConfigError` for a key that is not a field of ``cls``, naming the closest one.
+def check_keys(keys: Iterable[str], cls, where: str, error: type[ConfigError] = ConfigError) -> None:
+    """Raise ``error`` for a key that is not a field of ``cls``, naming the closest one.
+
+    The one unknown-key check of the kit's configs (profile sections, ``--set``, options).
 
     Args:
         keys: the keys given (a profile section's, ``--set``'s).
-        cls: the config dataclass.
+        cls: the config dataclass, or a tuple of them (a section shared by several configs:
+            a key may be a field of any).
         where: where they came from (``"profile file X, section train:"``).
+        error: the class raised (a :class:`ConfigError`).
     """
-    known = set(field_types(cls))
+    classes = cls if isinstance(cls, tuple) else (cls,)
+    known = set().union(*(field_types(c) for c in classes))
     for key in keys:
         if key not in known:
             close = difflib.get_close_matches(key, sorted(known), n=1)
             hint = f"did you mean {close[0]!r}?" if close else f"known: {', '.join(sorted(known))}"
-            raise ConfigError(f"{where}: unknown key {key!r} of {cls.__name__}; {hint}")
+            names = " or ".join(c.__name__ for c in classes)
+            raise error(f"{where}: unknown key {key!r} of {names}; {hint}")
 
 
 def finite(value: float | None) -> bool:
@@ -111,10 +118,20 @@ def require(condition: bool, name: str, rule: str, value: Any) -> None:
         raise ConfigError(f"{name} must be {rule}, got {value!r}")
 
 
-def config_from(cls, values: Mapping[str, Any], where: str):
-    """``cls(**values)`` with unknown keys and wrong types named as coming from ``where``."""
-    check_keys(values, cls, where)
+def config_from(cls, values: Mapping[str, Any], where: str, *, build=None, error: type[ConfigError] = ConfigError):
+    """``cls(**values)`` (or ``build(values)``) with unknown keys and bad values named as coming
+    from ``where``.
+
+    Args:
+        cls: the config dataclass.
+        values: its settings.
+        where: where they came from, the start of every message.
+        build: makes the config of the checked values (default ``cls(**values)``; e.g. a
+            ``from_dict`` that also builds nested configs).
+        error: the class raised (a :class:`ConfigError`).
+    """
+    check_keys(values, cls, where, error)
     try:
-        return cls(**values)
-    except ConfigError as e:
-        raise ConfigError(f"{where}: {e}") from None
+        return cls(**values) if build is None else build(values)
+    except (ConfigError, ProfileError) as e:  # ProfileError: a nested config's own check
+        raise error(f"{where}: {e}") from None

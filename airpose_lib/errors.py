@@ -58,6 +58,13 @@ class ProfileError(UserError, ValueError):
     the file and the fix. A ``ValueError``, as the readers it replaced raised."""
 
 
+class ProfileSettingError(ProfileError, ConfigError):
+    """A profile section's key that its config does not have (the message names the closest one),
+    or a value it refuses; the message names the file and the section. Both a
+    :class:`ProfileError` (the file is wrong) and a :class:`ConfigError` (a setting is), so the
+    ``except`` clauses of either keep working (``profiles.section_config``)."""
+
+
 def _short(exc: BaseException, limit: int = 120) -> str:
     text = " ".join(str(exc).split()) or type(exc).__name__
     return text if len(text) <= limit else text[: limit - 3] + "..."

@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 import torch
 
+from airpose_lib.data.network_input import crop_input, network_camera
 from airpose_lib.data.sequences import PAPER_CAMERAS
 from airpose_lib.geometry import (
     crop_affine_matrix,
@@ -21,7 +22,6 @@ from airpose_lib.geometry import (
     virtual_crop,
     weak_perspective_to_translation,
 )
-from airpose_lib.runtime.source import crop_input, network_camera
 
 S = 64
 TAU = np.array([0.9, -0.4, 12.0])  # the board's centre in every camera's frame, metres

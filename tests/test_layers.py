@@ -37,7 +37,7 @@ ALLOWED: dict[str, set[str]] = {
     "fitting": {"geometry", "body", "prior", "losses", "profiles"},
     "train": {"geometry", "body", "assets", "data", "model", "losses", "eval", "profiles", "engine"},
     "runtime": {"geometry", "body", "data", "model", "profiles"},
-    "finetune": {"geometry", "body", "data", "model", "losses", "prior", "train", "runtime", "profiles", "engine"},
+    "finetune": {"geometry", "body", "data", "model", "losses", "prior", "train", "profiles", "engine"},
     "experiments": {"geometry", "profiles", "body", "assets", "data", "model", "losses", "eval", "viz", "prior", "fitting",
                     "train", "finetune", "runtime", "engine"},
     "reproduce": {"assets", "viz", "profiles"},

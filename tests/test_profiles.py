@@ -89,3 +89,72 @@ def test_the_command_reports_a_profile_error_in_one_line():
     except ProfileError as e:
         message = user_error_message(e)  # printed as `airpose: error: ...`, exit status 2
     assert message.startswith(f"{PROFILES_DIR / 'smoke.yaml'} has no `nope:` section (the nope settings)")
+
+
+def _with_key(tmp_path, section: str, key: str, value) -> object:
+    """The smoke profile with ``key: value`` added to ``section`` (dots go deeper)."""
+    import yaml
+
+    raw = read_profile("smoke")
+    target = raw
+    for part in section.split("."):
+        target = target[part]
+    target[key] = value
+    path = tmp_path / "mine.yaml"
+    path.write_text(yaml.safe_dump(raw))
+    return path
+
+
+def _helpers():
+    from airpose_lib.data.sequences.config import profile_sequences
+    from airpose_lib.data.still_config import profile_config
+    from airpose_lib.finetune.train import finetune_config
+    from airpose_lib.fitting.airpose_plus import fitting_profile
+    from airpose_lib.fitting.recording import fit_config
+    from airpose_lib.prior.train import prior_profile
+    from airpose_lib.train.config import load_train_config
+    from airpose_lib.train.pretrain import pretrain_config
+
+    # (helper, section, a misspelt key, the field it should suggest, the section as messages name it)
+    return [
+        (lambda p: load_train_config(p, "airpose"), "train", "stepz", "steps", "train:"),
+        (pretrain_config, "pretrain", "stepz", "steps", "pretrain:"),
+        (finetune_config, "finetune", "stepz", "steps", "finetune:"),
+        (prior_profile, "prior", "n_posez", "n_poses", "prior:"),
+        (fitting_profile, "fitting", "iterationz", "iterations", "fitting:"),
+        (fit_config, "fitting", "iterationz", "iterations", "fitting:"),
+        (profile_config, "data.still", "num_samplez", "num_samples", "data: still:"),
+        (profile_sequences, "sequences", "fpz", "fps", "sequences:"),
+    ]
+
+
+@pytest.mark.parametrize("case", range(8))
+def test_every_section_reader_names_an_unknown_key_the_file_and_the_closest_key(tmp_path, case):
+    """The eight section-to-config helpers share one check (profiles.section_config /
+    config_fields.config_from): the file, the section, the key and the closest known one."""
+    from airpose_lib.errors import ConfigError, UserError
+
+    helper, section, key, close, label = _helpers()[case]
+    path = _with_key(tmp_path, section, key, 1)
+    with pytest.raises(UserError) as e:
+        helper(path)
+    message = str(e.value)
+    assert str(path) in message and f"`{label}" in message, message
+    assert f"unknown key {key!r}" in message and f"did you mean {close!r}" in message, message
+    if section != "data.still":  # the data commands report it as their DatasetError
+        assert isinstance(e.value, ProfileError) and isinstance(e.value, ConfigError)
+    assert helper("smoke") is not None  # the kit's profile itself is fine
+
+
+def test_a_bad_value_in_a_section_names_the_file_and_a_bad_option_the_options(tmp_path):
+    from airpose_lib.errors import ConfigError, ProfileSettingError
+    from airpose_lib.finetune.train import finetune_config
+    from airpose_lib.prior.train import prior_profile
+
+    path = _with_key(tmp_path, "finetune", "steps", "thirty")
+    with pytest.raises(ProfileSettingError, match=r"mine\.yaml, section `finetune:`: steps: expected int"):
+        finetune_config(path)
+    with pytest.raises(ConfigError, match=r"^fine-tuning options: unknown key 'stepz'"):
+        finetune_config("smoke", stepz=3)
+    train, corpus = prior_profile(_with_key(tmp_path, "prior", "seed", 7))
+    assert train.seed == 7 and corpus.seed == 7  # a key of both configs goes to each

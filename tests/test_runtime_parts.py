@@ -9,18 +9,17 @@ import time
 import numpy as np
 import pytest
 
-from airpose_lib.runtime import results as R
-from airpose_lib.runtime.backends import FakeStageModel, fresh_copy
-from airpose_lib.runtime.source import (
+from airpose_lib.data.network_input import (
     IMAGENET_MEAN,
     IMAGENET_STD,
-    SyntheticSource,
     crop_input,
     network_box_margin,
     network_camera,
-    open_source,
     person_box,
 )
+from airpose_lib.runtime import results as R
+from airpose_lib.runtime.backends import FakeStageModel, fresh_copy
+from airpose_lib.runtime.source import SyntheticSource, open_source
 from airpose_lib.runtime.sync import CameraReplay, Mailbox, PeerTable, Schedule
 from airpose_lib.runtime.transport import LinkConfig, LinkEmulator, Transport, endpoint, free_ports
 from airpose_lib.runtime.wire import DATA, HELLO, decode_packet, encode_packet

@@ -7,7 +7,9 @@ detectors), ``official_layout`` (the official real-data folder layout, ``load_se
 ``appearance`` (skin / hair / clothing colours), ``render`` (textured scenes, pyvista),
 ``shards`` and ``manifest`` (files on disk), ``still_config`` (still-frame dataset settings),
 ``still_frames`` (sampling and rendering one shard's still frames), ``generate`` (shards on disk,
-resumption, workers: ``airpose data generate``), ``dataset`` (``StillFrameDataset``).
+resumption, workers: ``airpose data generate``), ``dataset`` (``StillFrameDataset``),
+``network_input`` (how a frame becomes the network's input: person box, previous-box rule,
+crop, normalisation; shared by the drones and fine-tuning).
 
 Names are imported lazily, so ``import airpose_lib.data`` stays cheap and pulls in neither VTK
 nor torch until they are used.
@@ -34,8 +36,11 @@ _EXPORTS = {
     "StillFrameGenerator": "still_frames", "generate_still_dataset": "generate",
     "ensure_still_dataset": "generate",
     # datasets
-    "StillFrameDataset": "dataset", "IMAGENET_MEAN": "dataset", "IMAGENET_STD": "dataset",
-    "denormalize_images": "dataset",
+    "StillFrameDataset": "dataset", "denormalize_images": "dataset",
+    # the network's input (person box, previous-box rule, crop, normalisation)
+    "IMAGENET_MEAN": "network_input", "IMAGENET_STD": "network_input",
+    "person_box": "network_input", "hold_boxes": "network_input", "crop_input": "network_input",
+    "network_camera": "network_input", "network_box_margin": "network_input",
 }
 
 # Other modules' public names (their ``__all__``) are found on first use, in this order; the

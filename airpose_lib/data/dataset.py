@@ -41,13 +41,12 @@ from torch.utils.data import Dataset
 from airpose_lib.errors import ConfigError
 
 from .manifest import check_complete, verify_shard
+from .network_input import IMAGENET_MEAN, IMAGENET_STD, normalize
 from .shards import ShardImages, read_shard
 
-__all__ = ["StillFrameDataset", "IMAGENET_MEAN", "IMAGENET_STD", "PER_VIEW_KEYS", "SAMPLE_KEYS", "EXTRA_KEYS",
+__all__ = ["StillFrameDataset", "PER_VIEW_KEYS", "SAMPLE_KEYS", "EXTRA_KEYS",
            "normalize_images", "denormalize_images", "decode_image", "swap_views"]
 
-IMAGENET_MEAN = (0.485, 0.456, 0.406)
-IMAGENET_STD = (0.229, 0.224, 0.225)
 
 #: Per-view entries of a sample (permuted together by the view-swap augmentation).
 PER_VIEW_KEYS: tuple[str, ...] = ("images", "P", "K", "bbox", "R_cw", "t_cw", "phi", "tau",
@@ -88,12 +87,9 @@ def decode_image(data: bytes) -> np.ndarray:
 
 
 def normalize_images(rgb: np.ndarray) -> torch.Tensor:
-    """``(..., S, S, 3)`` uint8 RGB -> ``(..., 3, S, S)`` float32, /255 and ImageNet-normalised."""
-    x = torch.from_numpy(np.ascontiguousarray(rgb)).float().div_(255.0)
-    x = x.movedim(-1, -3)
-    mean = torch.tensor(IMAGENET_MEAN).view(3, 1, 1)
-    std = torch.tensor(IMAGENET_STD).view(3, 1, 1)
-    return (x - mean) / std
+    """``(..., S, S, 3)`` uint8 RGB -> ``(..., 3, S, S)`` float32, /255 and ImageNet-normalised
+    (``network_input.normalize``, the rule of the drones' crops)."""
+    return torch.from_numpy(normalize(rgb))
 
 
 def denormalize_images(x: torch.Tensor) -> np.ndarray:

@@ -11,7 +11,7 @@ from pathlib import Path
 
 from airpose_lib.errors import ConfigError
 from airpose_lib.paths import cache_dir
-from airpose_lib.profiles import ProfileError, profile_path, profile_section
+from airpose_lib.profiles import ProfileError, profile_path, section_config
 
 from .appearance import AppearanceConfig
 from .manifest import DatasetError
@@ -152,8 +152,8 @@ def profile_config(profile: str) -> GenerationConfig:
     """
     try:  # the data commands report every unusable input as a DatasetError
         path = profile_path(profile)
-        return GenerationConfig.from_dict(profile_section(path, "data.still",
-                                                          required="the still-frame dataset sizes"))
+        return section_config(path, "data.still", GenerationConfig, required="the still-frame dataset sizes",
+                              build=GenerationConfig.from_dict)
     except ProfileError as e:  # before ValueError: it is one
         raise DatasetError(str(e)) from None
     except (TypeError, ValueError) as e:

@@ -184,7 +184,7 @@ def _sequence_stamp(sequence) -> list[str]:
 
 
 #: Bumped when the estimates of an unchanged network and recording change (e.g. the camera rule).
-_ESTIMATE_VERSION = 3  # 3: the box margin of runtime.source.network_box_margin
+_ESTIMATE_VERSION = 3  # 3: the box margin of data.network_input.network_box_margin
 
 
 def _network_estimate(checkpoint: Path, sequence, out: Path) -> dict:

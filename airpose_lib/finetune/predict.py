@@ -1,22 +1,22 @@
 r"""Run a network over a recording: detections -> boxes -> crops -> per-view SMPL-X parameters.
 
 :func:`predict_sequence` builds every view's crop exactly as a drone does
-(:func:`airpose_lib.runtime.source.person_box` on the detections, then
-:func:`airpose_lib.runtime.offline.offline_inputs` / ``crop_input``), runs the backbone on all
+(:mod:`airpose_lib.data.network_input`: ``person_box`` on the detections, the previous-box
+rule ``hold_boxes``, then ``crop_input``), runs the backbone on all
 views of a batch of frames and the regressor on all views jointly (so the multi-view variants
 exchange their messages, as :meth:`AirPoseNet.forward`), and returns camera-frame parameters per
 view (:func:`airpose_lib.model.to_smplx_params`).
 
 Any camera: the crops and P are formed in the network's virtual camera ``K_net`` (the camera it
 was trained with, ``model.camera_K`` from :func:`~airpose_lib.finetune.network.load_sized_network`,
-else ``runtime.source.network_camera()``: f = 1475 px at 1920x1080), see
+else ``data.network_input.network_camera()``: f = 1475 px at 1920x1080), see
 ``geometry.virtual_crop``. The network's translation is then already in the real camera's frame;
 a weak camera is converted with ``K_net`` (the camera its P refers to). The provenance records
 the rule (``camera_rule``, ``K_net``).
 
 Frames without a usable detection in a view (fewer than 4 keypoints above the box confidence)
 reuse that view's previous box, as a drone does; leading frames take the first box the view
-has. Their outputs are computed from that stale crop and flagged ``valid[f, v] = False``; a view
+has (``hold_boxes(leading="first")``). Their outputs are computed from that stale crop and flagged ``valid[f, v] = False``; a view
 without any detection in the selection is an error.
 
 The predictions file (:func:`save_predictions`, :func:`load_predictions`) is an ``.npz``:
@@ -51,12 +51,11 @@ from torch import Tensor, nn
 
 from airpose_lib import __version__  # the package root holds only the version
 from airpose_lib.atomic import atomic_path
+from airpose_lib.data.network_input import box_margin, crop_input, hold_boxes, network_camera, person_box
 from airpose_lib.data.official_layout import SequenceFormatError, load_sequence
 from airpose_lib.errors import ConfigError, UserError
 from airpose_lib.model import to_smplx_params
 from airpose_lib.progress import progress_bar
-from airpose_lib.runtime.offline import offline_inputs
-from airpose_lib.runtime.source import box_margin, network_camera, person_box
 
 __all__ = [
     "PREDICTION_KEYS",
@@ -119,8 +118,8 @@ def detection_boxes(keypoints: np.ndarray, image_sizes: SequenceABC[tuple[int, i
     Args:
         keypoints: ``(F, V, J, 3)`` ``[x, y, confidence]`` full-image pixels.
         image_sizes: ``(W, H)`` of each of the V views.
-        min_confidence, margin_px: as :func:`airpose_lib.runtime.source.person_box` (the margin
-            may be given per view, e.g. :func:`~airpose_lib.runtime.source.network_box_margin`).
+        min_confidence, margin_px: as :func:`airpose_lib.data.network_input.person_box` (the
+            margin may be given per view, e.g. ``data.network_input.network_box_margin``).
         where: named in the error message (e.g. the sequence folder).
 
     Returns:
@@ -140,46 +139,27 @@ def detection_boxes(keypoints: np.ndarray, image_sizes: SequenceABC[tuple[int, i
     boxes = np.zeros((F, V, 4))
     valid = np.zeros((F, V), bool)
     for v in range(V):
-        last = None
-        for f in range(F):
-            box = person_box(kp[f, v], image_sizes[v], min_confidence, float(margins[v]))
-            if box is not None:
-                valid[f, v] = True
-                last = box
-            if last is not None:
-                boxes[f, v] = last
+        detected = [person_box(kp[f, v], image_sizes[v], min_confidence, float(margins[v])) for f in range(F)]
+        boxes[:, v], valid[:, v] = hold_boxes(detected, leading="first")
         if not valid[:, v].any():
             raise SequenceFormatError(f"{where}: view {v} has no frame with at least 4 keypoints of confidence >= "
                                       f"{min_confidence}; check the detector files or lower the box confidence")
-        first = int(np.argmax(valid[:, v]))
-        boxes[:first, v] = boxes[first, v]  # leading frames: the first box the view has
     return boxes, valid
 
 
-class _Views:
-    """The views of a loaded sequence as the runtime's frame sources (only ``image`` and ``K`` are
-    used: the boxes are always given to ``offline_inputs``)."""
-
-    class _View:
-        def __init__(self, seq, v: int) -> None:
-            self._seq, self._v = seq, v
-            self.K = np.asarray(seq.K[v], np.float64)
-
-        def image(self, i: int) -> np.ndarray:
-            return self._seq.image(i, self._v)
-
-        def keypoints(self, i: int):  # pragma: no cover - offline_inputs gets the boxes
-            return None
-
-    def __init__(self, seq) -> None:
-        self.views = [self._View(seq, v) for v in range(seq.num_views)]
-
-    @property
-    def num_views(self) -> int:
-        return len(self.views)
-
-    def view(self, v: int):
-        return self.views[v]
+def _crops(sequence, rows: np.ndarray, boxes: np.ndarray, input_size: int,
+           K_net: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Network inputs of ``rows (B,)`` of a loaded sequence with ``boxes (B, V, 4)``
+    (``data.network_input.crop_input`` per view): ``crops (B, V, 3, S, S)``, ``P (B, V, 3)`` float32."""
+    B, V = len(rows), sequence.num_views
+    crops = np.zeros((B, V, 3, input_size, input_size), np.float32)
+    P = np.zeros((B, V, 3), np.float32)
+    for v in range(V):
+        K = np.asarray(sequence.K[v], np.float64)
+        for b, row in enumerate(rows):
+            c, p = crop_input(sequence.image(int(row), v), boxes[b, v], K, input_size, K_net)
+            crops[b, v], P[b, v] = c[0], p[0]
+    return crops, P
 
 
 def frames_in_range(root: str | Path, start: int | None, stop: int | None) -> np.ndarray:
@@ -215,7 +195,7 @@ def _positions(sequence, frames) -> np.ndarray:
 
 def network_camera_of(model: nn.Module, K_net=None) -> np.ndarray:
     """``(3, 3)`` virtual camera of a network: ``K_net`` if given, else ``model.camera_K`` (set by
-    ``load_sized_network``), else ``runtime.source.network_camera()``."""
+    ``load_sized_network``), else ``data.network_input.network_camera()``."""
     if K_net is None:
         K_net = getattr(model, "camera_K", None)
     return np.asarray(network_camera() if K_net is None else K_net, np.float64).reshape(3, 3)
@@ -285,7 +265,6 @@ def sequence_features(model: nn.Module, sequence, *, input_size: int, detector: 
     model.eval()
     device = _model_device(model)
     dtype = model.init_beta.dtype
-    source = _Views(sequence)
     feats, Ps = [], []
     chunks = range(0, len(pos), batch_size)
     if progress:
@@ -293,8 +272,7 @@ def sequence_features(model: nn.Module, sequence, *, input_size: int, detector: 
     try:
         for a in chunks:
             rows = pos[a:a + batch_size]
-            index = np.repeat(rows[:, None], V, axis=1)
-            crops, P, _ = offline_inputs(source, index, input_size, boxes=boxes[a:a + batch_size], K_net=K_net)
+            crops, P = _crops(sequence, rows, boxes[a:a + batch_size], input_size, K_net)
             x = torch.from_numpy(crops).to(device=device, dtype=dtype)
             f = model.features(x.flatten(0, 1)).unflatten(0, (len(rows), V))
             feats.append(f.float().cpu())
@@ -323,9 +301,9 @@ def predict_sequence(model: nn.Module, sequence, *, input_size: int | None = Non
         batch_size: frames per backbone batch (each holds V crops).
         features_only: return the backbone features instead of parameters (see
             :func:`sequence_features`; what fine-tuning caches).
-        box_min_confidence, margin_px: :func:`airpose_lib.runtime.source.person_box` settings
-            (the runtime's defaults: 0.2, and a margin of None is
-            :func:`~airpose_lib.runtime.source.network_box_margin`, in each view's pixels).
+        box_min_confidence, margin_px: :func:`airpose_lib.data.network_input.person_box`
+            settings (the drones' defaults: 0.2, and a margin of None is
+            ``data.network_input.network_box_margin``, in each view's pixels).
         K_net: ``(3, 3)`` the network's training camera (default :func:`network_camera_of`).
         provenance: extra JSON-able facts stored in the ``provenance`` string (e.g. the checkpoint).
         progress: tqdm bar over the batches.

@@ -90,7 +90,7 @@ from airpose_lib.folder_lock import folder_lock
 from airpose_lib.model import to_smplx_params
 from airpose_lib.model.record import network_record
 from airpose_lib.prior import load_prior
-from airpose_lib.profiles import profile_path, profile_section
+from airpose_lib.profiles import section_config
 from airpose_lib.train.sampling import epoch_permutation, seed_everything
 
 from .keypoints import agreement_masks, agreement_summary, kept_targets, pixel_settings, resolution_scales, true_targets
@@ -133,8 +133,8 @@ class FineTuneConfig:
         frames: ``[start, stop)`` image numbers to train on (paper: ``[0, 7000]``); None: all.
         input_size: crop side S (default: from the checkpoint).
         detector, box_min_confidence, margin_px: where the crops' boxes come from
-            (``predict_sequence``; the runtime's defaults: a margin of None frames the person as
-            the training crops do, ``runtime.source.network_box_margin``).
+            (``predict_sequence``; the drones' defaults: a margin of None frames the person as
+            the training crops do, ``data.network_input.network_box_margin``).
         feature_batch_size: frames per backbone batch when caching the features.
         checkpoint_every, keep_checkpoints, log_every: as ``TrainConfig``.
         prior, prior_path, prior_tag: the pose prior (``airpose_lib.prior.load_prior``).
@@ -229,13 +229,9 @@ def finetune_config(profile: str | Path | None, **overrides: Any) -> FineTuneCon
     """:class:`FineTuneConfig` from a profile's ``finetune:`` section (defaults where the profile
     has none), then ``overrides``. An unknown key or a bad value raises
     :class:`~airpose_lib.errors.ConfigError` naming the file (or the options) and the field."""
-    values: dict[str, Any] = {}
-    if profile is not None:
-        section = profile_section(profile, "finetune")
-        config_from(FineTuneConfig, section, f"{profile_path(profile)}, section `finetune:`")  # blame the file
-        values.update(section)
-    values.update(overrides)
-    return config_from(FineTuneConfig, values, "fine-tuning options")
+    if profile is None:
+        return config_from(FineTuneConfig, overrides, "fine-tuning options")
+    return section_config(profile, "finetune", FineTuneConfig, overrides, overrides_where="fine-tuning options")
 
 
 @dataclass

@@ -53,7 +53,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Mapping, Sequence
-from dataclasses import asdict, dataclass, field, fields, replace
+from dataclasses import asdict, dataclass, field, replace
 
 import numpy as np
 import roma
@@ -63,7 +63,7 @@ from torch import Tensor
 from airpose_lib.body import BODY_25_FROM_SMPLX, COCO18_FROM_SMPLX, load_body_model
 from airpose_lib.body.forward import BodyForward
 from airpose_lib.devices import resolve_device
-from airpose_lib.errors import ConfigError, ProfileError
+from airpose_lib.errors import ConfigError
 from airpose_lib.geometry import (
     axis_angle_to_matrix,
     matrix_to_axis_angle,
@@ -74,7 +74,7 @@ from airpose_lib.geometry import (
 )
 from airpose_lib.losses.robust import geman_mcclure
 from airpose_lib.prior import VPoser, load_prior
-from airpose_lib.profiles import profile_path, profile_section
+from airpose_lib.profiles import section_config
 from airpose_lib.progress import progress_bar
 
 __all__ = [
@@ -135,12 +135,7 @@ class AirPosePlusConfig:
 def fitting_profile(profile: str, **overrides) -> AirPosePlusConfig:
     """:class:`AirPosePlusConfig` from a profile's ``fitting:`` section (:mod:`airpose_lib.profiles`);
     keys are the config's fields, missing ones keep the defaults; ``overrides`` win."""
-    section = profile_section(profile, "fitting")
-    names = {f.name for f in fields(AirPosePlusConfig)}
-    unknown = set(section) - names
-    if unknown:
-        raise ProfileError(f"{profile_path(profile)}: unknown keys in `fitting:`: {sorted(unknown)}")
-    return AirPosePlusConfig(**{**section, **overrides})
+    return section_config(profile, "fitting", AirPosePlusConfig, overrides)
 
 
 @dataclass

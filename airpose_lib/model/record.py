@@ -10,7 +10,7 @@ Every training and fine-tuning checkpoint holds ``state["network"]`` (plain type
 ``model``          the other keyword arguments of :func:`~airpose_lib.model.build_model`
 ``input_size``     crop side S in pixels
 ``normalisation``  ``"imagenet"``: RGB / 255, then the ImageNet mean and std per channel
-                   (``data.dataset.normalize_images``, ``runtime.source.crop_input``)
+                   (``data.dataset.normalize_images``, ``data.network_input.crop_input``)
 ``camera_rule``    ``"virtual_crop"``: the crop and P of a box seen by a camera K are formed in
                    the virtual camera ``camera_K`` (``geometry.virtual_crop``)
 ``camera_K``       ``(3, 3)`` intrinsics ``K_net`` of the training camera, nested lists

@@ -21,7 +21,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable
-from dataclasses import asdict, dataclass, fields
+from dataclasses import asdict, dataclass
 
 import numpy as np
 import torch
@@ -29,9 +29,8 @@ from torch import Tensor
 
 from airpose_lib.devices import resolve_device
 from airpose_lib.engine import Schedule, TrainingTask, run_engine
-from airpose_lib.errors import ProfileError
 from airpose_lib.geometry import axis_angle_to_matrix, geodesic_angle
-from airpose_lib.profiles import profile_path, profile_section
+from airpose_lib.profiles import section_config
 
 from .vposer import LATENT_DIM, NUM_JOINTS, NUM_NEURONS, VPoser
 
@@ -92,15 +91,7 @@ def prior_profile(profile: str) -> tuple[PriorTrainConfig, CorpusConfig]:
     Keys of the section are fields of :class:`PriorTrainConfig` or :class:`CorpusConfig`
     (``seed`` sets both); missing keys keep the defaults.
     """
-    section = profile_section(profile, "prior")
-    train_keys = {f.name for f in fields(PriorTrainConfig)}
-    corpus_keys = {f.name for f in fields(CorpusConfig)}
-    unknown = set(section) - train_keys - corpus_keys
-    if unknown:
-        raise ProfileError(f"{profile_path(profile)}: unknown keys in `prior:`: {sorted(unknown)}")
-    train = PriorTrainConfig(**{k: v for k, v in section.items() if k in train_keys})
-    corpus = CorpusConfig(**{k: v for k, v in section.items() if k in corpus_keys})
-    return train, corpus
+    return section_config(profile, "prior", (PriorTrainConfig, CorpusConfig))
 
 
 def rotation_geodesic(R1: Tensor, R2: Tensor, eps: float = 1e-7) -> Tensor:

@@ -4,23 +4,30 @@ A profile is the one place where sizes live: every section configures one part o
 (``data: still:`` the still-frame data, ``sequences:`` the recordings, ``train:``, ``pretrain:``,
 ``prior:``, ``finetune:``, ``fitting:``, ``notebooks:`` the notebooks' parameters). This module is
 the only code that knows where the files are and how they are read; each package turns its own
-section into its config (``train.load_train_config``, ``data.generate.profile_config`` ...).
+section into its config through :func:`section_config` (unknown keys with the closest known one,
+bad values, both named with the file and the section), behind its own public name
+(``train.load_train_config``, ``data.still_config.profile_config`` ...).
 
 A profile is named (``"smoke"``) or given as the path of a YAML file of the same format. Readers
 raise :class:`~airpose_lib.errors.ProfileError` (one line naming the file and the fix; the
 ``airpose`` command exits with status 2). Files are read on every call: they are small, and a
-test or a user may edit one between calls. Imports nothing of the kit but ``errors``, so that
-every layer may use it.
+test or a user may edit one between calls. Imports nothing of the kit but the helpers ``errors``
+and ``config_fields``, so that every layer may use it.
 """
 from __future__ import annotations
 
+from collections.abc import Mapping
 from pathlib import Path
+from typing import Any
 
 import yaml
 
-from airpose_lib.errors import ProfileError
+from airpose_lib import config_fields
+from airpose_lib.config_fields import config_from
+from airpose_lib.errors import ProfileError, ProfileSettingError
 
-__all__ = ["PROFILES_DIR", "ProfileError", "profile_names", "profile_path", "read_profile", "profile_section"]
+__all__ = ["PROFILES_DIR", "ProfileError", "ProfileSettingError", "profile_names", "profile_path", "read_profile",
+           "profile_section", "section_where", "section_config"]
 
 #: Folder of the kit's ``<name>.yaml`` profile files.
 PROFILES_DIR = Path(__file__).resolve().parent
@@ -107,3 +114,48 @@ def profile_section(profile: str | Path, section: str, *, required: str | None =
         raise ProfileError(f"{path}: `{label}` must be a mapping of settings, not a {type(value).__name__}; "
                            "fix the file")
     return dict(value)
+
+
+def section_where(profile: str | Path, section: str, folder: str | Path = PROFILES_DIR) -> str:
+    """How messages name a section: ``"<file>, section `data: still:`"``."""
+    return f"{profile_path(profile, folder)}, section `{': '.join(section.split('.'))}:`"
+
+
+def section_config(profile: str | Path, section: str, cls, overrides: Mapping[str, Any] | None = None, *,
+                   required: str | None = None, build=None, overrides_where: str = "options",
+                   folder: str | Path = PROFILES_DIR):
+    """A config dataclass from a profile section, then ``overrides``.
+
+    The one way from a section to its config: the section (:func:`profile_section`) goes
+    through ``config_fields.config_from``, so an unknown key names the closest known one and a
+    refused value its field, both with the file and the section
+    (:class:`~airpose_lib.errors.ProfileSettingError`); then ``overrides`` (a command's options)
+    go on top, checked the same way and named ``overrides_where``. Missing keys keep the defaults.
+
+    Args:
+        profile: a profile name or the path of a profile YAML file.
+        section: the section's key (``"data.still"`` is ``data: still:``).
+        cls: the config dataclass, or a tuple of them for a section shared by several configs
+            (each takes its own keys; a key several have, e.g. ``seed``, goes to each; returns a
+            tuple then).
+        overrides: settings on top of the section's (one ``cls`` only).
+        required: as :func:`profile_section`.
+        build: makes a config of checked values (default ``cls(**values)``; e.g. a
+            ``from_dict`` that builds nested configs).
+        overrides_where: how messages name ``overrides``.
+        folder: where named profiles live.
+    Raises:
+        ProfileError: as :func:`profile_section`; ProfileSettingError: an unknown key or a bad value.
+        ConfigError: the same in ``overrides``.
+    """
+    path = profile_path(profile, folder)
+    values = profile_section(path, section, required=required)
+    where = section_where(path, section)
+    if isinstance(cls, tuple):
+        config_fields.check_keys(values, cls, where, ProfileSettingError)
+        return tuple(config_from(c, {k: v for k, v in values.items() if k in config_fields.field_types(c)},
+                                 where, build=build, error=ProfileSettingError) for c in cls)
+    config = config_from(cls, values, where, build=build, error=ProfileSettingError)
+    if overrides:
+        config = config_from(cls, {**values, **overrides}, overrides_where, build=build)
+    return config

@@ -1,5 +1,5 @@
 """A drone's camera: one view of the source replayed on the drone's clock, the person box from
-each frame's 2D detections, and the network's input crop (:func:`~.source.crop_input`)."""
+each frame's 2D detections, and the network's input crop (``data.network_input``)."""
 from __future__ import annotations
 
 import logging
@@ -7,8 +7,10 @@ import time
 
 import numpy as np
 
+from airpose_lib.data.network_input import box_margin, crop_input, keep_previous_box, person_box
+
 from . import results as R
-from .source import ViewSource, box_margin, crop_input, person_box
+from .source import ViewSource
 from .sync import CameraReplay, Clock
 
 __all__ = ["DroneCamera"]
@@ -23,8 +25,9 @@ class DroneCamera:
         view: the drone's view of the source.
         clock: the drone's clock.
         input_size: crop side S, pixels.
-        min_confidence, box_margin_px: the person box rule (:func:`~.source.person_box`); a
-            margin of None is :func:`~.source.network_box_margin` of the view's K.
+        min_confidence, box_margin_px: the person box rule (``data.network_input.person_box``);
+            a margin of None is ``network_box_margin`` of the view's K. No detection: the previous
+            box (``keep_previous_box``); before the first detection the frame is skipped.
     """
 
     def __init__(self, view: ViewSource, clock: Clock, input_size: int, min_confidence: float,
@@ -76,11 +79,11 @@ class DroneCamera:
         image = self._preloaded.get(i) if self._preloaded else None
         image = self.view.image(i) if image is None else image
         H, W = image.shape[:2]
-        box = person_box(self.view.keypoints(i), (W, H), self.min_confidence, self.box_margin_px)
-        if box is None:
-            box = self._last_box
+        detected = person_box(self.view.keypoints(i), (W, H), self.min_confidence, self.box_margin_px)
+        box = keep_previous_box(detected, self._last_box)
+        if detected is None:
             job.flags |= R.NO_DETECTION
-            if box is None:
+            if box is None:  # a live camera cannot look ahead: no box before the first detection
                 job.flags |= R.SKIPPED
                 job.skip_reason = "no detection yet"
                 return job

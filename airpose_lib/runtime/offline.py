@@ -1,7 +1,7 @@
 """The same frames computed offline, in one process: the reference for the online runs.
 
 :func:`offline_inputs` rebuilds each view's crop and P for given camera frames exactly as a
-drone does (detections -> :func:`~.source.person_box` -> :func:`~.source.crop_input`), or from the
+drone does (``data.network_input``: detections -> ``person_box`` -> ``crop_input``), or from the
 boxes a drone recorded. :func:`offline_staged` runs one :class:`~.backends.StageModel` per view
 in-process with a perfect exchange (every message of every other view, in view order, in the
 wire dtype), optionally replaying the online run's fallbacks (which drones' messages each stage
@@ -15,10 +15,12 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from airpose_lib.data.network_input import box_margin, crop_input, hold_boxes, person_box
+
 from .backends import BackendSpec, StageModel, build_torch_model, fresh_copy, to_numpy
 from .networks import make_stage_model
 from .results import PARAM_KEYS, mask_to_ids
-from .source import box_margin, crop_input, open_source, person_box
+from .source import open_source
 
 __all__ = ["offline_inputs", "offline_staged", "offline_batched", "max_abs_difference"]
 
@@ -33,10 +35,12 @@ def offline_inputs(source, frame_index: np.ndarray, input_size: int, boxes: np.n
         frame_index: ``(F, V)`` camera frame of view v for row f.
         input_size: S.
         boxes: optional ``(F, V, 4)`` boxes to use (e.g. the drones' records); default: from the
-            detections of each frame (a frame without one keeps the previous row's box).
-        min_confidence, margin_px: the person box rule (:func:`~.source.person_box`); a margin
-            of None is :func:`~.source.network_box_margin` of each view's K (as a drone's).
-        K_net: the network's camera (:func:`~.source.crop_input`; default ``network_camera()``).
+            detections of each frame (``data.network_input.hold_boxes`` over the rows: a row
+            without one keeps the previous row's box, and a row before the view's first
+            detection is an error, since no drone made that crop).
+        min_confidence, margin_px: the person box rule (``data.network_input.person_box``); a
+            margin of None is ``network_box_margin`` of each view's K (as a drone's).
+        K_net: the network's camera (``data.network_input.crop_input``; default ``network_camera()``).
 
     Returns:
         ``crops (F, V, 3, S, S)`` float32, ``P (F, V, 3)`` float32, ``boxes (F, V, 4)``.
@@ -48,20 +52,28 @@ def offline_inputs(source, frame_index: np.ndarray, input_size: int, boxes: np.n
     out_boxes = np.zeros((F, V, 4), np.float64)
     for v in range(V):
         view = src.view(v)
-        margin = box_margin(margin_px, view.K, K_net)
-        last = None
+        if boxes is None:
+            view_boxes = _detected_boxes(view, v, frame_index[:, v], min_confidence,
+                                         box_margin(margin_px, view.K, K_net))
+        else:
+            view_boxes = boxes[:, v]
         for f in range(F):
             i = int(frame_index[f, v])
-            image = view.image(i)
-            H, W = image.shape[:2]
-            box = boxes[f, v] if boxes is not None else person_box(view.keypoints(i), (W, H), min_confidence, margin)
-            box = last if box is None else box  # no detection: the previous box, as a drone does
-            if box is None:
-                raise ValueError(f"view {v} frame {i}: no detection and no earlier box; pass the boxes")
-            last = box
-            c, p = crop_input(image, box, view.K, input_size, K_net)
-            crops[f, v], P[f, v], out_boxes[f, v] = c[0], p[0], box
+            c, p = crop_input(view.image(i), view_boxes[f], view.K, input_size, K_net)
+            crops[f, v], P[f, v], out_boxes[f, v] = c[0], p[0], view_boxes[f]
     return crops, P, out_boxes
+
+
+def _detected_boxes(view, v: int, frames: np.ndarray, min_confidence: float, margin: float) -> np.ndarray:
+    """``(F, 4)`` boxes of view v's camera ``frames (F,)`` by the previous-box rule; a frame
+    before the first detection raises ``ValueError``. The image size (which clips the box) is the
+    first frame's: a camera's frames share one size."""
+    H, W = view.image(int(frames[0])).shape[:2]
+    detected = [person_box(view.keypoints(int(i)), (W, H), min_confidence, margin) for i in frames]
+    boxes, _ = hold_boxes(detected, leading="none")
+    if np.isnan(boxes[0, 0]):  # leading frames without a box
+        raise ValueError(f"view {v} frame {int(frames[0])}: no detection and no earlier box; pass the boxes")
+    return boxes
 
 
 def offline_staged(model: StageModel | BackendSpec, crops: np.ndarray, P: np.ndarray,

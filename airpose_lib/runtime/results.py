@@ -11,7 +11,7 @@ and this view's outputs with the network's keys (``phi6d (6)``, ``theta6d (21, 6
 ``beta (10)``, ``tau (3)`` or ``cam (3)``). :func:`predictions` turns a file into the same dict
 of tensors as ``AirPoseNet.forward`` for one view (leading ``(N,)``), plus ``P (N, 3)`` and
 ``K (N, 3, 3)`` (the camera's) and ``K_net (N, 3, 3)`` (the network's virtual camera that P
-refers to, :func:`~.source.crop_input`), so ``model.to_smplx_params(pred, pred["P"], pred["K_net"])``
+refers to, ``data.network_input.crop_input``), so ``model.to_smplx_params(pred, pred["P"], pred["K_net"])``
 and ``eval`` read it like offline predictions; :func:`merge_views` joins the drones' files into ``(F, V, ...)``.
 """
 from __future__ import annotations
@@ -23,8 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from airpose_lib.atomic import atomic_path
-
-from .source import network_camera
+from airpose_lib.data.network_input import network_camera
 
 __all__ = [
     "FLAGS",

@@ -1,4 +1,4 @@
-"""Where a drone's frames come from, and how a frame becomes the network input (crop, P).
+"""Where a drone's frames come from.
 
 A :class:`ViewSource` is one camera of a recorded sequence: per-frame shutter time stamps, the
 intrinsics K, the images (loaded on demand) and 2D keypoint detections. :func:`open_source` gives
@@ -10,14 +10,8 @@ the views of
   moving in front of a gradient, BODY_25-like keypoints inside it) for tests and benchmarks that
   need no data on disk.
 
-:func:`person_box` turns detections into the person box (its callers' default margin,
-:func:`box_margin` -> :func:`network_box_margin`, frames the person as the training crops did)
-and :func:`crop_input` turns the image and the box into the normalised ``(1, 3, S, S)`` crop
-and ``P (1, 3)``, the same preprocessing as the still-frame training samples
-(aspect-preserving, black padding), formed in the network's
-virtual camera (``geometry.virtual_crop``): any camera gives the input a training camera
-(:func:`network_camera`, f = 1475 px at 1920x1080) would give, and the predicted translation is
-in the real camera's frame.
+How a frame becomes the network input (person box, margin, network camera, crop, normalisation,
+the previous-box rule) is ``airpose_lib.data.network_input``, shared with fine-tuning.
 """
 from __future__ import annotations
 
@@ -36,17 +30,7 @@ __all__ = [
     "SyntheticView",
     "SourceError",
     "open_source",
-    "person_box",
-    "crop_input",
-    "network_camera",
-    "network_box_margin",
-    "box_margin",
-    "IMAGENET_MEAN",
-    "IMAGENET_STD",
 ]
-
-IMAGENET_MEAN = np.array([0.485, 0.456, 0.406], np.float32)
-IMAGENET_STD = np.array([0.229, 0.224, 0.225], np.float32)
 
 
 @runtime_checkable
@@ -225,7 +209,7 @@ class _SequenceSource:
     """
 
     def __init__(self, root: str | Path, detector: str):
-        # lazy, as data.scene below: ~0.2 s each of a drone's start-up, which a synthetic source skips
+        # lazy: ~0.2 s of a drone's start-up, which a synthetic source skips
         from airpose_lib.data.official_layout import load_sequence
 
         seq = load_sequence(root, detectors=(detector,), missing_detections="zero", ground_truth=False)
@@ -256,121 +240,3 @@ def open_source(spec: str, detector: str = "openpose"):
     if spec.startswith("synthetic"):
         return _parse_synthetic(spec)
     return _SequenceSource(spec, detector)
-
-
-# -- detections -> box -> network input ----------------------------------------------------
-def person_box(keypoints: np.ndarray | None, image_size: tuple[int, int], min_confidence: float = 0.2,
-               margin_px: float = 20.0, min_points: int = 4) -> np.ndarray | None:
-    """The person box from 2D detections.
-
-    Args:
-        keypoints: ``(J, 3)`` ``[x, y, confidence]`` (BODY_25 or COCO), full-frame pixels, or None.
-        image_size: ``(W, H)``.
-        min_confidence: keypoints below it are ignored.
-        margin_px: added on every side (the synthetic data's boxes are the joints +/- 20 px).
-        min_points: fewer confident keypoints = no detection.
-
-    Returns:
-        ``(4,)`` ``[x0, y0, x1, y1]`` clipped to the image, or None.
-    """
-    if keypoints is None:
-        return None
-    kp = np.asarray(keypoints, np.float64).reshape(-1, 3)
-    ok = (kp[:, 2] >= min_confidence) & np.isfinite(kp[:, :2]).all(1)
-    if ok.sum() < min_points:
-        return None
-    W, H = image_size
-    x0, y0 = kp[ok, :2].min(0) - margin_px
-    x1, y1 = kp[ok, :2].max(0) + margin_px
-    box = np.array([max(x0, 0.0), max(y0, 0.0), min(x1, W - 1.0), min(y1, H - 1.0)])
-    if box[2] - box[0] < 2 or box[3] - box[1] < 2:
-        return None
-    return box
-
-
-def network_camera() -> np.ndarray:
-    """``(3, 3)`` intrinsics of the camera every kit and official network is trained with: the
-    still-frame data's (``data.scene.SceneConfig``: f = 1475 px, 1920x1080, principal point at
-    the image centre). A checkpoint records its own (``model.record``, ``camera_K``)."""
-    from airpose_lib.data.scene import SceneConfig  # lazy: see _SequenceSource
-
-    return SceneConfig().K
-
-
-def network_box_margin(K: np.ndarray, K_net: np.ndarray | None = None) -> float:
-    """The person-box margin, in pixels of an image with intrinsics ``K (3, 3)``, that frames the
-    person as the training crops do on average.
-
-    A training box is the joints +- ``bbox_margin_px`` with each side moved out by
-    ``U(0, bbox_jitter_px)`` (``data.scene.SceneConfig``: 20 + U(0, 200) px at f = 1475, as
-    ``copenet/dsets/aerialpeople.py`` for both of its splits): 120 px on average in the network
-    camera. A box much tighter than that puts the crop scale s of P outside the training range
-    (Table I's tight-box column: AirPose MPJPE 0.143 vs 0.106 m on the same samples). The
-    official real-data loader (``copenet_real/dsets/copenet_real.py``) uses OpenPose +- 50 px at
-    1920x1080 and then fine-tunes on those crops; pass that as an explicit margin to follow it.
-
-    Args:
-        K: ``(3, 3)`` intrinsics of the image the box is drawn in.
-        K_net: ``(3, 3)`` the network's camera (default :func:`network_camera`).
-
-    Returns:
-        the margin in the image's pixels: 120 px scaled by ``f / f_net`` (mean of fx and fy), the
-        same margin in the virtual camera whatever the image's resolution.
-    """
-    from airpose_lib.data.scene import SceneConfig  # lazy: see _SequenceSource
-
-    sc = SceneConfig()
-    K = np.asarray(K, np.float64)
-    K_net = np.asarray(network_camera() if K_net is None else K_net, np.float64)
-    f_ratio = (K[0, 0] + K[1, 1]) / (K_net[0, 0] + K_net[1, 1])
-    return float((sc.bbox_margin_px + sc.bbox_jitter_px / 2.0) * f_ratio)
-
-
-def box_margin(margin_px: float | None, K: np.ndarray, K_net: np.ndarray | None = None) -> float:
-    """The person-box margin to use in an image with intrinsics ``K (3, 3)``: ``margin_px`` when
-    given, else :func:`network_box_margin` (the default of the drones, the offline inputs and the
-    recordings' predictions)."""
-    return network_box_margin(K, K_net) if margin_px is None else float(margin_px)
-
-
-def crop_input(image: np.ndarray, bbox: np.ndarray, K: np.ndarray, input_size: int,
-               K_net: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """The network input of one view.
-
-    Args:
-        image: ``(H, W, 3)`` uint8 RGB full frame.
-        bbox: ``(4,)`` ``[x0, y0, x1, y1]`` full-frame pixels.
-        K: ``(3, 3)`` full-frame intrinsics of ``image``.
-        input_size: S.
-        K_net: ``(3, 3)`` intrinsics the network was trained with (default :func:`network_camera`).
-
-    Returns:
-        ``crop (1, 3, S, S)`` float32 (RGB/255, ImageNet mean/std) and ``P (1, 3)`` float32, both
-        formed in the virtual camera ``K_net`` (``geometry.virtual_crop``; convert a weak camera
-        to a translation with ``K_net``). The box is resized keeping its aspect ratio into the
-        centre of the S x S square and everything outside the box is black, by the rule of the
-        training crops (``geometry.pad_outside_box``): the same box gives the same array.
-
-    Raises:
-        ValueError: the box is empty or entirely outside the image (the crop would be black).
-    """
-    # lazy, both (geometry imports torch): a drone's start-up imports this module and must stay
-    # free of torch
-    import torch
-
-    from airpose_lib.geometry import crop_from_image, virtual_box, virtual_crop
-
-    H, W = image.shape[:2]
-    x0, y0, x1, y1 = (float(v) for v in np.asarray(bbox, np.float64).reshape(4))
-    if not (x0 < W and y0 < H and x1 > 0 and y1 > 0 and x1 > x0 and y1 > y0):  # nothing of the image in it
-        raise ValueError(f"person box [{x0:.1f}, {y0:.1f}, {x1:.1f}, {y1:.1f}] does not overlap the "
-                         f"{W}x{H} image (or is empty); check the detections or the box margin")
-    box_t = torch.as_tensor(np.asarray(bbox, np.float64))
-    K_t = torch.as_tensor(np.asarray(K, np.float64))
-    K_net_t = torch.as_tensor(np.asarray(network_camera() if K_net is None else K_net, np.float64))
-    A, P = virtual_crop(box_t, K_t, K_net_t, input_size)
-    # The box is blacked out where the virtual camera sees it, by the training crops' rule.
-    box_v, _ = virtual_box(box_t, K_t, K_net_t)
-    out = crop_from_image(image, A.numpy(), box_v.numpy(), input_size)
-    x = (out.astype(np.float32) / 255.0 - IMAGENET_MEAN) / IMAGENET_STD
-    return np.ascontiguousarray(x.transpose(2, 0, 1)[None]), P.numpy().astype(np.float32)[None]

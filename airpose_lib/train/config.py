@@ -23,8 +23,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from airpose_lib.config_fields import ConfigError, check_fields, check_keys, check_type, finite, require
-from airpose_lib.profiles import profile_path, profile_section
+from airpose_lib.config_fields import ConfigError, check_fields, check_keys, check_type, config_from, finite, require
+from airpose_lib.errors import ProfileSettingError
+from airpose_lib.profiles import profile_section, section_where
 
 __all__ = ["TrainConfig", "load_train_config"]
 
@@ -245,24 +246,25 @@ def load_train_config(profile: str | Path | None, variant: str, seed: int | None
     """The profile's ``train`` section (or ``section``), then its ``variants[variant]`` entry, then
     ``seed`` and ``overrides`` (TrainConfig fields), on top of :class:`TrainConfig`'s defaults.
 
-    ``profile=None`` uses the defaults only. Unknown keys raise ``ValueError`` (typos in a
-    profile fail before anything runs); an unknown profile raises ``ProfileError`` (a ``ValueError``).
+    ``profile=None`` uses the defaults only. Unknown keys and bad values raise ``ConfigError``
+    (in the profile: ``ProfileSettingError``, naming the file; typos fail before anything runs);
+    an unknown profile raises ``ProfileError``. The section goes through
+    ``config_fields.config_from`` as every section does (``profiles.section_config``); its
+    ``variants:`` entries are train's own.
     """
     values: dict[str, Any] = {}
     if profile is not None:
         settings = profile_section(profile, section)
         per_variant = settings.pop("variants", None) or {}
-        where = f"{profile_path(profile)}, section `{section}:`"
-        check_keys(settings, TrainConfig, where)
+        where = section_where(profile, section)
+        check_keys(settings, TrainConfig, where, ProfileSettingError)
         if not isinstance(per_variant, dict) or not isinstance(per_variant.get(variant) or {}, dict):
-            raise ConfigError(f"{where}: `variants:` must map a variant name to its settings")
-        check_keys(per_variant.get(variant) or {}, TrainConfig, f"{where} `variants: {variant}:`")
+            raise ProfileSettingError(f"{where}: `variants:` must map a variant name to its settings")
+        check_keys(per_variant.get(variant) or {}, TrainConfig, f"{where} `variants: {variant}:`", ProfileSettingError)
         values.update(settings)
         values.update(per_variant.get(variant) or {})
-        try:  # the profile's values alone first, so that a bad one is blamed on the file
-            TrainConfig(**{**values, "variant": variant})
-        except ConfigError as e:
-            raise ConfigError(f"{where}: {e}; fix the file") from None
+        # the profile's values alone first, so that a bad one is blamed on the file
+        config_from(TrainConfig, {**values, "variant": variant}, where, error=ProfileSettingError)
     values["variant"] = variant
     if profile is not None:
         # a kit profile by name; a profile file of one's own by its path (read again for its data)

@@ -31,22 +31,23 @@ import torch
 from torch.utils.data import DataLoader
 
 from airpose_lib.atomic import atomic_path
+from airpose_lib.config_fields import config_from
 from airpose_lib.data.dataset import StillFrameDataset
 from airpose_lib.data.generate import GenerationConfig, default_root, ensure_still_dataset, profile_config
 from airpose_lib.data.manifest import load_manifest
 from airpose_lib.data.shards import sha256_file
 from airpose_lib.engine.checkpoint import kit_version, load_checkpoint
 from airpose_lib.engine.launch import resolve_device, single_process
-from airpose_lib.errors import DamagedFileError, ProfileError, reading
+from airpose_lib.errors import DamagedFileError, ProfileError, ProfileSettingError, reading
 from airpose_lib.eval.metrics import rotation_error
 from airpose_lib.folder_lock import file_lock
 from airpose_lib.geometry import axis_angle_to_matrix, rot6d_to_matrix
 from airpose_lib.losses.pretrain import heading_bin
 from airpose_lib.model.backbone import build_backbone
 from airpose_lib.paths import cache_dir, run_path
-from airpose_lib.profiles import profile_section
+from airpose_lib.profiles import profile_section, section_where
 
-from .config import TrainConfig, load_train_config
+from .config import TrainConfig
 from .loop import check_data_root, default_model_factory, start_training
 
 __all__ = ["PRETRAIN_VERSION", "pretrain_config", "pretrain_stages", "backbone_key", "stage_keys", "ensure_backbone",
@@ -77,11 +78,19 @@ def pretrain_stages(profile: str, **overrides) -> list[TrainConfig]:
                                f"(e.g. {{steps: 4000}}), not {earlier!r}")
         chain.append({**chain[-1], **earlier})
     name = Path(str(profile)).stem
+    where = section_where(profile, "pretrain")
 
     def stage(values: dict, extra: dict) -> TrainConfig:
-        values = {**values, **extra}
+        values = dict(values)
         data = values.pop("data", None) or {}
-        cfg = load_train_config(None, "pretrain", task="pretrain", **values).replace(profile=name)
+        # the section's settings blamed on the file (config_from, as every section), then the
+        # caller's overrides as options
+        values = {"variant": "pretrain", "task": "pretrain", **values}
+        config_from(TrainConfig, values, where, error=ProfileSettingError)
+        extra = dict(extra)
+        if "data" in extra:  # an override's data replaces the section's
+            data = extra.pop("data") or {}
+        cfg = config_from(TrainConfig, {**values, **extra}, "training options").replace(profile=name)
         if "still" in data:
             if set(data) != {"still"}:
                 raise ProfileError(f"profile {profile}: a pretraining stage's `data:` takes only `still:` "

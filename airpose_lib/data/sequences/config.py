@@ -10,8 +10,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from airpose_lib.body.genders import GENDER_CODES
-from airpose_lib.errors import ConfigError, ProfileError
-from airpose_lib.profiles import profile_section
+from airpose_lib.config_fields import config_from
+from airpose_lib.errors import ConfigError, ProfileError, ProfileSettingError
+from airpose_lib.profiles import profile_section, section_where
 
 __all__ = [
     "CameraSpec",
@@ -235,25 +236,30 @@ class SequenceConfig:
 # ------------------------------------------------------------------------------------------
 # From a reproduction profile
 
-def sequence_configs_from_profile(profile_section: Mapping) -> dict[str, SequenceConfig]:
+def sequence_configs_from_profile(profile_section: Mapping,
+                                  where: str = "a `sequences:` profile section") -> dict[str, SequenceConfig]:
     """Sequence configs from a profile's ``sequences:`` section.
 
     The section has shared settings at the top and one entry per recording under ``recordings``,
     e.g. ``{fps: 30, render_scale: 0.5, recordings: {person1: {n_frames: 90, seed: 1}, ...}}``;
-    each recording's ``person`` defaults to its name.
+    each recording's ``person`` defaults to its name. Each recording's settings go through
+    ``config_fields.config_from`` (unknown keys with the closest one, named with ``where``), as
+    every profile section does (``profiles.section_config``).
     """
     section = dict(profile_section)
     recordings = section.pop("recordings", None)
     if not recordings:
-        raise ProfileError("a `sequences:` profile section needs a `recordings:` mapping")
+        raise ProfileError(f"{where} needs a `recordings:` mapping")
     out = {}
     for name, rec in recordings.items():
         d = {**section, **(rec or {})}
         d.setdefault("person", name)
-        out[name] = SequenceConfig.from_dict(d)
+        out[name] = config_from(SequenceConfig, d, f"{where} `recordings: {name}:`", build=SequenceConfig.from_dict,
+                                error=ProfileSettingError)
     return out
 
 
 def profile_sequences(profile: str) -> dict[str, SequenceConfig]:
     """The recordings of a reproduction profile (its ``sequences:`` section, :mod:`airpose_lib.profiles`)."""
-    return sequence_configs_from_profile(profile_section(profile, "sequences", required="the recordings' sizes"))
+    return sequence_configs_from_profile(profile_section(profile, "sequences", required="the recordings' sizes"),
+                                         section_where(profile, "sequences"))

@@ -12,7 +12,19 @@ from __future__ import annotations
 
 from airpose_lib.errors import ConfigError
 
-__all__ = ["resolve_device", "worker_device"]
+__all__ = ["is_device_name", "resolve_device", "worker_device"]
+
+
+def is_device_name(device: str) -> bool:
+    """``auto`` or a string torch reads as a device: what a config may say. Whether this machine has
+    it is :func:`resolve_device`'s question, asked when a run starts (a config read from a checkpoint
+    trained on a GPU stays valid on a CPU)."""
+    import torch
+
+    try:
+        return device == "auto" or torch.device(device) is not None
+    except (RuntimeError, TypeError):
+        return False
 
 
 def resolve_device(device: str, local_rank: int = 0) -> "torch.device":  # noqa: F821

@@ -69,6 +69,7 @@ from airpose_lib.atomic import atomic_path
 from airpose_lib.body import load_body_model
 from airpose_lib.config_fields import ConfigError, check_fields, config_from, finite, require
 from airpose_lib.data.official_layout import load_sequence
+from airpose_lib.devices import is_device_name
 from airpose_lib.engine import (
     AFRESH_HINT,
     EngineRun,
@@ -203,7 +204,7 @@ class FineTuneConfig:
         require(self.input_size is None or self.input_size >= 32, "input_size", "null or >= 32", self.input_size)
         require(self.num_threads is None or self.num_threads >= 1, "num_threads", "null or >= 1", self.num_threads)
         require(self.body_source in ("open", "smplx"), "body_source", "'open' or 'smplx'", self.body_source)
-        require(self.device in ("auto", "cpu", "cuda") or self.device.startswith("cuda:"), "device",
+        require(is_device_name(self.device), "device",
                 "'auto', 'cpu', 'cuda' or 'cuda:N'", self.device)
         require(0 <= self.holdout_fraction < 1, "holdout_fraction", "in [0, 1)", self.holdout_fraction)
         require(self.targets in TARGET_SOURCES, "targets", f"one of {', '.join(TARGET_SOURCES)}", self.targets)

@@ -24,6 +24,7 @@ from pathlib import Path
 from typing import Any
 
 from airpose_lib.config_fields import ConfigError, check_fields, check_keys, check_type, config_from, finite, require
+from airpose_lib.devices import is_device_name
 from airpose_lib.errors import ProfileSettingError
 from airpose_lib.profiles import profile_section, section_where
 
@@ -141,7 +142,7 @@ class TrainConfig:
         require(self.lr_schedule in ("constant", "cosine"), "lr_schedule", "'constant' or 'cosine'", self.lr_schedule)
         require(self.backbone in backbones, "backbone", f"one of {', '.join(backbones)}", self.backbone)
         require(self.body_source in ("open", "smplx"), "body_source", "'open' or 'smplx'", self.body_source)
-        require(_device_ok(self.device), "device", "'auto', 'cpu', 'cuda' or 'cuda:N'", self.device)
+        require(is_device_name(self.device), "device", "'auto', 'cpu', 'cuda' or 'cuda:N'", self.device)
         if self.trainable_from is not None and self.task != "regressor":
             raise ConfigError("trainable_from applies to the regressor task only")
         require(finite(self.lr) and self.lr > 0, "lr", "a finite number > 0", self.lr)
@@ -227,18 +228,6 @@ def _check_model_options(model: dict, task: str) -> None:
         if key not in params:
             raise ConfigError(f"model: unknown option {key!r}; {net.__name__} takes {', '.join(params)}")
         model[key] = check_type(f"model.{key}", value, hints.get(key, typing.Any))
-
-
-def _device_ok(device: str) -> bool:
-    """``auto`` or a string torch reads as a device (whether this machine has it is checked when a
-    run starts, :func:`airpose_lib.engine.launch.resolve_device`: a config read from a checkpoint
-    trained on a GPU stays valid on a CPU)."""
-    import torch  # lazy, as the model checks
-
-    try:
-        return device == "auto" or torch.device(device) is not None
-    except (RuntimeError, TypeError):
-        return False
 
 
 def load_train_config(profile: str | Path | None, variant: str, seed: int | None = None,

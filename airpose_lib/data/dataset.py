@@ -43,6 +43,7 @@ from airpose_lib.errors import ConfigError
 from .manifest import check_complete, verify_shard
 from .network_input import IMAGENET_MEAN, IMAGENET_STD, normalize
 from .shards import ShardImages, read_shard
+from .still_config import SPLITS
 
 __all__ = ["StillFrameDataset", "PER_VIEW_KEYS", "SAMPLE_KEYS", "EXTRA_KEYS",
            "normalize_images", "denormalize_images", "decode_image", "swap_views"]
@@ -105,7 +106,8 @@ class StillFrameDataset(Dataset):
 
     Args:
         root: dataset folder (with ``manifest.yaml`` and ``shard_*.npz``).
-        split: ``"train"``, ``"test"`` or ``"all"``.
+        split: ``"train"``, ``"val"``, ``"test"`` or ``"all"`` (a dataset generated before the
+            validation split existed has no ``"val"`` shards: that split is then empty and refused).
         augment: random view permutation; default True for the train split, else False.
         verify: check every shard's size and SHA-256 against the manifest when opening.
         crops: ``"jittered"`` (the stored crops) or ``"tight"`` (the tight-box crops that test
@@ -118,8 +120,8 @@ class StillFrameDataset(Dataset):
 
     def __init__(self, root: Path | str, split: str = "train", augment: bool | None = None, *,
                  verify: bool = True, crops: str = "jittered") -> None:
-        if split not in ("train", "test", "all"):
-            raise ConfigError(f"split must be 'train', 'test' or 'all', got {split!r}")
+        if split not in (*SPLITS, "all"):
+            raise ConfigError(f"split must be one of {', '.join(SPLITS)} or 'all', got {split!r}")
         if crops not in ("jittered", "tight"):
             raise ConfigError(f"crops must be 'jittered' or 'tight', got {crops!r}")
         self.crops = crops

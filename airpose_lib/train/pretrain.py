@@ -16,7 +16,7 @@ stage it starts from, so a user without the committed file rebuilds the whole ch
 
 The file holds the backbone's weights in float16 (half the size; the features differ from the
 float32 network's by about 1e-3 relative, far below what the regressors resolve) and a JSON
-record: backbone name, key, the gate's measurements on the test split, the wall time and the
+record: backbone name, key, the gate's measurements on the validation split, the wall time and the
 command that rebuilds it (``airpose pretrain --profile <profile>``).
 """
 from __future__ import annotations
@@ -281,7 +281,7 @@ def ensure_backbone(profile: str, data_root: str | Path, data_fingerprint: str, 
 
     Args:
         profile: reproduction profile (its ``pretrain:`` section).
-        data_root: the still-frame dataset to pretrain on (train split; the test split gates).
+        data_root: the still-frame dataset to pretrain on (train split; the validation split gates).
         data_fingerprint: that dataset's configuration fingerprint (part of the key).
         out_root: parent of the pretraining run folders (default ``<runs>/pretrain/<profile>``).
         device: where the stages that must be trained train and are gated (default: their
@@ -307,7 +307,7 @@ def ensure_backbone(profile: str, data_root: str | Path, data_fingerprint: str, 
 def _train_stage(profile: str, cfg: TrainConfig, key: str, start: Path | None, out_root: str | Path | None,
                  progress: bool) -> Path:
     """Train one stage (from ``start``'s backbone, or from scratch) on its dataset (``cfg.data``),
-    gate it on that dataset's test split, export it as ``key``."""
+    gate it on that dataset's validation split, export it as ``key``."""
     target = cache_dir() / "backbones" / f"{key}.pt"
     target.parent.mkdir(parents=True, exist_ok=True)
     with file_lock(target.with_suffix(".lock")):
@@ -329,10 +329,10 @@ def _train_stage(profile: str, cfg: TrainConfig, key: str, start: Path | None, o
             run = start_training(run_cfg, out / key)
         wall = time.time() - t0
         model = _load_pretrain_model(run.checkpoint, cfg)
-        gate = gate_metrics(model, StillFrameDataset(data_root, "test", augment=False),  # the whole test split
+        gate = gate_metrics(model, StillFrameDataset(data_root, "val", augment=False),  # the whole validation split
                             device=resolve_device(cfg.device))
         meta = {"backbone": cfg.backbone, "key": key, "profile": profile, "kit_version": kit_version(),
-                "config": cfg.to_dict(), "data_fingerprint": data_fingerprint, "gate": gate,
+                "config": cfg.to_dict(), "data_fingerprint": data_fingerprint, "gate": gate, "gate_split": "val",
                 "train_wall_s": round(wall, 1), "steps": run.step,
                 "command": f"airpose pretrain --profile {profile}"}
         if start is not None:

@@ -497,6 +497,8 @@ def _run_training(cfg: TrainConfig, out_dir: Path, resume: bool, model_factory: 
     if threads:
         torch.set_num_threads(threads)
     if cfg.deterministic:
+        if device.type == "cuda":  # cuBLAS is deterministic only with a fixed workspace (CUDA docs);
+            os.environ.setdefault("CUBLAS_WORKSPACE_CONFIG", ":4096:8")  # read when cuBLAS starts
         torch.use_deterministic_algorithms(True, warn_only=True)
     out_dir = Path(out_dir)
 

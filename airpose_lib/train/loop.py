@@ -316,6 +316,8 @@ def start_training(cfg: TrainConfig, out: Path, resume: bool = True, *, model_fa
         finally:
             dist.destroy_process_group()
     if cfg.world_size > 1:
+        for rank in range(cfg.world_size):  # every process's device exists, or one line before any starts
+            resolve_device(cfg.device, rank)
         return _spawn(cfg, out, resume, factories, stop_at)
     return run_training(cfg, out, resume, *factories, stop_at=stop_at)
 

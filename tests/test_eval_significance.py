@@ -1,9 +1,9 @@
-"""Paired bootstrap and Table I's claim table against cases with a known answer."""
+"""Paired bootstrap over two-view samples and Table I's claim table against cases with a known answer."""
 import numpy as np
 import pandas as pd
 import pytest
 
-from airpose_lib.eval.significance import claims_table, paired_bootstrap, paired_differences
+from airpose_lib.eval.significance import claims_table, paired_bootstrap, paired_sample_errors
 
 
 def test_interval_matches_the_normal_theory_interval():
@@ -18,7 +18,7 @@ def test_interval_matches_the_normal_theory_interval():
     assert r.low == pytest.approx(r.mean - half, abs=0.08 * half)
     assert r.high == pytest.approx(r.mean + half, abs=0.08 * half)
     np.testing.assert_allclose(r.per_seed, d.mean(axis=1))
-    assert r.n_images == 800
+    assert r.n_units == 800
 
 
 def test_interval_covers_the_true_mean_about_95_percent_of_the_time():
@@ -64,17 +64,82 @@ def _table(values, samples=None):
                          "mpe_m": v, "mpjpe_m": v / 10})
 
 
-def test_differences_are_paired_by_sample_and_view():
+def test_sample_errors_average_the_views_and_pair_by_sample():
     a = _table([1.0, 2.0, 3.0, 4.0])
-    b = _table([0.5, 0.5, 0.5, 0.5]).iloc[::-1]  # another row order: pairing is by (sample, view)
-    seeds, d = paired_differences({("baseline", 1): a, ("multiview", 1): b}, "baseline", "multiview", "mpe_m")
+    b = _table([0.5, 0.5, 0.5, 1.5]).iloc[::-1]  # another row order: pairing is by (sample, view)
+    seeds, ea, eb = paired_sample_errors({("baseline", 1): a, ("multiview", 1): b}, "baseline", "multiview",
+                                         "mpe_m")
     assert seeds == [1]
-    np.testing.assert_allclose(d, [[0.5, 1.5, 2.5, 3.5]])
-    # an image missing in one seed is dropped from every seed (the same images in each)
+    np.testing.assert_allclose(ea, [[1.5, 3.5]])  # (1 + 2) / 2, (3 + 4) / 2
+    np.testing.assert_allclose(eb, [[0.5, 1.0]])
+    # a view missing in one seed drops its whole sample from every seed and both variants
     runs = {("baseline", 1): a, ("multiview", 1): b, ("baseline", 2): a.iloc[1:], ("multiview", 2): b}
-    seeds, d = paired_differences(runs, "baseline", "multiview", "mpe_m")
-    assert seeds == [1, 2] and d.shape == (2, 3)
-    np.testing.assert_allclose(d[0], [1.5, 2.5, 3.5])
+    seeds, ea, eb = paired_sample_errors(runs, "baseline", "multiview", "mpe_m")
+    assert seeds == [1, 2] and ea.shape == eb.shape == (2, 1)
+    np.testing.assert_allclose(ea, [[3.5], [3.5]])
+    # so does a non-finite error
+    c = a.copy()
+    c.loc[2, "mpe_m"] = np.nan
+    seeds, ea, _ = paired_sample_errors({("baseline", 1): c, ("multiview", 1): b}, "baseline", "multiview", "mpe_m")
+    np.testing.assert_allclose(ea, [[1.5]])
+    with pytest.raises(ValueError, match="repeats"):
+        paired_sample_errors({("baseline", 1): pd.concat([a, a]), ("multiview", 1): b}, "baseline", "multiview",
+                             "mpe_m")
+
+
+def test_hand_checkable_pair_interval():
+    """Two samples whose view differences are (1, 3) and (0, 0): per-sample differences 2 and 0.
+    A resample of the two samples has mean 0, 1 or 2 with probability 1/4, 1/2, 1/4, so the 95 %
+    interval is exactly [0, 2] around the mean 1. Resampling the four views instead would count
+    the view pair twice and draw means such as 0.25 or 1.75 as well."""
+    a = _table([1.0, 3.0, 0.0, 0.0])
+    b = _table([0.0, 0.0, 0.0, 0.0])
+    _, ea, eb = paired_sample_errors({("baseline", 1): a, ("multiview", 1): b}, "baseline", "multiview", "mpe_m")
+    np.testing.assert_allclose(ea - eb, [[2.0, 0.0]])
+    r = paired_bootstrap(ea - eb, n_resamples=4000, seed=0)
+    assert (r.mean, r.low, r.high, r.n_units) == (1.0, 0.0, 2.0, 2)
+
+
+def _one_and_two_views(rng, n=300, seeds=(1, 2, 3)):
+    """Per-view tables with one view per sample, and the same with that view duplicated."""
+    level = rng.uniform(0.5, 1.5, size=n)
+    one, two = {}, {}
+    for s in seeds:
+        for v, shift in (("baseline", 0.05), ("multiview", 0.0)):
+            e = level + shift + rng.normal(0, 0.1, size=n)
+            one[v, s] = pd.DataFrame({"sample": np.arange(n), "view": 0, "mpe_m": e, "mpjpe_m": e / 10})
+            two[v, s] = pd.DataFrame({"sample": np.repeat(np.arange(n), 2), "view": np.tile([0, 1], n),
+                                      "mpe_m": np.repeat(e, 2), "mpjpe_m": np.repeat(e, 2) / 10})
+    return one, two
+
+
+def test_two_identical_views_double_nothing():
+    """Known answer: a second view that repeats the first adds no information, so the pair-level
+    interval is exactly the one-view interval. The view-level bootstrap of before narrowed it by
+    about sqrt(2), as if it had twice the samples."""
+    one, two = _one_and_two_views(np.random.default_rng(11))
+    t1, t2 = claims_table(one, order=("baseline", "multiview")), claims_table(two, order=("baseline", "multiview"))
+    cols = ["difference [m]", "CI low [m]", "CI high [m]", "samples", "verdict"]
+    pd.testing.assert_frame_equal(t1[cols], t2[cols], check_exact=True)
+    assert (t2["samples"] == 300).all()
+    # the old unit: one column per (sample, view)
+    per_view = np.stack([two["baseline", s]["mpe_m"].to_numpy() - two["multiview", s]["mpe_m"].to_numpy()
+                         for s in (1, 2, 3)])
+    old = paired_bootstrap(per_view, n_resamples=4000, seed=0)
+    new = paired_bootstrap(per_view.reshape(3, -1, 2).mean(-1), n_resamples=4000, seed=0)
+    assert old.mean == pytest.approx(new.mean, abs=1e-12)
+    assert (new.high - new.low) / (old.high - old.low) == pytest.approx(np.sqrt(2), rel=0.08)
+
+
+def test_seeds_are_pooled_per_sample():
+    """The unit is a sample with all its seeds: moving an error between seeds within a sample
+    changes no interval; the per-seed means and the verdict's every-seed rule still see the seeds."""
+    rng = np.random.default_rng(12)
+    d = rng.normal(0.1, 1.0, size=(3, 400))
+    shuffled = rng.permuted(d, axis=0)  # each column's seed values in another order
+    a, b = paired_bootstrap(d, seed=3), paired_bootstrap(shuffled, seed=3)
+    assert (a.low, a.high) == pytest.approx((b.low, b.high), abs=1e-12)
+    assert not np.allclose(a.per_seed, b.per_seed)
 
 
 def _runs(effects, seeds=(1, 2, 3), n=200, noise=0.05, seed_effects=None):
@@ -96,7 +161,7 @@ def test_claims_hold_when_every_seed_shows_a_clear_ordering():
     assert len(t) == 6 and (t["verdict"] == "holds").all() and t["sign in every seed"].all()
     assert t.loc["MPE: Baseline + Fullcam > AirPose", "difference [m]"] == pytest.approx(0.1, abs=0.01)
     assert t.loc["MPJPE: Baseline + Fullcam > AirPose", "difference [m]"] == pytest.approx(0.01, abs=0.001)
-    assert (t["CI low [m]"] > 0).all() and (t["seeds"] == 3).all() and (t["images"] == 400).all()
+    assert (t["CI low [m]"] > 0).all() and (t["seeds"] == 3).all() and (t["samples"] == 200).all()
 
 
 def test_no_effect_is_not_significant_and_a_reversal_is_reversed():

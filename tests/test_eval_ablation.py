@@ -153,6 +153,12 @@ def test_findings_are_written_from_the_tables():
     assert "PA-MPJPE, which aligns rotation and scale away, is 0.050 m" in text
     assert "One seed" in text
     assert "true root" not in text  # no such column: nothing said about it
+    assert "Effect sizes" not in text  # claims without gains (a claims.csv of before)
+    claims["gain [%]"], claims["gain CI low [%]"], claims["gain CI high [%]"] = [16.7, -1.0], [15.0, -3.0], [18.0, 1.0]
+    claims["paper gain [%]"], claims["of paper's size"] = [70.0, 20.9], [False, False]
+    text = ablation_findings(ablation_table(runs, oracle=oracle), claims)
+    assert ("0 of 2 reach a third of the paper's gain. MPE: Baseline > AirPose 16.7 % (15.0 to 18.0) against "
+            "the paper's 70.0 %; MPJPE: Baseline > AirPose -1.0 % (-3.0 to 1.0) against the paper's 20.9 %.") in text
 
 
 def test_findings_without_oracle_claims_or_extra_columns():

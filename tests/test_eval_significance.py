@@ -3,7 +3,13 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from airpose_lib.eval.significance import claims_table, paired_bootstrap, paired_sample_errors
+from airpose_lib.eval.significance import (
+    PAPER_GAIN_SHARE,
+    claims_table,
+    paired_bootstrap,
+    paired_sample_errors,
+    paper_relative_gain,
+)
 
 
 def test_interval_matches_the_normal_theory_interval():
@@ -221,3 +227,60 @@ def test_block_bootstrap_covers_the_mean_of_a_correlated_series():
     cover = lambda block: np.mean([(lambda r: r.low <= 0 <= r.high)(  # noqa: E731
         paired_bootstrap(x, n_resamples=500, seed=i, block=block)) for i, x in enumerate(series)])
     assert cover(30) >= 0.85 and cover(1) <= 0.6
+
+
+# -- effect sizes ---------------------------------------------------------------------------------
+def test_paper_relative_gains_from_its_table_i():
+    # hand-computed from the paper's Table I: MPE 0.50 0.46 0.22 0.15, MPJPE 0.091 0.084 0.077 0.072
+    assert paper_relative_gain("baseline", "multiview", "MPE") == pytest.approx(0.04 / 0.50)
+    assert paper_relative_gain("fullcam", "airpose", "MPE") == pytest.approx(0.07 / 0.22)  # 32 %
+    assert paper_relative_gain("multiview", "fullcam", "MPJPE") == pytest.approx(0.007 / 0.084)  # 8.3 %
+    assert np.isnan(paper_relative_gain("baseline", "multiview", "PA-MPJPE"))
+
+
+def test_hand_checkable_relative_gain_interval():
+    """e_A = (1, 3), e_B = (1, 1): the gain is the ratio of the means, (0 + 2) / (1 + 3) = 0.5 (not
+    the mean of the ratios, 1/3). The resamples {0, 0}, {0, 1}, {1, 1} give 0, 2/4 and 4/6, so the
+    95 % interval is [0, 2/3]."""
+    e_a, e_b = np.array([[1.0, 3.0]]), np.array([[1.0, 1.0]])
+    r = paired_bootstrap(e_a - e_b, n_resamples=4000, seed=0, base=e_a)
+    assert r.relative == 0.5 and r.relative_low == 0.0 and r.relative_high == pytest.approx(2 / 3)
+    assert np.isnan(paired_bootstrap(e_a - e_b, n_resamples=10).relative)  # no base, no gain
+    with pytest.raises(ValueError, match="base"):
+        paired_bootstrap(e_a - e_b, base=e_a[:, :1])
+
+
+def test_relative_gain_interval_is_paired():
+    """B removes exactly 10 % of A's error on every sample, however hard the sample: every resample
+    gives 10 %, so the interval is the point. Resampling A and B independently would not."""
+    rng = np.random.default_rng(13)
+    e_a = rng.uniform(0.2, 3.0, size=(3, 500))
+    r = paired_bootstrap(e_a - 0.9 * e_a, seed=1, base=e_a)
+    assert (r.relative, r.relative_low, r.relative_high) == pytest.approx((0.1, 0.1, 0.1), abs=1e-12)
+
+
+def _scaled_runs(factors, n=50):
+    """Per-view tables whose errors are ``factor x`` a per-sample difficulty shared by the variants."""
+    difficulty = np.random.default_rng(14).uniform(0.5, 2.0, size=2 * n)
+    return {(v, 1): _table(f * difficulty) for v, f in zip(("baseline", "multiview", "fullcam", "airpose"), factors)}
+
+
+def test_claims_give_the_kit_gain_next_to_the_papers_and_whether_it_reaches_a_third():
+    # MPE gains: 3 % (paper 8 %: a third is 2.67 %), 17 % (paper 52.2 %: 17.39 %), 11 % (paper 31.8 %: 10.6 %)
+    f = np.cumprod([1.0, 0.97, 0.83, 0.89])
+    t = claims_table(_scaled_runs(f), n_resamples=500)
+    mpe = t[t["metric"] == "MPE"]
+    np.testing.assert_allclose(mpe["gain [%]"], [3.0, 17.0, 11.0], atol=1e-9)
+    np.testing.assert_allclose(mpe["gain CI low [%]"], [3.0, 17.0, 11.0], atol=1e-9)  # a shared difficulty
+    np.testing.assert_allclose(mpe["paper gain [%]"], [8.0, 100 * 0.24 / 0.46, 100 * 0.07 / 0.22])
+    assert list(mpe["of paper's size"]) == [True, False, True]
+    assert PAPER_GAIN_SHARE == pytest.approx(1 / 3)
+    # a reversal is a negative gain, never of the paper's size
+    t = claims_table(_scaled_runs([1.0, 1.05, 0.5, 0.4]), n_resamples=200)
+    row = t.loc["MPJPE: Baseline > Baseline + Multi-view"]
+    assert row["gain [%]"] == pytest.approx(-5.0) and not row["of paper's size"]
+    # a missing variant: the paper's gain is still shown
+    t = claims_table({k: v for k, v in _scaled_runs(f).items() if k[0] != "airpose"}, n_resamples=200)
+    row = t.loc["MPE: Baseline + Fullcam > AirPose"]
+    assert row["verdict"] == "not run" and row["paper gain [%]"] == pytest.approx(100 * 0.07 / 0.22)
+    assert np.isnan(row["gain [%]"])

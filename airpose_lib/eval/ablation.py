@@ -174,6 +174,21 @@ def _listed(rows: pd.DataFrame) -> str:
     return "; ".join(f"{r['claim']} ({_signed_length(r['difference [m]'])})" for _, r in rows.iterrows()) or "none"
 
 
+def _gains(claims: pd.DataFrame) -> str | None:
+    """The effect-size line of :func:`ablation_findings` (None when the claims have no gains)."""
+    if not {"gain [%]", "paper gain [%]", "of paper's size"} <= set(claims.columns):
+        return None
+    measured = claims[claims["gain [%]"].notna() & claims["paper gain [%]"].notna()]
+    if measured.empty:
+        return None
+    sizes = "; ".join(f"{r['claim']} {r['gain [%]']:.1f} % ({r['gain CI low [%]']:.1f} to "
+                      f"{r['gain CI high [%]']:.1f}) against the paper's {r['paper gain [%]']:.1f} %"
+                      for _, r in measured.iterrows())
+    reach = int(measured["of paper's size"].astype(bool).sum())
+    return (f"* **Effect sizes** (relative gain, 95 % interval, the paper's): {reach} of {len(measured)} reach "
+            f"a third of the paper's gain. {sizes}.")
+
+
 def ablation_findings(table: pd.DataFrame, claims: pd.DataFrame | None = None) -> str:
     """What a run's Table I says, as Markdown built from its own tables (notebook 02's summary):
     no number in it is typed by hand, so it cannot contradict the tables above it.
@@ -185,7 +200,8 @@ def ablation_findings(table: pd.DataFrame, claims: pd.DataFrame | None = None) -
             ``difference [m]`` and ``verdict``; or ``claim`` as a column, as in ``claims.csv``), or None.
     Returns:
         a bulleted Markdown paragraph: AirPose against the paper and the oracle floor, the claims'
-        verdicts, what the root orientation adds to MPJPE, and the seed count's caveat.
+        verdicts and (when ``claims`` has them) their relative gains next to the paper's, what the
+        root orientation adds to MPJPE, and the seed count's caveat.
     """
     rows = [m for m in table.index if m != ORACLE_LABEL]
     best = "AirPose" if "AirPose" in rows else rows[-1]
@@ -208,6 +224,9 @@ def ablation_findings(table: pd.DataFrame, claims: pd.DataFrame | None = None) -
         lines.append(f"* **Claims**: {int((verdicts == 'holds').sum())} of the paper's {len(claims)} orderings "
                      f"hold with significance. Not significant: {_listed(claims[verdicts == 'not significant'])}. "
                      f"Reversed: {_listed(claims[verdicts == 'reversed'])}.")
+        gains = _gains(claims)
+        if gains is not None:
+            lines.append(gains)
     if has("MPJPE true root [m]"):
         others = ", ".join(f"{m} {table.loc[m, 'MPJPE true root [m]']:.3f}" for m in rows if m != best)
         root = (f" (median root-orientation error {r['root orient. median [deg]']:.1f} deg)"

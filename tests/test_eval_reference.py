@@ -10,6 +10,7 @@ import pandas as pd
 import pytest
 
 from airpose_lib.eval.ablation import ablation_table, per_seed_table
+from airpose_lib.eval.mean_body import GENDERED_LABEL, NEUTRAL_LABEL
 from airpose_lib.eval.reference import (
     RECORDING_FILES,
     REFERENCE_FILES,
@@ -39,17 +40,18 @@ def _runs(seeds=(1, 2, 3), shift=0.0, n=40):
     return runs
 
 
-def _oracle(n=40):
+def _references(n=40):
     z = np.linspace(-0.5, 0.5, n)
-    return pd.DataFrame({"method": "Oracle", "mpe_m": np.abs(z) + 0.1, "err_z_m": z, "reproj_px": 0.0})
+    neutral = pd.DataFrame({"method": NEUTRAL_LABEL, "mpe_m": np.abs(z) + 0.1, "err_z_m": z, "reproj_px": 0.0})
+    return pd.concat([neutral, neutral.assign(method=GENDERED_LABEL, mpe_m=neutral["mpe_m"] / 2)], ignore_index=True)
 
 
 def _bundle(tmp_path, runs, name="bundle"):
     per_seed = per_seed_table(runs, wall_s={k: 1.5 for k in runs})
-    return write_reference(tmp_path / name, table=ablation_table(runs, oracle=_oracle()), per_seed=per_seed,
-                           claims=claims_table(runs, n_resamples=200), oracle=_oracle(), profile="smoke",
+    return write_reference(tmp_path / name, table=ablation_table(runs, references=_references()), per_seed=per_seed,
+                           claims=claims_table(runs, n_resamples=200), references=_references(), profile="smoke",
                            command="airpose reproduce --profile smoke --only 02_ablation_table",
-                           step_wall_s={"train and evaluate": 12.34, "oracle": None}, extra={"seeds": [1, 2, 3]})
+                           step_wall_s={"train and evaluate": 12.34, "mean-body references": None}, extra={"seeds": [1, 2, 3]})
 
 
 def test_bundle_has_every_file_and_its_provenance(tmp_path):
@@ -57,7 +59,7 @@ def test_bundle_has_every_file_and_its_provenance(tmp_path):
     assert sorted(p.name for p in out.iterdir()) == sorted(REFERENCE_FILES)  # no temporary files left
     prov = json.loads((out / "provenance.json").read_text())
     assert prov["kit_version"] and prov["profile"] == "smoke" and prov["seeds"] == [1, 2, 3]
-    assert prov["wall_s"] == {"train and evaluate": 12.3, "oracle": None}
+    assert prov["wall_s"] == {"train and evaluate": 12.3, "mean-body references": None}
     assert set(prov["machine"]) >= {"platform", "cpu", "cores", "ram_gib"} and prov["machine"]["cores"] >= 1
     assert "commit" in prov["git"]
     table = read_reference_table(out)
@@ -65,7 +67,11 @@ def test_bundle_has_every_file_and_its_provenance(tmp_path):
     assert table.loc["Baseline", "MPE paper [m]"] == 0.5
     claims = pd.read_csv(out / "claims.csv", index_col=0)
     assert len(claims) == 6 and (claims["verdict"] == "holds").all()
-    assert pd.read_csv(out / "oracle.csv").loc[0, "abs_err_z_m"] == pytest.approx(_oracle()["err_z_m"].abs().mean())
+    references = pd.read_csv(out / "mean_body.csv", index_col="method")
+    assert list(references.index) == [NEUTRAL_LABEL, GENDERED_LABEL] and (references["images"] == 40).all()
+    assert references.loc[NEUTRAL_LABEL, "abs_err_z_m"] == pytest.approx(20 / 78)  # |z| = 1/78, 3/78 ... 39/78
+    assert references.loc[GENDERED_LABEL, "mpe_m"] == pytest.approx(references.loc[NEUTRAL_LABEL, "mpe_m"] / 2)
+    assert list(table.index)[4:] == [NEUTRAL_LABEL, GENDERED_LABEL]
     assert len(pd.read_csv(out / "per_seed.csv")) == 12
 
 

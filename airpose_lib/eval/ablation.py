@@ -3,8 +3,9 @@
 ``PAPER_TABLE_I`` holds the paper's numbers; :func:`per_seed_table` reduces each run's per-view
 table to its metric means, and :func:`ablation_table` aggregates those over seeds (mean and
 standard deviation), puts the paper's numbers in adjacent columns, so every reproduction shows
-both side by side, and adds the mean-body oracle row (:mod:`airpose_lib.eval.oracle`), the floor
-MPE is read against. Whether the orderings are significant is :mod:`airpose_lib.eval.significance`.
+both side by side, and adds the mean-body reference rows (:mod:`airpose_lib.eval.mean_body`: what
+a stature-blind estimate with the ground-truth pose gets, neutral and of the true gender), the
+scale MPE is read against. Whether the orderings are significant is :mod:`airpose_lib.eval.significance`.
 """
 from __future__ import annotations
 
@@ -13,7 +14,7 @@ from collections.abc import Mapping
 import numpy as np
 import pandas as pd
 
-from .oracle import ORACLE_LABEL
+from .mean_body import GENDERED_LABEL, MEAN_BODY_LABELS, NEUTRAL_LABEL
 
 __all__ = ["VARIANT_LABELS", "PAPER_TABLE_I", "PER_SEED_METRICS", "TABLE_COLUMNS", "per_seed_table",
            "ablation_table", "paper_gaps", "ablation_findings", "table_to_markdown", "table_to_latex"]
@@ -104,18 +105,19 @@ def per_seed_table(per_view: Mapping[tuple[str, int], pd.DataFrame],
 
 
 def ablation_table(per_view: Mapping[tuple[str, int], pd.DataFrame],
-                   oracle: pd.DataFrame | None = None,
+                   references: pd.DataFrame | None = None,
                    per_view_tight: Mapping[tuple[str, int], pd.DataFrame] | None = None,
                    camera0: bool = False) -> pd.DataFrame:
-    """Kit numbers (mean and std over seeds) next to the paper's, and the oracle floor.
+    """Kit numbers (mean and std over seeds) next to the paper's, and the mean-body references.
 
     Args:
         per_view: (variant, seed) -> the per-view table of that run
             (:func:`airpose_lib.eval.tables.per_view_table`: columns ``mpe_m``, ``mpjpe_m``,
             ``pa_mpjpe_m``, optionally ``mpjpe_shape_m`` and ``root_rot_deg``; one row per test
             image and view).
-        oracle: per-view table of :func:`airpose_lib.eval.oracle.oracle_per_view` (``mpe_m``):
-            adds the oracle row, MPE only (its other columns are NaN, shown as ``-``).
+        references: per-view rows of :func:`airpose_lib.eval.mean_body.mean_body_references`
+            (``method``, ``mpe_m``): adds one row per reference (``method``), MPE only (its other
+            columns are NaN, shown as ``-``).
         per_view_tight: the same runs evaluated on tight-box test crops: adds the tight-box
             MPE / MPJPE columns (only when every run has one).
         camera0: add ``MPE camera 0 [m]`` (the official code's printed MPE: view 0 alone).
@@ -142,26 +144,40 @@ def ablation_table(per_view: Mapping[tuple[str, int], pd.DataFrame],
             out[column] = g[m].mean()
     out["seeds"] = g["seed"].count().astype("Int64")
     out = out.loc[[m for m in VARIANT_LABELS.values() if m in g.groups]]  # Table I order
-    if oracle is not None:
-        row = pd.DataFrame({"MPE [m]": [float(oracle["mpe_m"].mean())]}, index=[ORACLE_LABEL])
-        out = pd.concat([out, row.reindex(columns=out.columns)])
+    if references is not None:
+        mpe = references.groupby("method", sort=False)["mpe_m"].mean()
+        mpe = mpe.reindex([m for m in MEAN_BODY_LABELS if m in mpe.index] + [m for m in mpe.index
+                                                                              if m not in MEAN_BODY_LABELS])
+        rows = pd.DataFrame({"MPE [m]": mpe.to_numpy(float)}, index=list(mpe.index))
+        out = pd.concat([out, rows.reindex(columns=out.columns)])
         out["seeds"] = out["seeds"].astype("Int64")
     out.index.name = "method"
     return out
 
 
+#: Mean-body reference row -> its ratio column in :func:`paper_gaps` and its name in the findings.
+_REFERENCE_NAMES = {NEUTRAL_LABEL: "neutral mean body", GENDERED_LABEL: "true-gender mean body"}
+
+
+def _variant_rows(table: pd.DataFrame) -> list[str]:
+    """The variant rows of :func:`ablation_table` (the mean-body reference rows left out)."""
+    return [m for m in table.index if m not in MEAN_BODY_LABELS]
+
+
 def paper_gaps(table: pd.DataFrame) -> pd.DataFrame:
-    """How far each variant is from the paper and from the oracle floor, as ratios.
+    """How far each variant is from the paper and from the mean-body references, as ratios.
 
     Returns:
         one row per variant of :func:`ablation_table`: ``MPE kit / paper``, ``MPJPE kit / paper``
-        and, with an oracle row, ``MPE kit / oracle`` (how many times the stature floor).
+        and, per reference row, ``MPE kit / neutral mean body`` and ``MPE kit / true-gender mean
+        body`` (how many times what a stature-blind estimate with the ground-truth pose gets).
     """
-    rows = [m for m in table.index if m != ORACLE_LABEL]
+    rows = _variant_rows(table)
     out = pd.DataFrame({"MPE kit / paper": table.loc[rows, "MPE [m]"] / table.loc[rows, "MPE paper [m]"],
                         "MPJPE kit / paper": table.loc[rows, "MPJPE [m]"] / table.loc[rows, "MPJPE paper [m]"]})
-    if ORACLE_LABEL in table.index:
-        out["MPE kit / oracle"] = table.loc[rows, "MPE [m]"] / table.loc[ORACLE_LABEL, "MPE [m]"]
+    for label, name in _REFERENCE_NAMES.items():
+        if label in table.index:
+            out[f"MPE kit / {name}"] = table.loc[rows, "MPE [m]"] / table.loc[label, "MPE [m]"]
     return out
 
 
@@ -194,16 +210,16 @@ def ablation_findings(table: pd.DataFrame, claims: pd.DataFrame | None = None) -
     no number in it is typed by hand, so it cannot contradict the tables above it.
 
     Args:
-        table: :func:`ablation_table` (variant rows in Table I order, optional oracle row and
+        table: :func:`ablation_table` (variant rows in Table I order, optional reference rows and
             extra columns; a column that is absent or NaN is left out of the text).
         claims: :func:`airpose_lib.eval.significance.claims_table` (index ``claim``, columns
             ``difference [m]`` and ``verdict``; or ``claim`` as a column, as in ``claims.csv``), or None.
     Returns:
-        a bulleted Markdown paragraph: AirPose against the paper and the oracle floor, the claims'
+        a bulleted Markdown paragraph: AirPose against the paper and the mean-body references, the claims'
         verdicts and (when ``claims`` has them) their relative gains next to the paper's, what the
         root orientation adds to MPJPE, and the seed count's caveat.
     """
-    rows = [m for m in table.index if m != ORACLE_LABEL]
+    rows = _variant_rows(table)
     best = "AirPose" if "AirPose" in rows else rows[-1]
     r = table.loc[best]
 
@@ -212,11 +228,15 @@ def ablation_findings(table: pd.DataFrame, claims: pd.DataFrame | None = None) -
 
     head = (f"* **{best}**: MPE {r['MPE [m]']:.3f} m (the paper's {r['MPE paper [m]']:.3f} m), "
             f"MPJPE {r['MPJPE [m]']:.3f} m (the paper's {r['MPJPE paper [m]']:.3f} m)")
-    if ORACLE_LABEL in table.index:
-        floor = float(table.loc[ORACLE_LABEL, "MPE [m]"])
-        head += (f"; the oracle floor of this data is MPE {floor:.3f} m, so {best}'s MPE is "
-                 f"{r['MPE [m]'] / floor:.2f} x the floor and the paper's is "
-                 f"{'below' if r['MPE paper [m]'] < floor else 'above'} it")
+    refs = {name: float(table.loc[label, "MPE [m]"]) for label, name in _REFERENCE_NAMES.items()
+            if label in table.index}
+    if refs:
+        head += ("; a stature-blind estimate with the ground-truth pose gets MPE "
+                 + " and ".join(f"{v:.3f} m with the {name}" for name, v in refs.items())
+                 + f" on this data, so {best}'s MPE is "
+                 + " and ".join(f"{r['MPE [m]'] / v:.2f} x the {name}'s" for name, v in refs.items())
+                 + ", and the paper's " + " and ".join(
+                     f"{'below' if r['MPE paper [m]'] < v else 'above'} the {name}'s" for name, v in refs.items()))
     lines = [head + "."]
     if claims is not None and len(claims):
         claims = claims if "claim" in claims.columns else claims.reset_index()  # claims_table's index

@@ -3,10 +3,12 @@ new run against them.
 
 Notebook 02 writes a results bundle into its output folder with :func:`write_reference`:
 
-* ``table1.csv`` / ``table1.md``: Table I (kit mean and seed std, paper, extra columns, oracle row);
+* ``table1.csv`` / ``table1.md``: Table I (kit mean and seed std, paper, extra columns, the
+  mean-body reference rows);
 * ``per_seed.csv``: one row per variant x seed with the metric means (what the check compares);
 * ``claims.csv`` / ``claims.md``: the six ordering claims with difference, interval and verdict;
-* ``oracle.csv``: the mean-body oracle's MPE summary (the floor of the data);
+* ``mean_body.csv``: the MPE summary of the mean-body references, neutral and of the true gender
+  (what a stature-blind estimate with the ground-truth pose gets on the data);
 * ``provenance.json``: kit version, git commit, machine, command and the wall time of each step
   (notebook 02 adds the device and precision each network trained with, :func:`train_settings`).
 
@@ -35,12 +37,12 @@ from airpose_lib.atomic import atomic_path
 from .ablation import PER_SEED_METRICS, table_to_markdown
 
 __all__ = ["REFERENCE_FILES", "RESULTS_ROOT", "reference_dir", "machine_description", "git_commit", "provenance_record",
-           "train_settings", "train_wall_s", "oracle_summary", "write_reference", "read_reference_table", "side_by_side",
+           "train_settings", "train_wall_s", "mean_body_summary", "write_reference", "read_reference_table", "side_by_side",
            "compare_to_reference", "check_against_reference", "install_reference", "reference_report",
            "RECORDING_FILES", "install_recordings_reference", "recordings_report"]
 
 #: The files of a results bundle.
-REFERENCE_FILES = ("table1.csv", "table1.md", "per_seed.csv", "claims.csv", "claims.md", "oracle.csv",
+REFERENCE_FILES = ("table1.csv", "table1.md", "per_seed.csv", "claims.csv", "claims.md", "mean_body.csv",
                    "provenance.json")
 #: ``results/`` at the root of the checkout this package lives in.
 RESULTS_ROOT = Path(__file__).resolve().parents[2] / "results"
@@ -147,17 +149,18 @@ def train_settings(runs: Mapping) -> dict:
 
 
 # -- the bundle -----------------------------------------------------------------------------------
-def oracle_summary(oracle: pd.DataFrame) -> pd.DataFrame:
-    """One row: the oracle's MPE mean, median, 90th percentile, signed / absolute depth error and
-    reprojection residual over the test images (``oracle_per_view`` columns)."""
+def mean_body_summary(references: pd.DataFrame) -> pd.DataFrame:
+    """One row per mean-body reference (``method``): MPE mean, median, 90th percentile, signed /
+    absolute depth error and reprojection residual over the test images
+    (:func:`airpose_lib.eval.mean_body.mean_body_references` columns)."""
     return pd.DataFrame([{
-        "method": oracle["method"].iloc[0] if "method" in oracle else "oracle",
-        "mpe_m": oracle["mpe_m"].mean(), "mpe_median_m": oracle["mpe_m"].median(),
-        "mpe_p90_m": oracle["mpe_m"].quantile(0.9),
-        "err_z_m": oracle["err_z_m"].mean(), "abs_err_z_m": oracle["err_z_m"].abs().mean(),
-        "reproj_px": oracle["reproj_px"].mean() if "reproj_px" in oracle else np.nan,
-        "images": len(oracle),
-    }])
+        "method": method,
+        "mpe_m": t["mpe_m"].mean(), "mpe_median_m": t["mpe_m"].median(),
+        "mpe_p90_m": t["mpe_m"].quantile(0.9),
+        "err_z_m": t["err_z_m"].mean(), "abs_err_z_m": t["err_z_m"].abs().mean(),
+        "reproj_px": t["reproj_px"].mean() if "reproj_px" in t else np.nan,
+        "images": len(t),
+    } for method, t in references.groupby("method", sort=False)])
 
 
 def _write_text(path: Path, text: str) -> None:
@@ -179,7 +182,7 @@ def _write_csv(path: Path, frame: pd.DataFrame, index: bool) -> None:
 
 
 def write_reference(out_dir: str | Path, *, table: pd.DataFrame, per_seed: pd.DataFrame, claims: pd.DataFrame,
-                    oracle: pd.DataFrame | None, profile: str, command: str,
+                    references: pd.DataFrame | None, profile: str, command: str,
                     step_wall_s: Mapping[str, float | None], extra: Mapping | None = None) -> Path:
     """Write a results bundle (:data:`REFERENCE_FILES`), each file atomically.
 
@@ -188,7 +191,8 @@ def write_reference(out_dir: str | Path, *, table: pd.DataFrame, per_seed: pd.Da
         table: :func:`airpose_lib.eval.ablation.ablation_table`.
         per_seed: :func:`airpose_lib.eval.ablation.per_seed_table`.
         claims: :func:`airpose_lib.eval.significance.claims_table`.
-        oracle: :func:`airpose_lib.eval.oracle.oracle_per_view` (None: no ``oracle.csv``).
+        references: :func:`airpose_lib.eval.mean_body.mean_body_references` (None: no
+            ``mean_body.csv``).
         profile: the reproduction profile.
         command: the command that regenerates the bundle.
         step_wall_s: step name -> wall time in seconds (None when unknown).
@@ -202,8 +206,8 @@ def write_reference(out_dir: str | Path, *, table: pd.DataFrame, per_seed: pd.Da
     _write_csv(out / "per_seed.csv", per_seed, index=False)
     _write_csv(out / "claims.csv", claims, index=True)
     _write_text(out / "claims.md", table_to_markdown(claims, digits=4))
-    if oracle is not None:
-        _write_csv(out / "oracle.csv", oracle_summary(oracle), index=False)
+    if references is not None:
+        _write_csv(out / "mean_body.csv", mean_body_summary(references), index=False)
     provenance = {
         **provenance_record(profile, command),
         "wall_s": {k: (round(float(v), 1) if v is not None else None) for k, v in step_wall_s.items()},

@@ -79,6 +79,24 @@ def test_per_seed_rows_in_table_order_with_wall_times():
     assert (p["images"] == 4).all() and list(p["method"]) == ["Baseline", "Baseline", "AirPose"]
 
 
+def test_root_orientation_breakdown_per_seed_in_the_table_and_the_findings():
+    t = _full(0.6, 0.10, 5.0)
+    t["root_rot_deg"] = [5.0, 10.0, 100.0, 170.0]  # median 55; two of four above 90 deg (exactly 90: not)
+    t["root_yaw_deg"] = [4.0, 9.0, 100.0, 170.0]  # median 54.5
+    t["root_tilt_deg"] = [1.0, 2.0, 3.0, 4.0]  # median 2.5
+    t["mpjpe_true_root_m"] = 0.08
+    edge = t.assign(root_rot_deg=[90.0, 90.0, 90.0, 90.5])
+    p = per_seed_table({("airpose", 1): t, ("airpose", 2): edge})
+    assert list(p["root_above90_pct"]) == [50.0, 25.0]
+    assert p.loc[0, "root_yaw_median_deg"] == 54.5 and p.loc[0, "root_tilt_median_deg"] == 2.5
+    table = ablation_table({("airpose", 1): t})
+    assert table.loc["AirPose", ["root orient. median [deg]", "root yaw median [deg]", "root tilt median [deg]",
+                                 "root orient. > 90 deg [%]"]].tolist() == [55.0, 54.5, 2.5, 50.0]
+    text = ablation_findings(table)
+    assert ("(median root-orientation error 55.0 deg: yaw 54.5 deg and tilt 2.5 deg median, 50.0 % of the images "
+            "above 90 deg)") in text
+
+
 def test_markdown_and_latex_render_every_row():
     t = ablation_table({("baseline", 1): _per_view(0.5, 0.1), ("fullcam", 1): _per_view(0.25, 0.09)})
     md = table_to_markdown(t)

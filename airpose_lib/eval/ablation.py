@@ -16,7 +16,7 @@ import pandas as pd
 
 from .mean_body import GENDERED_LABEL, MEAN_BODY_LABELS, NEUTRAL_LABEL
 
-__all__ = ["VARIANT_LABELS", "PAPER_TABLE_I", "PER_SEED_METRICS", "TABLE_COLUMNS", "per_seed_table",
+__all__ = ["VARIANT_LABELS", "PAPER_TABLE_I", "ROOT_FLIP_DEG", "PER_SEED_METRICS", "TABLE_COLUMNS", "per_seed_table",
            "ablation_table", "paper_gaps", "ablation_findings", "table_to_markdown", "table_to_latex"]
 
 #: Row names of Table I for the kit's variant names.
@@ -34,7 +34,18 @@ PAPER_TABLE_I = pd.DataFrame(
 )
 
 
-#: Per-seed metric -> (per-view column, how the images of one run are reduced).
+#: Root-orientation errors above this (degrees) are counted apart: a body turned more than a
+#: quarter turn away from the truth (a front/back flip, not imprecision).
+ROOT_FLIP_DEG = 90.0
+
+
+def _share_above_flip_pct(errors_deg: pd.Series) -> float:
+    """Percentage of the images whose geodesic root error exceeds :data:`ROOT_FLIP_DEG`."""
+    return 100.0 * float((errors_deg > ROOT_FLIP_DEG).mean())
+
+
+#: Per-seed metric -> (per-view column, how the images of one run are reduced: a pandas method's
+#: name or a function of the column).
 PER_SEED_METRICS = {
     "mpe_m": ("mpe_m", "mean"),
     "mpjpe_m": ("mpjpe_m", "mean"),
@@ -42,6 +53,9 @@ PER_SEED_METRICS = {
     "mpjpe_true_root_m": ("mpjpe_true_root_m", "mean"),
     "pa_mpjpe_m": ("pa_mpjpe_m", "mean"),
     "root_rot_median_deg": ("root_rot_deg", "median"),
+    "root_yaw_median_deg": ("root_yaw_deg", "median"),
+    "root_tilt_median_deg": ("root_tilt_deg", "median"),
+    "root_above90_pct": ("root_rot_deg", _share_above_flip_pct),
 }
 #: Per-seed metric -> Table I column (``ablation_table``).
 TABLE_COLUMNS = {
@@ -51,6 +65,9 @@ TABLE_COLUMNS = {
     "mpjpe_true_root_m": "MPJPE true root [m]",
     "pa_mpjpe_m": "PA-MPJPE [m]",
     "root_rot_median_deg": "root orient. median [deg]",
+    "root_yaw_median_deg": "root yaw median [deg]",
+    "root_tilt_median_deg": "root tilt median [deg]",
+    "root_above90_pct": "root orient. > 90 deg [%]",
     "mpe_tight_m": "MPE tight box [m]",
     "mpjpe_tight_m": "MPJPE tight box [m]",
     "mpe_camera0_m": "MPE camera 0 [m]",
@@ -72,7 +89,8 @@ def per_seed_table(per_view: Mapping[tuple[str, int], pd.DataFrame],
             0's; the kit's ``mpe_m`` averages both cameras).
     Returns:
         columns ``variant, method, seed`` and those of :data:`PER_SEED_METRICS` present in every
-        table (root orientation: the median over images), ``mpe_tight_m``, ``mpjpe_tight_m`` when
+        table (root orientation: the medians over images of the geodesic, yaw and tilt errors and
+        the percentage above :data:`ROOT_FLIP_DEG`), ``mpe_tight_m``, ``mpjpe_tight_m`` when
         every run has a tight-box table, ``images``, and ``wall_s`` when given; Table I order.
     """
     unknown = {v for v, _ in per_view} - set(VARIANT_LABELS)
@@ -87,7 +105,7 @@ def per_seed_table(per_view: Mapping[tuple[str, int], pd.DataFrame],
         row = {"variant": variant, "method": VARIANT_LABELS[variant], "seed": seed}
         for m in present:
             col, how = PER_SEED_METRICS[m]
-            row[m] = float(getattr(t[col], how)())
+            row[m] = float(how(t[col]) if callable(how) else getattr(t[col], how)())
         if tight:
             tt = per_view_tight[variant, seed]
             row["mpe_tight_m"], row["mpjpe_tight_m"] = float(tt["mpe_m"].mean()), float(tt["mpjpe_m"].mean())
@@ -126,7 +144,8 @@ def ablation_table(per_view: Mapping[tuple[str, int], pd.DataFrame],
         ``MPE std [m]``, ``MPE paper [m]``, ``MPJPE [m]``, ``MPJPE std [m]``, ``MPJPE paper [m]``,
         then the extra columns present (``MPJPE shape-aware [m]``, ``MPJPE true root [m]`` (the
         body pose alone: Table I's MPJPE with the true root orientation), ``PA-MPJPE [m]``,
-        ``root orient. median [deg]``, ``MPE tight box [m]``, ``MPJPE tight box [m]``; means over
+        ``root orient. median [deg]``, ``root yaw median [deg]``, ``root tilt median [deg]``,
+        ``root orient. > 90 deg [%]``, ``MPE tight box [m]``, ``MPJPE tight box [m]``; means over
         seeds) and ``seeds``. The std is over the seeds' means (NaN for one seed).
     """
     runs = per_seed_table(per_view, per_view_tight, camera0=camera0)
@@ -249,8 +268,13 @@ def ablation_findings(table: pd.DataFrame, claims: pd.DataFrame | None = None) -
             lines.append(gains)
     if has("MPJPE true root [m]"):
         others = ", ".join(f"{m} {table.loc[m, 'MPJPE true root [m]']:.3f}" for m in rows if m != best)
-        root = (f" (median root-orientation error {r['root orient. median [deg]']:.1f} deg)"
-                if has("root orient. median [deg]") else "")
+        root = ""
+        if has("root orient. median [deg]"):
+            root = f"median root-orientation error {r['root orient. median [deg]']:.1f} deg"
+            if all(has(c) for c in ("root yaw median [deg]", "root tilt median [deg]", "root orient. > 90 deg [%]")):
+                root += (f": yaw {r['root yaw median [deg]']:.1f} deg and tilt {r['root tilt median [deg]']:.1f} deg "
+                         f"median, {r['root orient. > 90 deg [%]']:.1f} % of the images above 90 deg")
+            root = f" ({root})"
         lines.append(f"* **Root orientation**: with the ground-truth root orientation, {best}'s MPJPE is "
                      f"{r['MPJPE true root [m]']:.3f} m ({others}); the predicted root orientation{root} "
                      f"adds {(r['MPJPE [m]'] - r['MPJPE true root [m]']) * 1000:.1f} mm to the "

@@ -16,6 +16,11 @@ Notebook 02 writes a results bundle into its output folder with :func:`write_ref
 writes there); without the flag, a run whose profile has a committed bundle prints
 :func:`compare_to_reference`: every variant mean that moved by more than the reference's own
 seed spread.
+
+Reference results come from a clean commit, and their provenance names it: ``--write-reference``
+refuses (:class:`ProvenanceError`) when the checkout has changes (:func:`require_clean_checkout`)
+or when the bundle's ``provenance.json`` records a dirty checkout or a commit that is not an
+ancestor of HEAD (:func:`provenance_problems`, the check a test runs on the committed files).
 """
 from __future__ import annotations
 
@@ -33,10 +38,12 @@ import pandas as pd
 
 from airpose_lib import __version__
 from airpose_lib.atomic import atomic_path
+from airpose_lib.errors import UserError
 
 from .ablation import PER_SEED_METRICS, table_to_markdown
 
-__all__ = ["REFERENCE_FILES", "RESULTS_ROOT", "reference_dir", "machine_description", "git_commit", "provenance_record",
+__all__ = ["REFERENCE_FILES", "RESULTS_ROOT", "ProvenanceError", "reference_dir", "machine_description", "git_commit",
+           "require_clean_checkout", "provenance_problems", "provenance_record",
            "train_settings", "train_wall_s", "mean_body_summary", "write_reference", "read_reference_table", "side_by_side",
            "compare_to_reference", "check_against_reference", "install_reference", "reference_report",
            "RECORDING_FILES", "install_recordings_reference", "recordings_report"]
@@ -89,17 +96,87 @@ def machine_description() -> dict:
             "load_average": [round(x, 2) for x in load] if load else None}
 
 
+class ProvenanceError(UserError, RuntimeError):
+    """Reference results that would not come from a clean commit: the message names the checkout
+    or the ``provenance.json`` and the fix."""
+
+
+def _git(root: Path, *args: str) -> subprocess.CompletedProcess:
+    return subprocess.run(["git", *args], cwd=root, capture_output=True, text=True, timeout=10)
+
+
 def git_commit(root: str | Path | None = None) -> dict:
-    """``{"commit": sha or None, "dirty": bool or None}`` of the checkout at ``root``."""
+    """``{"commit": sha or None, "dirty": bool or None}`` of the checkout at ``root`` (default:
+    the one ``results/`` belongs to).
+
+    Dirty: a change to a tracked file (staged or not) or an untracked file that git does not ignore
+    (new code counts; run folders, caches and other ignored files do not). None: not a git
+    checkout, or git failed.
+    """
     root = Path(root) if root is not None else RESULTS_ROOT.parent
     try:
-        sha = subprocess.run(["git", "rev-parse", "HEAD"], cwd=root, capture_output=True, text=True,
-                             timeout=10, check=True).stdout.strip()
-        status = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], cwd=root,
-                                capture_output=True, text=True, timeout=10, check=True).stdout
+        sha = _git(root, "rev-parse", "HEAD")
+        status = _git(root, "status", "--porcelain", "--untracked-files=normal")
     except (OSError, subprocess.SubprocessError):
         return {"commit": None, "dirty": None}
-    return {"commit": sha, "dirty": bool(status.strip())}
+    if sha.returncode or status.returncode:
+        return {"commit": None, "dirty": None}
+    return {"commit": sha.stdout.strip(), "dirty": bool(status.stdout.strip())}
+
+
+def require_clean_checkout(root: str | Path | None = None) -> dict:
+    """:func:`git_commit` of a checkout that may write reference results.
+
+    Raises:
+        ProvenanceError: not a git checkout, or it has changes (:func:`git_commit`'s rule).
+    """
+    root = Path(root) if root is not None else RESULTS_ROOT.parent
+    state = git_commit(root)
+    if state["commit"] is None:
+        raise ProvenanceError(f"{root}: not a git checkout (or git failed), so reference results could not name "
+                              f"their commit; write them from a clone of the repository")
+    if state["dirty"]:
+        raise ProvenanceError(f"{root} has changes that are not committed (see `git status`); reference results "
+                              f"must come from a clean commit: commit or remove the changes, then run again")
+    return state
+
+
+def provenance_problems(path: str | Path, root: str | Path | None = None) -> list[str]:
+    """What is wrong with a results bundle's ``provenance.json`` as a record of a clean commit.
+
+    Args:
+        path: the ``provenance.json`` (``git: {"commit", "dirty"}`` of :func:`provenance_record`).
+        root: the checkout whose HEAD the commit must precede (default: the one ``results/``
+            belongs to).
+    Returns:
+        one sentence per problem, [] when the file records a clean checkout at a commit that is an
+        ancestor of (or equal to) HEAD (``git merge-base --is-ancestor``).
+    """
+    root = Path(root) if root is not None else RESULTS_ROOT.parent
+    try:
+        record = json.loads(Path(path).read_text())
+    except (OSError, ValueError) as e:
+        return [f"no readable provenance ({type(e).__name__}: {e})"]
+    git = record.get("git") if isinstance(record, dict) else None
+    git = git if isinstance(git, dict) else {}
+    commit, dirty = git.get("commit"), git.get("dirty")
+    problems = []
+    if dirty is True:
+        problems.append("it was made from a checkout with uncommitted changes")
+    elif dirty is not False:
+        problems.append("it does not say whether the checkout was clean")
+    if not isinstance(commit, str) or not commit:
+        return problems + ["it names no git commit"]
+    try:
+        ancestor = _git(root, "merge-base", "--is-ancestor", commit, "HEAD")
+    except (OSError, subprocess.SubprocessError) as e:
+        return problems + [f"git could not check its commit {commit[:12]} ({type(e).__name__})"]
+    if ancestor.returncode == 1:
+        problems.append(f"its commit {commit[:12]} is not an ancestor of HEAD in {root}")
+    elif ancestor.returncode:
+        problems.append(f"its commit {commit[:12]} is not a commit of the repository at {root} "
+                        f"({' '.join(ancestor.stderr.split()) or 'git failed'})")
+    return problems
 
 
 def _run_result(run) -> dict:
@@ -302,16 +379,32 @@ def check_against_reference(new_per_seed: pd.DataFrame, ref_dir: str | Path) -> 
     return comparison, f"{int(comparison['differs'].sum())} of {len(comparison)} variant means differ from {ref_dir}"
 
 
+def _checkout_of(root: str | Path | None) -> Path:
+    """The checkout a results folder belongs to (the folder above ``results/``)."""
+    return Path(root if root is not None else RESULTS_ROOT).parent
+
+
 def install_reference(bundle: str | Path, profile: str, command: str | None = None,
                       root: str | Path | None = None) -> Path:
     """Copy a run's results bundle into ``results/<profile>/`` (what ``--write-reference`` does).
 
     ``command`` replaces the bundle's recorded command (the one that really ran). Files are
     copied atomically one by one; a file of the bundle that is absent is removed from the target.
+
+    Raises:
+        ProvenanceError: the checkout ``root`` belongs to has changes (:func:`require_clean_checkout`),
+            or the bundle's provenance has :func:`provenance_problems` against it.
     """
     src, dst = Path(bundle), reference_dir(profile, root)
     if not (src / "per_seed.csv").is_file():
         raise FileNotFoundError(f"{src}: no results bundle (per_seed.csv); run notebook 02 first")
+    checkout = _checkout_of(root)
+    require_clean_checkout(checkout)
+    problems = provenance_problems(src / "provenance.json", checkout)
+    if problems:
+        raise ProvenanceError(f"{src / 'provenance.json'}: {'; '.join(problems)}; reference results must come "
+                              f"from a clean commit: rerun notebook 02 from one (airpose reproduce "
+                              f"--profile {profile} --only 02_ablation_table --write-reference)")
     for name in REFERENCE_FILES:
         if not (src / name).is_file():
             (dst / name).unlink(missing_ok=True)
@@ -376,11 +469,13 @@ def install_recordings_reference(notebook_dir: str | Path, profile: str, command
         command: the command that made them (recorded in ``provenance.json``).
     Raises:
         FileNotFoundError: a file of :data:`RECORDING_FILES` is missing (notebook 05 did not finish).
+        ProvenanceError: the checkout ``root`` belongs to has changes (:func:`require_clean_checkout`).
     """
     src, dst = Path(notebook_dir), reference_dir(profile, root) / "recordings"
     missing = [n for n in RECORDING_FILES if not (src / n).is_file()]
     if missing:
         raise FileNotFoundError(f"{src}: no {', '.join(missing)}; run notebook 05_airpose_plus first")
+    require_clean_checkout(_checkout_of(root))
     for name in RECORDING_FILES:
         with atomic_path(dst / name) as tmp:
             shutil.copyfile(src / name, tmp)

@@ -209,7 +209,7 @@ def test_the_provenance_names_each_trainings_device_and_precision(tmp_path):
 
 
 def test_notebook_02s_bundle_records_the_trainings_device_and_precision(tmp_path):
-    from test_eval_reference import VARIANTS, _oracle, _runs
+    from test_eval_reference import VARIANTS, _references, _runs
 
     from airpose_lib.eval.ablation import ablation_table
     from airpose_lib.eval.significance import claims_table
@@ -225,8 +225,8 @@ def test_notebook_02s_bundle_records_the_trainings_device_and_precision(tmp_path
                                                                                   "precision": "bf16"}}))
         runs[variant, seed] = AblationRun(variant, seed, folder / "checkpoints" / "last.pt", {"per_view": per_view})
     exp = AblationExperiment("smoke", "generated", list(VARIANTS), [1], runs, test=None)
-    out = write_ablation_bundle(exp, tmp_path / "bundle", table=ablation_table(exp.per_view, oracle=_oracle()),
-                                claims=claims_table(exp.per_view, n_resamples=50), oracle=_oracle())
+    out = write_ablation_bundle(exp, tmp_path / "bundle", table=ablation_table(exp.per_view, references=_references()),
+                                claims=claims_table(exp.per_view, n_resamples=50), references=_references())
     prov = json.loads((out / "provenance.json").read_text())
     assert prov["training"] == {f"{v} seed 1": {"device": "cuda:0", "precision": "bf16"} for v in VARIANTS}
     assert prov["wall_s"]["train airpose seed 1"] == 2.0

@@ -33,29 +33,22 @@ from torch import Tensor, nn
 from torch.nn import functional as F
 
 from airpose_lib.errors import ConfigError
-from airpose_lib.geometry import axis_angle_to_matrix, full_to_crop_pixels, geodesic_angle, rot6d_to_matrix
+from airpose_lib.geometry import (
+    axis_angle_to_matrix,
+    full_to_crop_pixels,
+    geodesic_angle,
+    heading_of,
+    rot6d_to_matrix,
+)
 
 from .supervised import SupervisedLoss
 
 __all__ = ["PretrainLossConfig", "PretrainLoss", "camera_frame_joints", "heading_of", "heading_bin"]
 
 
-# The targets of the heading head: defined here, with the objective that trains it (the network
-# only knows how many classes it has).
-def heading_of(phi: Tensor) -> Tensor:
-    """Heading of the body in the camera, radians in ``(-pi, pi]``.
-
-    Args:
-        phi: ``(..., 3, 3)`` root rotation (model -> camera); the model faces +Z.
-
-    Returns:
-        ``(...)`` azimuth of the body's forward axis ``phi[:, :, 2]`` in the camera's x-z plane
-        (0: facing away from the camera, pi: facing it).
-    """
-    forward = phi[..., :, 2]
-    return torch.atan2(forward[..., 0], forward[..., 2])
-
-
+# The classes of the heading head: defined here, with the objective that trains it (the network
+# only knows how many classes it has); the heading itself is geometry's (the evaluation's yaw
+# error reads it too).
 def heading_bin(phi: Tensor, n_bins: int) -> Tensor:
     """Class index ``(...)`` int64 of :func:`heading_of` in ``n_bins`` equal bins of ``(-pi, pi]``."""
     h = heading_of(phi)

@@ -63,7 +63,7 @@ def test_a_bad_value_or_key_in_a_profile_names_the_file_and_the_field(tmp_path):
 
 
 def test_errors_name_the_file_and_the_fix(tmp_path):
-    with pytest.raises(ProfileError, match=r"unknown profile 'nope' \(no .*nope\.yaml\); available: cpu, paper, smoke"):
+    with pytest.raises(ProfileError, match=r"unknown profile 'nope' \(no .*nope\.yaml\); available: cpu, cpu_paper_layout, paper, smoke"):
         read_profile("nope")
     with pytest.raises(ValueError, match="missing.yaml does not exist"):  # a ValueError, as before
         profile_section(tmp_path / "missing.yaml", "train")
@@ -189,3 +189,11 @@ def test_a_bad_inheritance_names_the_file(tmp_path):
     (tmp_path / "d.yaml").write_text("inherits: nope\n")
     with pytest.raises(ProfileError, match=r"unknown profile 'nope'"):
         read_profile("d", folder=tmp_path)
+
+
+def test_the_paper_layout_profile_is_cpu_on_other_data():
+    cpu, paper = read_profile("cpu"), read_profile("cpu_paper_layout")
+    assert set(paper) == set(cpu)
+    for section in set(cpu) - {"data", "description"}:
+        assert paper[section] == cpu[section], section
+    assert {k: v for k, v in paper["data"]["still"].items() if k != "scene"} == cpu["data"]["still"]

@@ -1,4 +1,5 @@
-"""The reproduction profiles: ``smoke``, ``cpu`` and ``paper`` (one YAML file each, in this folder).
+"""The reproduction profiles: ``smoke``, ``cpu`` and ``paper`` (one YAML file each, in this folder),
+and ``cpu_paper_layout`` (cpu on still frames with the paper's camera layout).
 
 A profile is the one place where sizes live: every section configures one part of the kit
 (``data: still:`` the still-frame data, ``sequences:`` the recordings, ``train:``, ``pretrain:``,
@@ -40,7 +41,8 @@ PROFILES_DIR = Path(__file__).resolve().parent
 
 
 def profile_names(folder: str | Path = PROFILES_DIR) -> list[str]:
-    """Names of the profiles in ``folder`` (the kit's: ``["cpu", "paper", "smoke"]``), sorted."""
+    """Names of the profiles in ``folder`` (the kit's: ``["cpu", "cpu_paper_layout", "paper", "smoke"]``),
+    sorted."""
     return sorted(p.stem for p in Path(folder).glob("*.yaml"))
 
 

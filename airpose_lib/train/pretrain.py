@@ -50,11 +50,13 @@ from airpose_lib.profiles import profile_section, section_where
 from .config import TrainConfig
 from .loop import check_data_root, default_model_factory, start_training
 
-__all__ = ["PRETRAIN_VERSION", "pretrain_config", "pretrain_stages", "backbone_key", "stage_keys", "ensure_backbone",
+__all__ = ["PRETRAIN_VERSION", "DATA_OPTIONS", "pretrain_config", "pretrain_stages", "backbone_key", "stage_keys", "ensure_backbone",
            "profile_backbone", "profile_backbone_key", "export_backbone", "import_torchvision_backbone", "gate_metrics", "reference_backbone_path", "write_reference_backbone"]
 
 #: Bumped when the same settings would train another backbone.
 PRETRAIN_VERSION = 1
+#: Training-data options a pretraining stage's ``data:`` may set (StillFrameDataset keywords).
+DATA_OPTIONS = ("mirror",)
 _REPO = Path(__file__).resolve().parents[2]
 
 
@@ -68,7 +70,9 @@ def pretrain_stages(profile: str, **overrides) -> list[TrainConfig]:
     ``data: still:`` settings with those changes (e.g. the smaller dataset that earlier stages were
     trained on, when the profile's grew). Its ``cfg.data`` then holds that dataset's ``root``,
     ``fingerprint`` and ``generation`` settings; the other stages take the dataset that
-    :func:`ensure_backbone` is given.
+    :func:`ensure_backbone` is given. A stage's ``data:`` may also set the training augmentation
+    (:data:`DATA_OPTIONS`, e.g. ``mirror: true``, :class:`~airpose_lib.data.dataset.StillFrameDataset`'s
+    keywords); they are part of the stage's key.
     """
     settings = profile_section(profile, "pretrain")
     chain = [settings]
@@ -91,12 +95,15 @@ def pretrain_stages(profile: str, **overrides) -> list[TrainConfig]:
         if "data" in extra:  # an override's data replaces the section's
             data = extra.pop("data") or {}
         cfg = config_from(TrainConfig, {**values, **extra}, "training options").replace(profile=name)
+        unknown = set(data) - {"still", *DATA_OPTIONS}
+        if unknown:
+            raise ProfileError(f"profile {profile}: a pretraining stage's `data:` takes only `still:` "
+                               f"(changes to the profile's `data: still:`) and {', '.join(DATA_OPTIONS)}, "
+                               f"not {sorted(unknown)}")
+        options = {k: data[k] for k in DATA_OPTIONS if k in data}
         if "still" in data:
-            if set(data) != {"still"}:
-                raise ProfileError(f"profile {profile}: a pretraining stage's `data:` takes only `still:` "
-                                   f"(changes to the profile's `data: still:`), not {sorted(set(data) - {'still'})}")
             cfg = cfg.replace(data=_stage_dataset(profile, name, data["still"] or {}))
-        return cfg
+        return cfg.replace(data={**cfg.data, **options}) if options else cfg
 
     return [stage(values, overrides if i == 0 else {}) for i, values in reversed(list(enumerate(chain)))]
 
@@ -128,6 +135,9 @@ def backbone_key(cfg: TrainConfig, data_fingerprint: str, start_key: str | None 
                              "val_every", "val_batches", "device", "num_threads", "profile",
                              "trainable_from", "backbone_lr_scale")}  # the last two: regressor-task fields
     settings["pretrained"] = start_key
+    options = {k: cfg.data[k] for k in DATA_OPTIONS if cfg.data.get(k)}
+    if options:  # only when set, so that the keys of the backbones made before the options stay
+        settings["data_options"] = options
     for name, default in (("lr_schedule", "constant"), ("warmup_steps", 0), ("precision", "fp32"),
                           ("sync_batchnorm", False)):
         if settings.get(name) == default:  # added after the first committed backbone, whose key stays
@@ -272,7 +282,7 @@ def _with_data(stages: list[TrainConfig], data_root: str | Path, data_fingerprin
     """The dataset in ``data_root`` (``root`` and ``fingerprint``) for the stages that have none
     of their own."""
     given = {"root": str(data_root), "fingerprint": data_fingerprint}
-    return [cfg if "generation" in cfg.data else cfg.replace(data=given) for cfg in stages]
+    return [cfg if "generation" in cfg.data else cfg.replace(data={**cfg.data, **given}) for cfg in stages]
 
 
 def ensure_backbone(profile: str, data_root: str | Path, data_fingerprint: str, out_root: str | Path | None = None,
@@ -318,7 +328,8 @@ def _train_stage(profile: str, cfg: TrainConfig, key: str, start: Path | None, o
         if "generation" in cfg.data:  # a dataset of the stage's own, made only when the stage trains
             ensure_still_dataset(config=GenerationConfig.from_dict(cfg.data["generation"]), root=data_root,
                                  progress=progress)
-        cfg = cfg.replace(pretrained=None if start is None else str(start), data={"root": str(data_root)})
+        options = {k: cfg.data[k] for k in DATA_OPTIONS if k in cfg.data}
+        cfg = cfg.replace(pretrained=None if start is None else str(start), data={"root": str(data_root), **options})
         out = Path(out_root) if out_root is not None else run_path("pretrain", Path(str(profile)).stem)
         t0 = time.time()
         # One process trains a backbone (the others, torchrun's ranks included, wait on the lock

@@ -38,7 +38,7 @@ from airpose_lib.data.manifest import load_manifest
 from airpose_lib.data.shards import sha256_file
 from airpose_lib.engine.checkpoint import kit_version, load_checkpoint
 from airpose_lib.engine.launch import resolve_device, single_process
-from airpose_lib.errors import DamagedFileError, ProfileError, ProfileSettingError, reading
+from airpose_lib.errors import ConfigError, DamagedFileError, ProfileError, ProfileSettingError, reading
 from airpose_lib.eval.metrics import rotation_error
 from airpose_lib.folder_lock import file_lock
 from airpose_lib.geometry import axis_angle_to_matrix, rot6d_to_matrix
@@ -51,7 +51,8 @@ from .config import TrainConfig
 from .loop import check_data_root, default_model_factory, start_training
 
 __all__ = ["PRETRAIN_VERSION", "DATA_OPTIONS", "pretrain_config", "pretrain_stages", "backbone_key", "stage_keys", "ensure_backbone",
-           "profile_backbone", "profile_backbone_key", "export_backbone", "import_torchvision_backbone", "gate_metrics", "reference_backbone_path", "write_reference_backbone"]
+           "profile_backbone", "profile_backbone_key", "OTHER_PROFILE", "other_profile", "own_backbone_key",
+           "other_profile_backbone", "export_backbone", "import_torchvision_backbone", "gate_metrics", "reference_backbone_path", "write_reference_backbone"]
 
 #: Bumped when the same settings would train another backbone.
 PRETRAIN_VERSION = 1
@@ -371,6 +372,36 @@ def profile_backbone(profile: str, progress: bool = False) -> Path:
     """The backbone of a profile for its own still-frame dataset (generated first if missing)."""
     root = ensure_still_dataset(profile, progress=progress)
     return ensure_backbone(profile, root, load_manifest(Path(root))["fingerprint"], progress=progress)
+
+
+#: ``pretrained: profile:<name>`` in a training config: the backbone of profile ``<name>`` for its
+#: own data (e.g. ``cpu_paper_layout`` trains its regressors on cpu's features).
+OTHER_PROFILE = "profile:"
+
+
+def other_profile(pretrained: str | None) -> str | None:
+    """The profile named by ``pretrained: profile:<name>``; None for any other value."""
+    if pretrained is None or not str(pretrained).startswith(OTHER_PROFILE):
+        return None
+    name = str(pretrained)[len(OTHER_PROFILE):]
+    if not name:
+        raise ConfigError(f"pretrained: {pretrained!r} names no profile; write e.g. `pretrained: profile:cpu`")
+    return name
+
+
+def own_backbone_key(profile: str) -> str:
+    """The key of :func:`profile_backbone` (from the profile's settings; no dataset is read)."""
+    fingerprint = profile_config(profile).fingerprint()
+    return stage_keys(_with_data(pretrain_stages(profile), default_root(profile), fingerprint), fingerprint)[-1]
+
+
+def other_profile_backbone(profile: str, progress: bool = False) -> Path:
+    """:func:`profile_backbone`, without making the profile's dataset when the backbone is at hand
+    (in the cache, or the committed reference)."""
+    key = own_backbone_key(profile)
+    with file_lock(cache_dir() / "backbones" / f"{key}.lock"):
+        found = _at_hand(profile, key)
+    return found if found is not None else profile_backbone(profile, progress)
 
 
 def write_reference_backbone(profile: str, backbone_file: str | Path) -> Path:

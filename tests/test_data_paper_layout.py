@@ -23,7 +23,9 @@ def test_only_the_scene_differs_from_cpu(configs):
     assert paper.replace(scene=cpu.scene) == cpu  # sizes, seed, crops: cpu's
     changed = {k for k in cpu.scene.__dataclass_fields__ if getattr(cpu.scene, k) != getattr(paper.scene, k)}
     assert changed == {"camera_distance_jitter", "target_jitter", "target_height_range", "beta_std"}
-    assert paper.scene.camera_distance == 10.0 and paper.scene.pitch_range_deg == (0.0, 45.0) and paper.scene.person_extent == 2.75  # the paper's
+    # the paper's (Sec. IV-A), as cpu's
+    assert paper.scene.camera_distance == 10.0 and paper.scene.pitch_range_deg == (0.0, 45.0)
+    assert paper.scene.person_extent == 2.75
 
 
 def test_cameras_are_10_m_from_the_origin_and_aimed_at_it(configs):

@@ -33,8 +33,8 @@ from airpose_lib import config_fields
 from airpose_lib.config_fields import config_from
 from airpose_lib.errors import ProfileError, ProfileSettingError
 
-__all__ = ["PROFILES_DIR", "INHERITS", "ProfileError", "ProfileSettingError", "profile_names", "profile_path", "read_profile",
-           "profile_section", "section_where", "section_config"]
+__all__ = ["PROFILES_DIR", "INHERITS", "ProfileError", "ProfileSettingError", "profile_names", "profile_path",
+           "read_profile", "profile_section", "section_where", "section_config"]
 
 #: Folder of the kit's ``<name>.yaml`` profile files.
 PROFILES_DIR = Path(__file__).resolve().parent

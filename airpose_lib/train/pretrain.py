@@ -50,9 +50,11 @@ from airpose_lib.profiles import profile_section, section_where
 from .config import TrainConfig
 from .loop import check_data_root, default_model_factory, start_training
 
-__all__ = ["PRETRAIN_VERSION", "DATA_OPTIONS", "pretrain_config", "pretrain_stages", "backbone_key", "stage_keys", "ensure_backbone",
-           "profile_backbone", "profile_backbone_key", "OTHER_PROFILE", "other_profile", "own_backbone_key",
-           "other_profile_backbone", "export_backbone", "import_torchvision_backbone", "gate_metrics", "reference_backbone_path", "write_reference_backbone"]
+__all__ = ["PRETRAIN_VERSION", "DATA_OPTIONS", "pretrain_config", "pretrain_stages", "backbone_key",
+           "stage_keys", "ensure_backbone", "profile_backbone", "profile_backbone_key", "OTHER_PROFILE",
+           "other_profile", "own_backbone_key", "other_profile_backbone", "export_backbone",
+           "import_torchvision_backbone", "gate_metrics", "reference_backbone_path",
+           "write_reference_backbone"]
 
 #: Bumped when the same settings would train another backbone.
 PRETRAIN_VERSION = 1

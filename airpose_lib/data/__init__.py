@@ -7,7 +7,8 @@ detectors), ``official_layout`` (the official real-data folder layout, ``load_se
 ``appearance`` (skin / hair / clothing colours), ``render`` (textured scenes, pyvista),
 ``shards`` and ``manifest`` (files on disk), ``still_config`` (still-frame dataset settings),
 ``still_frames`` (sampling and rendering one shard's still frames), ``generate`` (shards on disk,
-resumption, workers: ``airpose data generate``), ``dataset`` (``StillFrameDataset``),
+resumption, workers: ``airpose data generate``), ``dataset`` (``StillFrameDataset``), ``mirror``
+(the left-right mirror augmentation),
 ``network_input`` (how a frame becomes the network's input: person box, previous-box rule,
 crop, normalisation; shared by the drones and fine-tuning).
 
@@ -48,7 +49,7 @@ _EXPORTS = {
 _SEARCHED = ("official_synthetic", "official_real", "official_layout", "sequences",
              "motions", "detections", "poses", "scene", "appearance", "manifest", "shards", "still_config",
              "still_frames", "generate",
-             "dataset", "render")
+             "mirror", "dataset", "render")
 
 __all__ = sorted(_EXPORTS)
 __getattr__, __dir__ = lazy_namespace(__name__, globals(), _SEARCHED, _EXPORTS, skip_failing=True)

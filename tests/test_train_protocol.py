@@ -229,7 +229,7 @@ def test_a_second_pretraining_stage_starts_from_the_first(tmp_path, monkeypatch,
 
     monkeypatch.setenv("AIRPOSE_CACHE", str(tmp_path / "cache"))
     root = tmp_path / "data"
-    generate_still_dataset(GenerationConfig(num_samples=8, shard_size=4, crop_size=32, seed=0), root,
+    generate_still_dataset(GenerationConfig(num_samples=16, shard_size=4, crop_size=32, seed=0), root,
                            workers=1, progress=False, record=False)
     section = {"steps": 1, "batch_size": 2, "backbone": "resnet18", "lr": 1e-3, "seed": 0, "checkpoint_every": 1,
                "val_every": None, "log_every": 1, "num_workers": 0, "model": {"n_heading_bins": 12}}
@@ -274,7 +274,7 @@ def test_earlier_stages_keep_their_dataset_when_the_profile_data_grow(tmp_path, 
     from airpose_lib.train.pretrain import ensure_backbone, pretrain_stages, stage_keys
 
     monkeypatch.setenv("AIRPOSE_CACHE", str(tmp_path / "cache"))
-    small = {"num_samples": 4, "shard_size": 2, "crop_size": 32, "seed": 0}
+    small = {"num_samples": 8, "shard_size": 2, "crop_size": 32, "seed": 0}  # 2 train, 1 val, 1 test shards
     section = {"steps": 1, "batch_size": 2, "backbone": "resnet18", "lr": 1e-3, "seed": 0, "checkpoint_every": 1,
                "val_every": None, "log_every": 1, "num_workers": 0, "model": {"n_heading_bins": 12}}
     before = tmp_path / "grow.yaml"  # the profile when its dataset was the small one: two stages
@@ -285,14 +285,14 @@ def test_earlier_stages_keep_their_dataset_when_the_profile_data_grow(tmp_path, 
 
     after = tmp_path / "grown" / "grow.yaml"  # the dataset grew; a third stage was added
     after.parent.mkdir()
-    after.write_text(yaml.safe_dump({"data": {"still": {**small, "num_samples": 6}}, "pretrain": {
-        **section, "continue_from": {"steps": 1, "data": {"still": {"num_samples": 4}}, "continue_from": {"steps": 2}}}}))
+    after.write_text(yaml.safe_dump({"data": {"still": {**small, "num_samples": 10}}, "pretrain": {
+        **section, "continue_from": {"steps": 1, "data": {"still": {"num_samples": 8}}, "continue_from": {"steps": 2}}}}))
     stages = pretrain_stages(str(after))
     assert [c.steps for c in stages] == [2, 1, 1]
     assert [c.data.get("fingerprint") for c in stages] == [small_fp, small_fp, None]
     assert stages[0].data["root"] == str(default_root("grow").with_name(f"still_grow-{small_fp[:12]}"))
     root = tmp_path / "data"
-    generate_still_dataset(GenerationConfig(**{**small, "num_samples": 6}), root, workers=1, progress=False,
+    generate_still_dataset(GenerationConfig(**{**small, "num_samples": 10}), root, workers=1, progress=False,
                            record=False)
     fp = load_manifest(root)["fingerprint"]
     keys = stage_keys(stages, fp)
@@ -305,7 +305,7 @@ def test_earlier_stages_keep_their_dataset_when_the_profile_data_grow(tmp_path, 
     assert record["continued_from"]["key"] == keys[1]
     earlier = json.loads(path.with_name(f"{keys[1]}.json").read_text())
     assert earlier["data_fingerprint"] == small_fp and earlier["config"]["data"]["root"] == stages[0].data["root"]
-    assert load_manifest(Path(stages[0].data["root"]))["totals"]["samples"] == 4  # generated for them
+    assert load_manifest(Path(stages[0].data["root"]))["totals"]["samples"] == 8  # generated for them
 
 
 def test_regressor_with_its_last_backbone_block_trainable(tmp_path, monkeypatch, open_model_files):
@@ -318,7 +318,7 @@ def test_regressor_with_its_last_backbone_block_trainable(tmp_path, monkeypatch,
 
     monkeypatch.setenv("AIRPOSE_CACHE", str(tmp_path / "cache"))
     root = tmp_path / "data"
-    generate_still_dataset(GenerationConfig(num_samples=8, shard_size=4, crop_size=32, seed=0), root,
+    generate_still_dataset(GenerationConfig(num_samples=16, shard_size=4, crop_size=32, seed=0), root,
                            workers=1, progress=False, record=False)
     torch.manual_seed(1)
     trunk = PretrainNet("resnet18").backbone

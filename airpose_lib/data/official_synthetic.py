@@ -193,8 +193,9 @@ def official_split_files(root: Path | str, split: str, split_by: str = "auto",
         split_by: ``"lists"`` (``dataset/{train,test}_pkls.pkl``), ``"subjects"`` (the last
             ``num_test_subjects`` subjects are the test split) or ``"auto"`` (lists if both exist).
         num_test_subjects: test subjects for ``split_by="subjects"`` (10 in the paper).
-        num_val_subjects: training subjects held out as the validation split (0: no validation
-            split, ``"train"`` is the authors' whole training split).
+        num_val_subjects: training subjects held out as the validation split (0, or not fewer
+            than the training split has: no validation split, ``"train"`` is the authors' whole
+            training split).
 
     Raises:
         OfficialDataError: no ``dataset/`` folder, missing or unreadable list file, a listed pkl
@@ -231,9 +232,12 @@ def official_split_files(root: Path | str, split: str, split_by: str = "auto",
         subjects = sorted({subject_of(f) for f in files_all})
         test = set(subjects[-num_test_subjects:]) if num_test_subjects > 0 else set()
         files = [f for f in files_all if split == "all" or (subject_of(f) in test) == (split == "test")]
-    if split in ("train", "val") and num_val_subjects > 0:
-        held = set(sorted({subject_of(f) for f in files})[-num_val_subjects:])
+    subjects = sorted({subject_of(f) for f in files})
+    if split in ("train", "val") and 0 < num_val_subjects < len(subjects):  # some training subjects stay
+        held = set(subjects[-num_val_subjects:])
         files = [f for f in files if (subject_of(f) in held) == (split == "val")]
+    elif split == "val":
+        files = []  # no validation split: refused below
     if not files:
         raise OfficialDataError(f"{root}: the {split!r} split is empty")
     missing = [f for f in files if not f.is_file()]

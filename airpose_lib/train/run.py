@@ -123,7 +123,7 @@ def prepare_data(cfg: TrainConfig, progress: bool | None = None, device: str | t
     if cfg.task == "regressor":
         if cfg.pretrained is None:
             raise ConfigError("the regressor task trains on the features of a pretrained backbone: set pretrained")
-        for split in {cfg.train_split, cfg.val_split}:
+        for split in {cfg.train_split} | ({cfg.val_split} if cfg.val_every is not None else set()):
             ensure_features(cfg.pretrained, data["root"], split, progress=show, cut=cfg.trainable_from,
                             device=device)
     return cfg

@@ -37,7 +37,7 @@ t_cw``) are documented in :func:`simulate_sequence`.
 
 Modules: ``config`` (cameras, persons, flights, :class:`SequenceConfig`, a profile's recordings),
 ``flight`` (the drones' paths and camera poses), ``simulate`` (ground truth without pixels),
-``renderer`` (the frames), ``recording`` (one recording on disk, detector files),
+``renderer`` (the frames), ``field`` (the opt-in field camera pipeline on them), ``recording`` (one recording on disk, detector files),
 ``cache`` (a profile's recordings, made only when missing or outdated).
 """
 from __future__ import annotations
@@ -55,6 +55,7 @@ from .config import (
     scale_intrinsics,
     sequence_configs_from_profile,
 )
+from .field import FieldConfig
 from .flight import look_at_rotation
 from .recording import generate_sequence, recording_detections, refresh_detections
 from .renderer import SequenceRenderer, render_sequence
@@ -66,6 +67,7 @@ __all__ = [
     "PersonSpec",
     "PERSONS",
     "FlightConfig",
+    "FieldConfig",
     "SequenceConfig",
     "SimulatedSequence",
     "GROUND_TRUTH_KEYS",

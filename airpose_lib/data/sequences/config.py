@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import dataclasses
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -13,6 +13,8 @@ from airpose_lib.body.genders import GENDER_CODES
 from airpose_lib.config_fields import config_from
 from airpose_lib.errors import ConfigError, ProfileError, ProfileSettingError
 from airpose_lib.profiles import profile_section, section_where
+
+from .field import FieldConfig
 
 __all__ = [
     "CameraSpec",
@@ -166,6 +168,9 @@ class SequenceConfig:
             image), as the still frames' joints +- 20 px.
         detector_seed: seed of the simulated keypoint detectors (None: derived from ``seed``).
         anti_aliasing: MSAA on the renders (as the still frames); about half the speed on a CPU.
+        field: the field camera pipeline on the rendered frames (:mod:`.field`); off by default,
+            and then absent from :meth:`to_dict` (the recordings' cache key), so the clean
+            recordings keep their key and every byte.
     """
 
     person: str | PersonSpec = "person1"
@@ -175,11 +180,12 @@ class SequenceConfig:
     cameras: tuple[CameraSpec, ...] = PAPER_CAMERAS
     render_scale: float = 0.5
     seed: int = 0
-    flight: FlightConfig = field(default_factory=FlightConfig)
+    flight: FlightConfig = dataclasses.field(default_factory=FlightConfig)
     jpeg_quality: int = 92
     bbox_margin_px: float = 20.0
     detector_seed: int | None = None
     anti_aliasing: bool = True
+    field: FieldConfig = FieldConfig()
 
     def __post_init__(self) -> None:
         if self.n_frames < 1:
@@ -209,6 +215,8 @@ class SequenceConfig:
         """Plain (JSON-able) settings, recorded with every generated sequence."""
         d = dataclasses.asdict(self)
         d["person"] = dataclasses.asdict(self.person_spec)
+        if not self.field.enabled:
+            del d["field"]  # the clean recordings' settings (and cache key) as before the option
         return d
 
     @classmethod
@@ -230,6 +238,8 @@ class SequenceConfig:
                                           for k, v in d["flight"].items()})
         if "time_offsets" in d:
             d["time_offsets"] = tuple(float(x) for x in d["time_offsets"])
+        if isinstance(d.get("field"), Mapping):
+            d["field"] = config_from(FieldConfig, d["field"], "field")
         return cls(**d)
 
 

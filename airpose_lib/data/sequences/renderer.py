@@ -1,5 +1,6 @@
 """Rendering of a simulated recording, frame by frame: the person's posed mesh in a fixed outdoor
-scene, seen by each drone's calibrated camera (non-square pixels, off-centre principal point)."""
+scene, seen by each drone's calibrated camera (non-square pixels, off-centre principal point),
+then, when the recording's ``field`` option is on, the field camera pipeline (:mod:`.field`)."""
 from __future__ import annotations
 
 from collections.abc import Iterator
@@ -10,6 +11,7 @@ from airpose_lib.body.forward import rest_body
 
 from ..appearance import BodyPaint, sample_appearance
 from ..scene import Distractor, EnvironmentSample
+from .field import field_frame, field_rng, person_image_velocity
 from .simulate import SimulatedSequence, person_body_model
 
 __all__ = ["SequenceRenderer", "render_sequence"]
@@ -108,9 +110,14 @@ class SequenceRenderer:
             light_intensity=0.9, ambient=0.35, distractors=dist)
         for r in self._renderers.values():
             r.set_environment(self.environment)
+        # The field pipeline's motion blur follows the person's image motion (the drone's and
+        # the person's together); computed only when the option is on.
+        self._field = sim.config.field
+        self._velocity = person_image_velocity(sim.gt["j2d"]) if self._field.enabled else None
 
     def render_frames(self, frames=None, chunk: int = 32) -> Iterator[tuple[int, list[np.ndarray]]]:
-        """Yield ``(frame_index, [image (H, W, 3) uint8 RGB per view])`` in order."""
+        """Yield ``(frame_index, [image (H, W, 3) uint8 RGB per view])`` in order (after the field
+        pipeline when the recording's ``field`` option is on)."""
         gt = self.sim.gt
         F, V = self.sim.num_frames, self.sim.num_views
         frames = np.arange(F) if frames is None else np.asarray(list(frames), dtype=np.int64)
@@ -126,7 +133,11 @@ class SequenceRenderer:
                     R_wb, t_wb = gt["R_wb"][i, v], gt["t_wb"][i, v]
                     r = self._renderers[self._size_of_view[v]]
                     r.set_body(v0[k, v] @ R_wb.T + t_wb, self.faces, self.colors)
-                    images.append(r.render(gt["K"][v], gt["R_cw"][i, v], gt["t_cw"][i, v]))
+                    img = r.render(gt["K"][v], gt["R_cw"][i, v], gt["t_cw"][i, v])
+                    if self._field.enabled:  # off: the rendered frame itself, byte for byte
+                        img = field_frame(img, self._field, field_rng(self.sim.config.seed, i, v),
+                                          K=gt["K"][v], velocity_px=self._velocity[i, v])
+                    images.append(img)
                 yield int(i), images
 
     def close(self) -> None:

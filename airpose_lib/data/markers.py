@@ -1,0 +1,211 @@
+"""ArUco markers on the ground as ground truth for the drones' cameras (issue 31, item 5).
+
+The paper's scene had ArUco markers on the ground, "never used for any of our methods" (Fig. 1);
+the official real data ships per-frame marker poses (``data.official_real``). This module is
+the geometry without a renderer: a layout of square markers lying on the ground plane ``y = 0``
+(world Y up, as the recordings), their images (``cv2.aruco``), a top-down image of the ground
+with the markers (:func:`ground_board`) and its homography into a camera (for synthetic views),
+their detection, each camera's pose from them (:func:`camera_pose_from_markers`) and UAV 2 in
+UAV 1 from two such poses (:func:`relative_camera_from_markers`).
+
+Conventions. A marker's own frame is OpenCV's (``x`` right and ``y`` up in the marker image,
+``z`` out of it), its corners in ArUco's order: top-left, top-right, bottom-right, bottom-left,
+at ``(-s/2, s/2), (s/2, s/2), (s/2, -s/2), (-s/2, -s/2)`` (``SOLVEPNP_IPPE_SQUARE``'s order).
+On the ground the marker's ``z`` is world up, its ``x`` world ``x`` and its ``y`` world ``-z``
+(markers are axis-aligned), so a marker's image pasted upright in a top-down image whose columns
+run along world ``x`` and rows along world ``z`` is the marker as it lies. Camera poses are
+OpenCV extrinsics ``x_cam = R x_world + t``.
+"""
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+import torch
+
+from airpose_lib.geometry import relative_camera_pose
+
+__all__ = [
+    "MarkerLayout",
+    "R_WORLD_MARKER",
+    "marker_image",
+    "marker_corners_world",
+    "ground_board",
+    "ground_homography",
+    "detect_markers",
+    "marker_pose",
+    "camera_pose_from_markers",
+    "relative_camera_from_markers",
+]
+
+#: Marker frame -> world rotation of a marker lying on the ground (columns: the marker's x, y, z
+#: in the world): x -> world x, y -> world -z, z -> world y (up).
+R_WORLD_MARKER = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])
+
+
+@dataclass(frozen=True)
+class MarkerLayout:
+    """Square ArUco markers lying axis-aligned on the ground ``y = 0``.
+
+    Attributes:
+        ids: (M,) marker ids of the dictionary.
+        centres_xz: (M, 2) world (x, z) of each marker's centre, metres.
+        side_m: the black square's side (ArUco's marker length, without the white margin), metres.
+        dictionary: a ``cv2.aruco.DICT_*`` name.
+    """
+
+    ids: tuple[int, ...] = (0, 1, 2, 3)
+    centres_xz: tuple[tuple[float, float], ...] = ((-1.5, -1.5), (1.5, -1.5), (1.5, 1.5), (-1.5, 1.5))
+    side_m: float = 0.6
+    dictionary: str = "DICT_4X4_50"
+
+    def __post_init__(self) -> None:
+        if len(self.ids) != len(self.centres_xz) or len(set(self.ids)) != len(self.ids):
+            raise ValueError("one centre per marker and distinct ids")
+        if not self.side_m > 0:
+            raise ValueError(f"side_m must be > 0, got {self.side_m}")
+
+    def aruco_dictionary(self):
+        return cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, self.dictionary))
+
+
+def marker_image(layout: MarkerLayout, marker_id: int, side_px: int) -> np.ndarray:
+    """(side_px, side_px) uint8 image of one marker's black square (black border bit included,
+    no white margin), ``cv2.aruco.generateImageMarker``."""
+    return cv2.aruco.generateImageMarker(layout.aruco_dictionary(), int(marker_id), int(side_px), borderBits=1)
+
+
+def marker_corners_world(layout: MarkerLayout) -> np.ndarray:
+    """(M, 4, 3) world corners of each marker in ArUco's order (TL, TR, BR, BL), on ``y = 0``."""
+    h = layout.side_m / 2
+    local = np.array([[-h, h, 0.0], [h, h, 0.0], [h, -h, 0.0], [-h, -h, 0.0]])  # marker frame
+    centres = np.array([[x, 0.0, z] for x, z in layout.centres_xz])
+    return local @ R_WORLD_MARKER.T + centres[:, None]
+
+
+def ground_board(layout: MarkerLayout, px_per_m: float, extent_xz: tuple[float, float, float, float],
+                 background: int | np.ndarray = 110) -> np.ndarray:
+    """Top-down image (H, W) uint8 of the ground with the markers lying on it.
+
+    Pixel ``(col, row)`` covers world ``x = x0 + (col + 0.5) / px_per_m``, ``z = z0 + (row + 0.5)
+    / px_per_m``; each marker has a white margin of one cell (1/6 of a 4x4 marker), as printed
+    markers do, so its border stands out from the ground.
+
+    Args:
+        layout: the markers.
+        px_per_m: resolution.
+        extent_xz: (x0, z0, x1, z1) world rectangle covered.
+        background: the ground's grey level, or an (H, W) image of it.
+    """
+    x0, z0, x1, z1 = extent_xz
+    W, H = int(round((x1 - x0) * px_per_m)), int(round((z1 - z0) * px_per_m))
+    board = np.empty((H, W), np.uint8)
+    board[...] = background
+    side = int(round(layout.side_m * px_per_m))
+    cells = layout.aruco_dictionary().markerSize + 2
+    margin = int(round(side / cells))
+    for mid, (cx, cz) in zip(layout.ids, layout.centres_xz):
+        img = marker_image(layout, mid, side)
+        c0 = int(round((cx - x0) * px_per_m - side / 2))
+        r0 = int(round((cz - z0) * px_per_m - side / 2))
+        if r0 - margin < 0 or c0 - margin < 0 or r0 + side + margin > H or c0 + side + margin > W:
+            raise ValueError(f"marker {mid} lies outside the board's extent {extent_xz}")
+        board[r0 - margin:r0 + side + margin, c0 - margin:c0 + side + margin] = 255
+        board[r0:r0 + side, c0:c0 + side] = img
+    return board
+
+
+def ground_homography(K: np.ndarray, R_cw: np.ndarray, t_cw: np.ndarray, px_per_m: float,
+                      origin_xz: tuple[float, float]) -> np.ndarray:
+    """(3, 3) homography from :func:`ground_board` pixels to the camera's image.
+
+    A ground point ``(x, 0, z)`` projects to ``K (x r1 + z r3 + t)`` (``r_i`` the columns of
+    ``R_cw``), and board pixel ``(col, row)`` is ``x = x0 + (col + 0.5) / s``, ``z = z0 + (row +
+    0.5) / s``.
+    """
+    R_cw = np.asarray(R_cw, dtype=np.float64)
+    x0, z0 = origin_xz
+    A = np.array([[1 / px_per_m, 0, x0 + 0.5 / px_per_m], [0, 1 / px_per_m, z0 + 0.5 / px_per_m], [0, 0, 1]])
+    return np.asarray(K) @ np.column_stack([R_cw[:, 0], R_cw[:, 2], np.asarray(t_cw, dtype=np.float64)]) @ A
+
+
+def detect_markers(image: np.ndarray, layout: MarkerLayout) -> dict[int, np.ndarray]:
+    """Marker id -> (4, 2) detected corners (TL, TR, BR, BL, pixels) of the layout's markers.
+
+    ``cv2.aruco.ArucoDetector`` with sub-pixel corner refinement (the pose needs corners better
+    than a pixel); ids not in the layout are dropped. ``image``: (H, W) or (H, W, 3) RGB uint8.
+    """
+    gray = image if image.ndim == 2 else cv2.cvtColor(np.ascontiguousarray(image), cv2.COLOR_RGB2GRAY)
+    params = cv2.aruco.DetectorParameters()
+    params.cornerRefinementMethod = cv2.aruco.CORNER_REFINE_SUBPIX
+    corners, ids, _ = cv2.aruco.ArucoDetector(layout.aruco_dictionary(), params).detectMarkers(gray)
+    if ids is None:
+        return {}
+    wanted = set(layout.ids)
+    return {int(i): np.asarray(c, dtype=np.float64).reshape(4, 2) for c, i in zip(corners, ids.ravel())
+            if int(i) in wanted}
+
+
+def marker_pose(corners_px: np.ndarray, side_m: float, K: np.ndarray,
+                dist: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """One marker's pose in the camera, ``x_cam = R x_marker + t``: (3, 3), (3,).
+
+    ``cv2.solvePnP`` with ``SOLVEPNP_IPPE_SQUARE`` (Collins and Bartoli 2014, the square-marker
+    solver; what ``estimatePoseSingleMarkers`` of the official scripts computes). ``corners_px``:
+    (4, 2) in ArUco's order.
+    """
+    h = side_m / 2
+    obj = np.array([[-h, h, 0.0], [h, h, 0.0], [h, -h, 0.0], [-h, -h, 0.0]])
+    ok, rvec, tvec = cv2.solvePnP(obj, np.asarray(corners_px, dtype=np.float64).reshape(4, 1, 2), K, dist,
+                                  flags=cv2.SOLVEPNP_IPPE_SQUARE)
+    if not ok:
+        raise RuntimeError("solvePnP (IPPE_SQUARE) failed")
+    return cv2.Rodrigues(rvec)[0], tvec.reshape(3)
+
+
+def camera_pose_from_markers(detections: Mapping[int, np.ndarray], layout: MarkerLayout, K: np.ndarray,
+                             dist: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, float] | None:
+    """A camera's world pose from all its detected markers jointly: ``R_cw (3, 3)``, ``t_cw (3,)``
+    and the RMS reprojection error (pixels), or None without a detection.
+
+    All corners lie on one plane, so ``SOLVEPNP_IPPE`` (planar PnP) gives the candidate poses
+    of the plane's two-fold ambiguity; the one with the smaller reprojection error is refined
+    by Levenberg-Marquardt on every corner. More markers spread over the ground constrain the
+    pose much better than one marker's four corners (the ambiguity of a small square seen from
+    afar is what makes single-marker poses flip).
+    """
+    ids = [i for i in layout.ids if i in detections]
+    if not ids:
+        return None
+    world = marker_corners_world(layout)
+    obj = np.concatenate([world[layout.ids.index(i)] for i in ids])  # (4n, 3)
+    img = np.concatenate([np.asarray(detections[i], dtype=np.float64).reshape(4, 2) for i in ids])
+    n, rvecs, tvecs, errs = cv2.solvePnPGeneric(obj, img[:, None], K, dist, flags=cv2.SOLVEPNP_IPPE)
+    if n == 0:
+        return None
+    best = int(np.argmin(np.asarray(errs).ravel()))
+    rvec, tvec = cv2.solvePnPRefineLM(obj, img[:, None], K, dist, rvecs[best].copy(), tvecs[best].copy())
+    proj = cv2.projectPoints(obj, rvec, tvec, K, dist)[0].reshape(-1, 2)
+    rms = float(np.sqrt(((proj - img) ** 2).sum(-1).mean()))
+    return cv2.Rodrigues(rvec)[0], tvec.reshape(3), rms
+
+
+def relative_camera_from_markers(R1: np.ndarray, t1: np.ndarray, R2: np.ndarray,
+                                 t2: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """UAV 2's camera in UAV 1's from both cameras' poses relative to the same markers.
+
+    Both cameras see the same marker (or world) frame, ``x_ck = R_k x_m + t_k``, as the networks'
+    two views see one body, so the relative pose is the same elimination
+    (:func:`airpose_lib.geometry.relative_camera_pose`): ``R_12 = R1 R2^T``, ``t_12 = t1 - R_12
+    t2`` (``x_c1 = R_12 x_c2 + t_12``; ``t_12`` is UAV 2's position in UAV 1's frame).
+
+    Args:
+        R1, t1, R2, t2: (..., 3, 3), (..., 3) marker/world -> camera poses of UAV 1 and UAV 2
+            (:func:`camera_pose_from_markers`, or ``data.official_real.MarkerPoses``).
+    Returns:
+        ``R_12 (..., 3, 3)``, ``t_12 (..., 3)``, float64.
+    """
+    R, t = relative_camera_pose(*(torch.as_tensor(np.asarray(x, dtype=np.float64)) for x in (R1, t1, R2, t2)))
+    return R.numpy(), t.numpy()

@@ -25,13 +25,16 @@ import cv2
 import numpy as np
 import torch
 
+from airpose_lib.errors import ConfigError
 from airpose_lib.geometry import relative_camera_pose
 
 __all__ = [
     "MarkerLayout",
     "R_WORLD_MARKER",
     "marker_image",
+    "marker_tile",
     "marker_corners_world",
+    "tile_corners_world",
     "ground_board",
     "ground_homography",
     "detect_markers",
@@ -47,11 +50,14 @@ R_WORLD_MARKER = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])
 
 @dataclass(frozen=True)
 class MarkerLayout:
-    """Square ArUco markers lying axis-aligned on the ground ``y = 0``.
+    """Square ArUco markers lying axis-aligned on the ground ``y = 0``, each printed with a white
+    margin of one cell (as printed markers are, so the border stands out from the ground).
 
     Attributes:
         ids: (M,) marker ids of the dictionary.
-        centres_xz: (M, 2) world (x, z) of each marker's centre, metres.
+        centres_xz: (M, 2) world (x, z) of each marker's centre, metres. The default: four
+            markers 3 m apart around the recordings' activity area (the person starts within
+            1 m of the origin), in view of both drones most of the time.
         side_m: the black square's side (ArUco's marker length, without the white margin), metres.
         dictionary: a ``cv2.aruco.DICT_*`` name.
     """
@@ -62,10 +68,30 @@ class MarkerLayout:
     dictionary: str = "DICT_4X4_50"
 
     def __post_init__(self) -> None:
+        # Lists (YAML, JSON) become tuples: the layout is hashable and compares equal after a
+        # round trip through a recording's sequence.json.
+        object.__setattr__(self, "ids", tuple(int(i) for i in self.ids))
+        object.__setattr__(self, "centres_xz", tuple((float(x), float(z)) for x, z in self.centres_xz))
+        object.__setattr__(self, "side_m", float(self.side_m))
         if len(self.ids) != len(self.centres_xz) or len(set(self.ids)) != len(self.ids):
-            raise ValueError("one centre per marker and distinct ids")
+            raise ConfigError("markers: one centre per marker and distinct ids")
         if not self.side_m > 0:
-            raise ValueError(f"side_m must be > 0, got {self.side_m}")
+            raise ConfigError(f"markers: side_m must be > 0, got {self.side_m}")
+        if not isinstance(getattr(cv2.aruco, self.dictionary, None), int) or not self.dictionary.startswith("DICT_"):
+            raise ConfigError(f"markers: unknown ArUco dictionary {self.dictionary!r} (e.g. DICT_4X4_50)")
+        size = self.aruco_dictionary().bytesList.shape[0]
+        if max(self.ids) >= size or min(self.ids) < 0:
+            raise ConfigError(f"markers: ids must be in [0, {size}) for {self.dictionary}, got {self.ids}")
+
+    @property
+    def cells(self) -> int:
+        """Cells across a marker's black square (its bits and the black border)."""
+        return self.aruco_dictionary().markerSize + 2
+
+    @property
+    def tile_m(self) -> float:
+        """Side of a printed marker with its white margin (one cell each side), metres."""
+        return self.side_m * (self.cells + 2) / self.cells
 
     def aruco_dictionary(self):
         return cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, self.dictionary))
@@ -77,12 +103,28 @@ def marker_image(layout: MarkerLayout, marker_id: int, side_px: int) -> np.ndarr
     return cv2.aruco.generateImageMarker(layout.aruco_dictionary(), int(marker_id), int(side_px), borderBits=1)
 
 
-def marker_corners_world(layout: MarkerLayout) -> np.ndarray:
-    """(M, 4, 3) world corners of each marker in ArUco's order (TL, TR, BR, BL), on ``y = 0``."""
-    h = layout.side_m / 2
+def marker_tile(layout: MarkerLayout, marker_id: int, px_per_cell: int) -> np.ndarray:
+    """(S, S) uint8 printed marker: the black square and a white margin of one cell,
+    ``S = (cells + 2) px_per_cell``."""
+    img = marker_image(layout, marker_id, layout.cells * px_per_cell)
+    return np.pad(img, px_per_cell, constant_values=255)
+
+
+def _square_corners(layout: MarkerLayout, side: float) -> np.ndarray:
+    h = side / 2
     local = np.array([[-h, h, 0.0], [h, h, 0.0], [h, -h, 0.0], [-h, -h, 0.0]])  # marker frame
     centres = np.array([[x, 0.0, z] for x, z in layout.centres_xz])
     return local @ R_WORLD_MARKER.T + centres[:, None]
+
+
+def marker_corners_world(layout: MarkerLayout) -> np.ndarray:
+    """(M, 4, 3) world corners of each marker in ArUco's order (TL, TR, BR, BL), on ``y = 0``."""
+    return _square_corners(layout, layout.side_m)
+
+
+def tile_corners_world(layout: MarkerLayout) -> np.ndarray:
+    """(M, 4, 3) world corners (TL, TR, BR, BL) of each printed marker, white margin included."""
+    return _square_corners(layout, layout.tile_m)
 
 
 def ground_board(layout: MarkerLayout, px_per_m: float, extent_xz: tuple[float, float, float, float],
@@ -90,8 +132,7 @@ def ground_board(layout: MarkerLayout, px_per_m: float, extent_xz: tuple[float, 
     """Top-down image (H, W) uint8 of the ground with the markers lying on it.
 
     Pixel ``(col, row)`` covers world ``x = x0 + (col + 0.5) / px_per_m``, ``z = z0 + (row + 0.5)
-    / px_per_m``; each marker has a white margin of one cell (1/6 of a 4x4 marker), as printed
-    markers do, so its border stands out from the ground.
+    / px_per_m``; each marker is pasted with its white margin (:func:`marker_tile`).
 
     Args:
         layout: the markers.
@@ -103,17 +144,17 @@ def ground_board(layout: MarkerLayout, px_per_m: float, extent_xz: tuple[float, 
     W, H = int(round((x1 - x0) * px_per_m)), int(round((z1 - z0) * px_per_m))
     board = np.empty((H, W), np.uint8)
     board[...] = background
-    side = int(round(layout.side_m * px_per_m))
-    cells = layout.aruco_dictionary().markerSize + 2
-    margin = int(round(side / cells))
+    cell = layout.side_m / layout.cells * px_per_m
+    if abs(cell - round(cell)) > 1e-6:
+        raise ValueError(f"px_per_m {px_per_m} gives {cell:.3f} px per marker cell; choose a whole number")
     for mid, (cx, cz) in zip(layout.ids, layout.centres_xz):
-        img = marker_image(layout, mid, side)
-        c0 = int(round((cx - x0) * px_per_m - side / 2))
-        r0 = int(round((cz - z0) * px_per_m - side / 2))
-        if r0 - margin < 0 or c0 - margin < 0 or r0 + side + margin > H or c0 + side + margin > W:
+        tile = marker_tile(layout, mid, int(round(cell)))
+        n = tile.shape[0]
+        c0 = int(round((cx - x0) * px_per_m - n / 2))
+        r0 = int(round((cz - z0) * px_per_m - n / 2))
+        if r0 < 0 or c0 < 0 or r0 + n > H or c0 + n > W:
             raise ValueError(f"marker {mid} lies outside the board's extent {extent_xz}")
-        board[r0 - margin:r0 + side + margin, c0 - margin:c0 + side + margin] = 255
-        board[r0:r0 + side, c0:c0 + side] = img
+        board[r0:r0 + n, c0:c0 + n] = tile
     return board
 
 

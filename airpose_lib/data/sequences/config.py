@@ -14,6 +14,7 @@ from airpose_lib.config_fields import config_from
 from airpose_lib.errors import ConfigError, ProfileError, ProfileSettingError
 from airpose_lib.profiles import profile_section, section_where
 
+from ..markers import MarkerLayout
 from .field import FieldConfig
 
 __all__ = [
@@ -171,6 +172,10 @@ class SequenceConfig:
         field: the field camera pipeline on the rendered frames (:mod:`.field`); off by default,
             and then absent from :meth:`to_dict` (the recordings' cache key), so the clean
             recordings keep their key and every byte.
+        markers: ArUco markers printed on the ground (:class:`~airpose_lib.data.markers.MarkerLayout`,
+            world coordinates), as in the paper's scene; None (default) = none, and then absent
+            from :meth:`to_dict` like ``field``. A profile turns the default layout on with
+            ``markers: {}``.
     """
 
     person: str | PersonSpec = "person1"
@@ -186,6 +191,7 @@ class SequenceConfig:
     detector_seed: int | None = None
     anti_aliasing: bool = True
     field: FieldConfig = FieldConfig()
+    markers: MarkerLayout | None = None
 
     def __post_init__(self) -> None:
         if self.n_frames < 1:
@@ -215,8 +221,11 @@ class SequenceConfig:
         """Plain (JSON-able) settings, recorded with every generated sequence."""
         d = dataclasses.asdict(self)
         d["person"] = dataclasses.asdict(self.person_spec)
+        # Options that are off leave the settings (and the cache key) as before they existed.
         if not self.field.enabled:
-            del d["field"]  # the clean recordings' settings (and cache key) as before the option
+            del d["field"]
+        if self.markers is None:
+            del d["markers"]
         return d
 
     @classmethod
@@ -240,6 +249,8 @@ class SequenceConfig:
             d["time_offsets"] = tuple(float(x) for x in d["time_offsets"])
         if isinstance(d.get("field"), Mapping):
             d["field"] = config_from(FieldConfig, d["field"], "field")
+        if isinstance(d.get("markers"), Mapping):
+            d["markers"] = config_from(MarkerLayout, d["markers"], "markers")
         return cls(**d)
 
 

@@ -28,6 +28,8 @@ import torch
 from airpose_lib.errors import ConfigError
 from airpose_lib.geometry import relative_camera_pose
 
+from .official_real import MarkerPoses
+
 __all__ = [
     "MarkerLayout",
     "R_WORLD_MARKER",
@@ -41,6 +43,8 @@ __all__ = [
     "marker_pose",
     "camera_pose_from_markers",
     "relative_camera_from_markers",
+    "sequence_marker_poses",
+    "marker_relative_cameras",
 ]
 
 #: Marker frame -> world rotation of a marker lying on the ground (columns: the marker's x, y, z
@@ -250,3 +254,50 @@ def relative_camera_from_markers(R1: np.ndarray, t1: np.ndarray, R2: np.ndarray,
     """
     R, t = relative_camera_pose(*(torch.as_tensor(np.asarray(x, dtype=np.float64)) for x in (R1, t1, R2, t2)))
     return R.numpy(), t.numpy()
+
+
+def sequence_marker_poses(seq, layout: MarkerLayout | None = None, min_markers: int = 1
+                          ) -> tuple[MarkerPoses, np.ndarray, np.ndarray]:
+    """Each drone's camera pose from the markers in every frame of a recording.
+
+    Args:
+        seq: a recording (:class:`~airpose_lib.data.official_layout.Sequence`: ``frames``,
+            ``images[view][i]`` RGB, ``K`` (V, 3, 3) of the stored images).
+        layout: the markers on its ground; default: a generated recording's own
+            (``SequenceConfig.markers`` in its ``sequence.json``).
+        min_markers: fewer detected markers than this leave the view invalid (two markers from
+            12 m can be tens of centimetres off along the line of sight; three or four are not).
+    Returns:
+        :class:`~airpose_lib.data.official_real.MarkerPoses` in the layout's (world) frame
+        (``R_cm``, ``t_cm`` = ``R_cw``, ``t_cw``; identity / zero where invalid), the number of
+        markers detected ``(F, V)`` and the RMS reprojection error ``(F, V)`` pixels (NaN where
+        no pose).
+    """
+    if layout is None:
+        stored = (seq.meta or {}).get("config", {}).get("markers")
+        if stored is None:
+            raise ConfigError(f"recording {seq.root} has no markers on its ground (a profile's `sequences: "
+                              "markers: {}` adds them); give their layout")
+        layout = MarkerLayout(**stored)
+    F, V = seq.num_frames, seq.num_views
+    R = np.tile(np.eye(3), (F, V, 1, 1))
+    t = np.zeros((F, V, 3))
+    count = np.zeros((F, V), np.int64)
+    rms = np.full((F, V), np.nan)
+    for i in range(F):
+        for v in range(V):
+            det = detect_markers(seq.image(i, v), layout)
+            count[i, v] = len(det)
+            pose = camera_pose_from_markers(det, layout, seq.K[v]) if len(det) >= max(min_markers, 1) else None
+            if pose is not None:
+                R[i, v], t[i, v], rms[i, v] = pose
+    return MarkerPoses(np.asarray(seq.frames), R, t, ~np.isnan(rms)), count, rms
+
+
+def marker_relative_cameras(poses: MarkerPoses) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """UAV 2 in UAV 1 per frame from marker poses (the official release's
+    ``markerposes_corrected_all.pkl`` through ``data.official_real.load_marker_poses``, or
+    :func:`sequence_marker_poses`): ``R_12 (F, 3, 3)``, ``t_12 (F, 3)`` and ``valid (F,)`` (both
+    views posed; elsewhere the values are meaningless)."""
+    R_12, t_12 = relative_camera_from_markers(poses.R_cm[:, 0], poses.t_cm[:, 0], poses.R_cm[:, 1], poses.t_cm[:, 1])
+    return R_12, t_12, poses.valid[:, 0] & poses.valid[:, 1]

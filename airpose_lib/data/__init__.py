@@ -3,7 +3,8 @@ manifests and the PyTorch datasets.
 
 Modules: ``scene`` (people, drone cameras, crop boxes, environment), ``poses`` (plausible body
 poses), ``motions`` and ``sequences`` (simulated recordings), ``detections`` (simulated keypoint
-detectors), ``official_layout`` (the official real-data folder layout, ``load_sequence``),
+detectors), ``official_layout`` (the official real-data folder layout, ``load_sequence``), ``markers``
+(ArUco markers on the ground: detection, camera poses, UAV 2 in UAV 1),
 ``appearance`` (skin / hair / clothing colours), ``render`` (textured scenes, pyvista),
 ``shards`` and ``manifest`` (files on disk), ``still_config`` (still-frame dataset settings),
 ``still_frames`` (sampling and rendering one shard's still frames), ``generate`` (shards on disk,
@@ -46,7 +47,7 @@ _EXPORTS = {
 
 # Other modules' public names (their ``__all__``) are found on first use, in this order; the
 # renderer comes last because importing it starts VTK.
-_SEARCHED = ("official_synthetic", "official_real", "official_layout", "sequences",
+_SEARCHED = ("official_synthetic", "official_real", "official_layout", "sequences", "markers",
              "motions", "detections", "poses", "scene", "appearance", "manifest", "shards", "still_config",
              "still_frames", "generate",
              "mirror", "dataset", "render")

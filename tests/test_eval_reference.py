@@ -22,6 +22,7 @@ from airpose_lib.eval.reference import (
     provenance_problems,
     read_reference_table,
     recordings_report,
+    reference_outputs,
     reference_report,
     require_clean_checkout,
     side_by_side,
@@ -305,6 +306,22 @@ def test_dirty_means_tracked_changes_or_new_files_never_ignored_ones(tmp_path):
         require_clean_checkout(root)
     assert str(root) in str(e.value) and "\n" not in str(e.value)
     assert git_commit(tmp_path / "nowhere") == {"commit": None, "dirty": None}
+    _git(root, "checkout", "--", ".gitignore")
+    # A reproduction's own outputs, written by its first writer, do not make it dirty for the next
+    # ones (seen: notebook 02 wrote results/smoke/, then notebook 05's install refused); an input
+    # beside them (the committed backbone) and another profile's results do.
+    outputs = reference_outputs("smoke")
+    assert "results/smoke/table1.csv" in outputs and "results/smoke/recordings/" in outputs
+    (root / "results" / "smoke" / "recordings").mkdir(parents=True)
+    (root / "results" / "smoke" / "table1.csv").write_text("new")
+    (root / "results" / "smoke" / "recordings" / "paper_claims.csv").write_text("new")
+    assert git_commit(root, outputs)["dirty"] is False and git_commit(root)["dirty"] is True
+    require_clean_checkout(root, outputs)
+    for other in ("results/smoke/pretrained_backbone.pt", "results/cpu/table1.csv"):
+        (root / other).parent.mkdir(parents=True, exist_ok=True)
+        (root / other).write_text("x")
+        assert git_commit(root, outputs)["dirty"] is True, other
+        (root / other).unlink()
     (tmp_path / "plain").mkdir()
     with pytest.raises(ProvenanceError, match="not a git checkout"):
         require_clean_checkout(tmp_path / "plain")

@@ -43,7 +43,7 @@ from airpose_lib.errors import UserError
 from .ablation import PER_SEED_METRICS, table_to_markdown
 
 __all__ = ["REFERENCE_FILES", "RESULTS_ROOT", "ProvenanceError", "reference_dir", "machine_description", "git_commit",
-           "require_clean_checkout", "provenance_problems", "provenance_record",
+           "require_clean_checkout", "reference_outputs", "provenance_problems", "provenance_record",
            "train_settings", "train_wall_s", "mean_body_summary", "write_reference", "read_reference_table", "side_by_side",
            "compare_to_reference", "check_against_reference", "install_reference", "reference_report",
            "RECORDING_FILES", "install_recordings_reference", "recordings_report"]
@@ -105,33 +105,46 @@ def _git(root: Path, *args: str) -> subprocess.CompletedProcess:
     return subprocess.run(["git", *args], cwd=root, capture_output=True, text=True, timeout=10)
 
 
-def git_commit(root: str | Path | None = None) -> dict:
+def reference_outputs(profile: str) -> tuple[str, ...]:
+    """The paths (relative to the checkout; a trailing ``/``: a folder) that a reproduction with
+    ``--write-reference`` writes for ``profile``: its own outputs, which do not make the checkout
+    dirty for the writers that come after the first (notebook 02's bundle, then notebook 05's
+    recordings, then the report). Inputs under ``results/<profile>/`` (the committed backbone) are
+    not among them: a change to one is a change to what the results depend on."""
+    base = f"results/{Path(str(profile)).stem}/"
+    return (*(base + name for name in REFERENCE_FILES), base + "recordings/", base + "report/")
+
+
+def git_commit(root: str | Path | None = None, outputs: tuple[str, ...] = ()) -> dict:
     """``{"commit": sha or None, "dirty": bool or None}`` of the checkout at ``root`` (default:
     the one ``results/`` belongs to).
 
     Dirty: a change to a tracked file (staged or not) or an untracked file that git does not ignore
-    (new code counts; run folders, caches and other ignored files do not). None: not a git
-    checkout, or git failed.
+    (new code counts; run folders, caches and other ignored files do not), other than the
+    ``outputs`` being written (:func:`reference_outputs`). None: not a git checkout, or git failed.
     """
     root = Path(root) if root is not None else RESULTS_ROOT.parent
     try:
         sha = _git(root, "rev-parse", "HEAD")
-        status = _git(root, "status", "--porcelain", "--untracked-files=normal")
+        status = _git(root, "status", "--porcelain", "--untracked-files=all")  # files, not folders
     except (OSError, subprocess.SubprocessError):
         return {"commit": None, "dirty": None}
     if sha.returncode or status.returncode:
         return {"commit": None, "dirty": None}
-    return {"commit": sha.stdout.strip(), "dirty": bool(status.stdout.strip())}
+    changed = [line[3:].split(" -> ")[-1].strip('"') for line in status.stdout.splitlines() if line.strip()]
+    own = lambda path: any(path == o or (o.endswith("/") and path.startswith(o)) for o in outputs)  # noqa: E731
+    return {"commit": sha.stdout.strip(), "dirty": any(not own(path) for path in changed)}
 
 
-def require_clean_checkout(root: str | Path | None = None) -> dict:
-    """:func:`git_commit` of a checkout that may write reference results.
+def require_clean_checkout(root: str | Path | None = None, outputs: tuple[str, ...] = ()) -> dict:
+    """:func:`git_commit` of a checkout that may write reference results (``outputs``: what this
+    reproduction has already written there, :func:`reference_outputs`).
 
     Raises:
         ProvenanceError: not a git checkout, or it has changes (:func:`git_commit`'s rule).
     """
     root = Path(root) if root is not None else RESULTS_ROOT.parent
-    state = git_commit(root)
+    state = git_commit(root, outputs)
     if state["commit"] is None:
         raise ProvenanceError(f"{root}: not a git checkout (or git failed), so reference results could not name "
                               f"their commit; write them from a clone of the repository")
@@ -246,9 +259,10 @@ def _write_text(path: Path, text: str) -> None:
 
 
 def provenance_record(profile: str, command: str) -> dict:
-    """What every results bundle records about how it was made: profile, kit version, git commit,
-    time (UTC), machine and the command."""
-    return {"profile": profile, "kit_version": __version__, "git": git_commit(),
+    """What every results bundle records about how it was made: profile, kit version, git commit
+    (clean but for the profile's own reference outputs, :func:`reference_outputs`), time (UTC),
+    machine and the command."""
+    return {"profile": profile, "kit_version": __version__, "git": git_commit(outputs=reference_outputs(profile)),
             "created_at": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
             "machine": machine_description(), "command": command}
 
@@ -399,7 +413,7 @@ def install_reference(bundle: str | Path, profile: str, command: str | None = No
     if not (src / "per_seed.csv").is_file():
         raise FileNotFoundError(f"{src}: no results bundle (per_seed.csv); run notebook 02 first")
     checkout = _checkout_of(root)
-    require_clean_checkout(checkout)
+    require_clean_checkout(checkout, reference_outputs(profile))
     problems = provenance_problems(src / "provenance.json", checkout)
     if problems:
         raise ProvenanceError(f"{src / 'provenance.json'}: {'; '.join(problems)}; reference results must come "
@@ -475,7 +489,7 @@ def install_recordings_reference(notebook_dir: str | Path, profile: str, command
     missing = [n for n in RECORDING_FILES if not (src / n).is_file()]
     if missing:
         raise FileNotFoundError(f"{src}: no {', '.join(missing)}; run notebook 05_airpose_plus first")
-    require_clean_checkout(_checkout_of(root))
+    require_clean_checkout(_checkout_of(root), reference_outputs(profile))
     for name in RECORDING_FILES:
         with atomic_path(dst / name) as tmp:
             shutil.copyfile(src / name, tmp)

@@ -424,3 +424,40 @@ def test_training_and_pretraining_never_read_the_test_split(tmp_path, monkeypatc
                       progress=False, loss={"vertex_subsample": 50})
     train("airpose", config=cfg, out_dir=tmp_path / "run", resume=False)
     assert "val" in opened and "train" in opened and "test" not in opened, opened
+
+
+def test_gate_reports_the_root_error_as_yaw_tilt_and_flips():
+    """The pretraining gate on a stub whose root head is the truth turned about the body's up axis
+    (30 deg for most crops, 180 deg for a quarter): yaw median 30, tilt 0, a quarter above 90 deg."""
+    from scipy.spatial.transform import Rotation
+
+    from airpose_lib.train.pretrain import gate_metrics
+
+    rng = np.random.default_rng(0)
+    n, V = 8, 2
+    # upright bodies (tilt is measured between up axes) with random headings in the camera
+    phi = torch.as_tensor(Rotation.from_euler("y", rng.uniform(-np.pi, np.pi, (n * V, 1))).as_matrix(),
+                          dtype=torch.float32).reshape(n, V, 3, 3)
+    turns = np.where(np.arange(n * V) % 4 == 0, 180.0, 30.0)
+    turn = torch.as_tensor(Rotation.from_euler("y", turns[:, None], degrees=True).as_matrix(), dtype=torch.float32)
+    items = [{"images": torch.zeros(V, 3, 8, 8), "phi": phi[i], "theta": torch.zeros(21, 3)} for i in range(n)]
+
+    class Stub(nn.Module):
+        n_heading_bins = 12
+
+        def __init__(self):
+            super().__init__()
+            self.k = 0
+
+        def forward(self, images):
+            N = images.shape[0]
+            R = phi.flatten(0, 1)[self.k:self.k + N] @ turn[self.k:self.k + N]  # turn about the body's y
+            self.k += N
+            return {"phi6d": matrix_to_rot6d(R), "theta6d": matrix_to_rot6d(torch.eye(3).expand(N, 21, 3, 3)),
+                    "heading": torch.zeros(N, 12)}
+
+    gate = gate_metrics(Stub(), items, batch_size=4)
+    assert gate["n"] == n * V and gate["root_rot_over_90"] == pytest.approx(0.25)
+    assert gate["root_yaw_median_deg"] == pytest.approx(30.0, abs=1e-3)
+    assert gate["root_tilt_median_deg"] == pytest.approx(0.0, abs=1e-3)
+    assert gate["root_rot_median_deg"] == pytest.approx(30.0, abs=1e-3)

@@ -39,7 +39,8 @@ from airpose_lib.data.shards import sha256_file
 from airpose_lib.engine.checkpoint import kit_version, load_checkpoint
 from airpose_lib.engine.launch import resolve_device, single_process
 from airpose_lib.errors import ConfigError, DamagedFileError, ProfileError, ProfileSettingError, reading
-from airpose_lib.eval.metrics import rotation_error
+from airpose_lib.eval.metrics import root_yaw_tilt, rotation_error
+from airpose_lib.eval.reference import git_commit
 from airpose_lib.folder_lock import file_lock
 from airpose_lib.geometry import axis_angle_to_matrix, rot6d_to_matrix
 from airpose_lib.losses.pretrain import heading_bin
@@ -161,17 +162,23 @@ def gate_metrics(model: torch.nn.Module, dataset, batch_size: int = 32, max_samp
     """The pretrained heads on held-out data: heading accuracy, root-rotation and body-pose errors.
 
     Returns ``heading_acc`` (fraction), ``root_rot_median_deg`` / ``root_rot_mean_deg`` of the
-    linear ``phi6d`` head, ``theta_mean_deg`` (mean over the 21 joints) and ``n`` crops.
+    linear ``phi6d`` head with its yaw and tilt medians (:func:`~airpose_lib.eval.metrics.root_yaw_tilt`)
+    and the share of crops above 90 deg (``root_rot_over_90``, a fraction), ``theta_mean_deg``
+    (mean over the 21 joints) and ``n`` crops.
     """
     model = model.to(device).eval()
     n_bins = model.n_heading_bins
-    rot, th, hit = [], [], []
+    rot, yaw, tilt, th, hit = [], [], [], [], []
     n = 0
     for batch in DataLoader(dataset, batch_size=batch_size, shuffle=False):
         B, V = batch["phi"].shape[:2]
         out = {k: v.cpu() for k, v in model(batch["images"].flatten(0, 1).to(device)).items()}
         phi = batch["phi"].flatten(0, 1)
-        rot.append(torch.rad2deg(rotation_error(rot6d_to_matrix(out["phi6d"]).double(), phi.double())))
+        R = rot6d_to_matrix(out["phi6d"]).double()
+        rot.append(torch.rad2deg(rotation_error(R, phi.double())))
+        y, t = root_yaw_tilt(R, phi.double())
+        yaw.append(torch.rad2deg(y))
+        tilt.append(torch.rad2deg(t))
         theta = axis_angle_to_matrix(batch["theta"]).unsqueeze(1).expand(B, V, 21, 3, 3).flatten(0, 1)
         th.append(torch.rad2deg(rotation_error(rot6d_to_matrix(out["theta6d"]).double(), theta.double())).mean(-1))
         hit.append(out["heading"].argmax(-1) == heading_bin(phi, n_bins))
@@ -180,7 +187,9 @@ def gate_metrics(model: torch.nn.Module, dataset, batch_size: int = 32, max_samp
             break
     rot_all, th_all, hit_all = torch.cat(rot), torch.cat(th), torch.cat(hit)
     return {"heading_acc": float(hit_all.float().mean()), "root_rot_median_deg": float(rot_all.median()),
-            "root_rot_mean_deg": float(rot_all.mean()), "theta_mean_deg": float(th_all.mean()),
+            "root_rot_mean_deg": float(rot_all.mean()), "root_yaw_median_deg": float(torch.cat(yaw).median()),
+            "root_tilt_median_deg": float(torch.cat(tilt).median()),
+            "root_rot_over_90": float((rot_all > 90.0).double().mean()), "theta_mean_deg": float(th_all.mean()),
             "n": int(len(rot_all))}
 
 
@@ -347,7 +356,7 @@ def _train_stage(profile: str, cfg: TrainConfig, key: str, start: Path | None, o
                             device=resolve_device(cfg.device))
         meta = {"backbone": cfg.backbone, "key": key, "profile": profile, "kit_version": kit_version(),
                 "config": cfg.to_dict(), "data_fingerprint": data_fingerprint, "gate": gate, "gate_split": "val",
-                "train_wall_s": round(wall, 1), "steps": run.step,
+                "train_wall_s": round(wall, 1), "steps": run.step, "git": git_commit(),  # the code that trained it
                 "command": f"airpose pretrain --profile {profile}"}
         if start is not None:
             earlier = json.loads(Path(start).with_suffix(".json").read_text())

@@ -37,7 +37,9 @@ def resolve_device(device: str, local_rank: int = 0) -> "torch.device":  # noqa:
     import torch  # here, not at module level: see the module docstring
 
     if device == "auto":
-        return torch.device(f"cuda:{local_rank}") if torch.cuda.is_available() else torch.device("cpu")
+        if not torch.cuda.is_available():
+            return torch.device("cpu")
+        device = "cuda"  # the process's own GPU, which must exist (below)
     try:
         dev = torch.device(device)
     except (RuntimeError, TypeError):
@@ -49,6 +51,10 @@ def resolve_device(device: str, local_rank: int = 0) -> "torch.device":  # noqa:
                               f"(torch {torch.__version__}); use --device cpu, or install a CUDA build of torch")
         if dev.index is None:
             dev = torch.device(f"cuda:{local_rank}")
+            if dev.index >= torch.cuda.device_count():  # more processes on this node than GPUs
+                raise ConfigError(f"the process of local rank {local_rank} would train on {dev}, but only "
+                                  f"{torch.cuda.device_count()} GPU(s) are visible: start at most that many "
+                                  "processes per node (--world-size, torchrun --nproc_per_node), or use --device cpu")
         if dev.index >= torch.cuda.device_count():
             raise ConfigError(f"device {dev} asked for, but only {torch.cuda.device_count()} GPU(s) are visible; "
                               "use another index or set CUDA_VISIBLE_DEVICES")

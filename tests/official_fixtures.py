@@ -34,7 +34,7 @@ import numpy as np
 from airpose_lib.atomic import atomic_path
 from airpose_lib.body.forward import rest_body
 from airpose_lib.data.official_layout import OfficialLayoutWriter, write_camera_calib
-from airpose_lib.data.official_synthetic import OFFICIAL_CROP_MARGIN, stored_image_box, subject_of
+from airpose_lib.data.official_synthetic import OFFICIAL_CROP_MARGIN, VAL_SUBJECTS, stored_image_box, subject_of
 from airpose_lib.data.poses import sample_body_pose
 from airpose_lib.data.scene import PersonSample, SceneConfig, body_world_pose, sample_cameras, sample_person
 
@@ -205,7 +205,13 @@ def write_official_synthetic_fixture(root: Path | str, n_subjects: int = 3, n_po
         for name, part in (("train_pkls.pkl", train), ("test_pkls.pkl", test)):
             entries = [f"{AUTHOR_ROOT}/dataset/{f.relative_to(root / 'dataset').as_posix()}" for f in part]
             _write_bytes(root / "dataset" / name, pickle.dumps(entries, protocol=4))
-    return {"root": root, "files": files, "train": train, "test": test, "subjects": subjects,
+    # The kit's validation split: the last VAL_SUBJECTS training subjects (the list files above
+    # hold the authors' whole training split, as the release's do).
+    train_ids = sorted({subject_of(f) for f in train})
+    val_ids = set(train_ids[-VAL_SUBJECTS:]) if len(train_ids) > VAL_SUBJECTS else set()
+    val = [f for f in train if subject_of(f) in val_ids]
+    train = [f for f in train if subject_of(f) not in val_ids]
+    return {"root": root, "files": files, "train": train, "val": val, "test": test, "subjects": subjects,
             "colors": colors, "disc_radius": disc_radius}
 
 

@@ -173,7 +173,7 @@ def test_generation_config_round_trip_and_splits():
     again = GenerationConfig.from_dict(cfg.to_dict())
     assert again == cfg and again.fingerprint() == cfg.fingerprint()
     assert cfg.num_shards == 11 and cfg.shard_samples(10) == 5 and cfg.num_test_shards == 1
-    assert [cfg.shard_split(k) for k in range(11)] == ["train"] * 10 + ["test"]
+    assert [cfg.shard_split(k) for k in range(11)] == ["train"] * 9 + ["val", "test"]
     assert cfg.replace(seed=1).fingerprint() != cfg.fingerprint()
     with pytest.raises(ValueError, match="unknown scene setting"):
         GenerationConfig.from_dict({"scene": {"num_view": 2}})

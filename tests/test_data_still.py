@@ -14,6 +14,7 @@ from airpose_lib.data.manifest import DatasetError, ShardIntegrityError, load_ma
 from airpose_lib.data.render import SceneRenderer
 from airpose_lib.data.scene import SceneConfig
 from airpose_lib.data.shards import read_shard, shard_name
+from airpose_lib.errors import ConfigError
 from airpose_lib.geometry import (
     body_in_camera,
     box_in_crop,
@@ -23,8 +24,8 @@ from airpose_lib.geometry import (
     project_points,
 )
 
-CFG = GenerationConfig(num_samples=12, shard_size=4, crop_size=64, seed=7,
-                       scene=SceneConfig(num_distractors=(1, 2)))
+CFG = GenerationConfig(num_samples=12, shard_size=4, crop_size=64, seed=7, val_fraction=0.0,
+                       scene=SceneConfig(num_distractors=(1, 2)))  # no validation split: see test_validation_split
 
 
 def _generate(root, config=CFG, **kw):
@@ -68,13 +69,44 @@ def test_manifest_records_everything(reference):
     root, m = reference
     assert m["status"] == "complete" and m["seed"] == 7 and m["profile"] == "test"
     assert m["generator_version"] >= 1 and m["kit_version"]
-    assert [r["index"] for r in m["shards"]] == [0, 1, 2] and m["splits"] == {"train": [0, 1], "test": [2]}
+    assert [r["index"] for r in m["shards"]] == [0, 1, 2] and m["splits"] == {"train": [0, 1], "val": [], "test": [2]}
     t = m["totals"]
     assert t["samples"] == 12 and t["train_samples"] == 8 and t["test_samples"] == 4
     assert t["attempts"] - t["samples"] == t["dropped"] == sum(r["dropped"] for r in m["shards"])
     assert all(len(r["sha256"]) == 64 for r in m["shards"])
     assert set(m["body_models"]["sha256"]) == {"male", "female"}
     assert load_manifest(root) == m
+
+
+def test_shard_splits():
+    """train | val | test in shard order; each split keeps at least one shard; small datasets
+    have no room for a validation split."""
+    cfg = GenerationConfig(num_samples=35200, shard_size=200)  # the cpu profile's sizes
+    splits = [cfg.shard_split(k) for k in range(cfg.num_shards)]
+    assert splits == ["train"] * 140 + ["val"] * 18 + ["test"] * 18
+    assert [GenerationConfig(num_samples=n, shard_size=1).num_val_shards for n in (1, 2, 3, 4, 30)] == [0, 0, 1, 1, 3]
+    assert [GenerationConfig(num_samples=3, shard_size=1).shard_split(k) for k in range(3)] == ["train", "val", "test"]
+    assert GenerationConfig(num_samples=30, shard_size=1, val_fraction=0.0).num_val_shards == 0
+    assert GenerationConfig(num_samples=10, shard_size=1, val_fraction=0.5, test_fraction=0.4).num_val_shards == 5
+    with pytest.raises(ConfigError, match="val_fraction"):
+        GenerationConfig(val_fraction=0.9, test_fraction=0.1)
+
+
+def test_validation_split(tmp_path):
+    """The validation shards are made like the test shards (test-protocol and tight crops, their own
+    seeds), recorded in the manifest, and read by StillFrameDataset("val")."""
+    from airpose_lib.data.dataset import StillFrameDataset
+
+    cfg = GenerationConfig(num_samples=6, shard_size=2, crop_size=32, seed=3, val_fraction=0.3)
+    m = _generate(tmp_path / "d", cfg)
+    assert m["splits"] == {"train": [0], "val": [1], "test": [2]}
+    assert (m["totals"]["train_samples"], m["totals"]["val_samples"], m["totals"]["test_samples"]) == (2, 2, 2)
+    val = StillFrameDataset(tmp_path / "d", "val")
+    assert len(val) == 2 and not val.augment
+    assert len(StillFrameDataset(tmp_path / "d", "val", crops="tight")) == 2  # like the test shards
+    assert "images_tight" not in read_shard(tmp_path / "d" / shard_name(0))
+    indices = {s: set(StillFrameDataset(tmp_path / "d", s).arrays["index"].tolist()) for s in ("train", "val", "test")}
+    assert not (indices["val"] & indices["train"]) and not (indices["val"] & indices["test"])
 
 
 def test_same_seed_gives_identical_bytes(reference, tmp_path):

@@ -47,6 +47,17 @@ def test_auto_is_the_process_gpu_when_cuda_is_available_else_the_cpu(monkeypatch
     assert resolve_device("cpu", local_rank=1) == torch.device("cpu")
     with pytest.raises(ConfigError, match="only 2 GPU"):
         resolve_device("cuda:2")
+    _gpus(monkeypatch, 1)  # two processes on one GPU (seen on an H200: "invalid device ordinal" before)
+    for device in ("auto", "cuda"):
+        with pytest.raises(ConfigError, match="local rank 1 would train on cuda:1, but only 1 GPU"):
+            resolve_device(device, local_rank=1)
+    from test_train_loop import tiny_config
+
+    from airpose_lib.train.loop import start_training
+
+    # --world-size 2 on one GPU: one line before any process starts (not a CUDA error in rank 1)
+    with pytest.raises(ConfigError, match="local rank 1"):
+        start_training(tiny_config(world_size=2, device="auto"), "/nonexistent/run")
     _gpus(monkeypatch, 0)
     assert resolve_device("auto", local_rank=1) == torch.device("cpu")
     with pytest.raises(ConfigError, match="--device cpu"):
@@ -164,12 +175,17 @@ def test_prior_train_on_cuda_without_cuda_is_a_one_line_error(tmp_path, capsys):
 
 
 @pytest.mark.skipif(not CUDA, reason="needs a CUDA GPU")
-def test_prior_training_on_cuda_is_close_to_the_cpu(corpus):
-    cfg = dict(steps=4, batch_size=32, kl_anneal_steps=2)
+def test_prior_training_on_cuda_learns_like_the_cpu(corpus):
+    """The same weights and batches on both devices, but the VAE's noise and dropout masks come
+    from each device's own generator (measured on an H200 after 4 steps: losses 7 % apart), so the
+    runs agree in what they learn, not number for number."""
+    cfg = dict(steps=40, batch_size=32, kl_anneal_steps=2, log_every=1)
     m1, h1 = train_prior(corpus, PriorTrainConfig(**cfg))
     m2, h2 = train_prior(corpus, PriorTrainConfig(**cfg, device="cuda"))
     assert all(p.device.type == "cpu" for p in m2.parameters())
-    np.testing.assert_allclose(h2["loss"], h1["loss"], rtol=1e-3)
+    assert h2["loss"][0] == pytest.approx(h1["loss"][0], rel=0.05)  # same start, other noise
+    assert h2["loss"][-1] < 0.7 * h2["loss"][0]
+    assert h2["loss"][-1] == pytest.approx(h1["loss"][-1], rel=0.25)
 
 
 # -- provenance -----------------------------------------------------------------------------------
@@ -193,7 +209,7 @@ def test_the_provenance_names_each_trainings_device_and_precision(tmp_path):
 
 
 def test_notebook_02s_bundle_records_the_trainings_device_and_precision(tmp_path):
-    from test_eval_reference import VARIANTS, _oracle, _runs
+    from test_eval_reference import VARIANTS, _references, _runs
 
     from airpose_lib.eval.ablation import ablation_table
     from airpose_lib.eval.significance import claims_table
@@ -209,8 +225,8 @@ def test_notebook_02s_bundle_records_the_trainings_device_and_precision(tmp_path
                                                                                   "precision": "bf16"}}))
         runs[variant, seed] = AblationRun(variant, seed, folder / "checkpoints" / "last.pt", {"per_view": per_view})
     exp = AblationExperiment("smoke", "generated", list(VARIANTS), [1], runs, test=None)
-    out = write_ablation_bundle(exp, tmp_path / "bundle", table=ablation_table(exp.per_view, oracle=_oracle()),
-                                claims=claims_table(exp.per_view, n_resamples=50), oracle=_oracle())
+    out = write_ablation_bundle(exp, tmp_path / "bundle", table=ablation_table(exp.per_view, references=_references()),
+                                claims=claims_table(exp.per_view, n_resamples=50), references=_references())
     prov = json.loads((out / "provenance.json").read_text())
     assert prov["training"] == {f"{v} seed 1": {"device": "cuda:0", "precision": "bf16"} for v in VARIANTS}
     assert prov["wall_s"]["train airpose seed 1"] == 2.0

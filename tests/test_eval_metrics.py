@@ -19,6 +19,7 @@ from airpose_lib.eval import (
     pa_mpjpe,
     procrustes_align,
     relative_camera_errors,
+    root_yaw_tilt,
     rotation_error,
     translation_error,
 )
@@ -102,6 +103,52 @@ def test_rotation_error():
     Rz = torch.as_tensor(Rotation.from_euler("z", 30, degrees=True).as_matrix())
     assert rotation_error(R @ Rz, R).numpy() == pytest.approx([math.radians(30)] * 3)
     assert rotation_error(R, R).abs().max().item() < 1e-7
+
+
+def _deg(x: torch.Tensor) -> np.ndarray:
+    return np.degrees(x.numpy())
+
+
+def _euler(seq, angles):
+    return torch.as_tensor(Rotation.from_euler(seq, angles, degrees=True).as_matrix())
+
+
+def test_root_yaw_tilt_on_hand_made_rotations():
+    upright = torch.eye(3, dtype=torch.float64)  # up along the camera's y axis, facing away
+    facing = _euler("x", 180)  # up along -y, facing the camera
+    for gt in (upright, facing):
+        yaw, tilt = root_yaw_tilt(gt @ _euler("y", 30), gt)  # a pure turn of 30 deg about the body's up axis
+        assert _deg(yaw) == pytest.approx(30) and _deg(tilt) == pytest.approx(0, abs=1e-6)
+    yaw, tilt = root_yaw_tilt(upright @ _euler("x", 20), upright)  # leaning 20 deg forward: no heading change
+    assert _deg(yaw) == pytest.approx(0, abs=1e-6) and _deg(tilt) == pytest.approx(20)
+    yaw, tilt = root_yaw_tilt(upright @ _euler("y", 180), upright)  # a front/back flip
+    assert _deg(yaw) == pytest.approx(180) and _deg(tilt) == pytest.approx(0, abs=1e-6)
+    yaw, _ = root_yaw_tilt(_euler("y", -170), _euler("y", 170))  # headings -170 and 170: 20 deg apart
+    assert _deg(yaw) == pytest.approx(20)
+
+
+def test_root_yaw_tilt_against_scipy():
+    """Random ground truths turned by a random alpha about the body's up axis (+Y) and tilted by a
+    random beta about its x axis: the tilt is |beta| (a turn about +Y keeps the up axis); the yaw is
+    the wrapped difference of scipy's headings, the first angle of the intrinsic Y-X-Z Euler
+    decomposition (R = Ry(a) Rx(b) Rz(c) puts the forward axis R e_z at azimuth a)."""
+    rng = np.random.default_rng(21)
+    n = 200
+    gt = Rotation.random(n, random_state=22)
+    alpha, beta = rng.uniform(-180, 180, n), rng.uniform(-80, 80, n)
+    pred = gt * Rotation.from_euler("y", alpha[:, None], degrees=True) * Rotation.from_euler("x", beta[:, None],
+                                                                                           degrees=True)
+    P, G = (torch.as_tensor(r.as_matrix()) for r in (pred, gt))
+    yaw, tilt = root_yaw_tilt(P, G)
+    assert yaw.shape == tilt.shape == (n,)
+    np.testing.assert_allclose(_deg(tilt), np.abs(beta), atol=1e-9)
+    d = pred.as_euler("YXZ")[:, 0] - gt.as_euler("YXZ")[:, 0]
+    np.testing.assert_allclose(_deg(yaw), np.degrees(np.abs(np.arctan2(np.sin(d), np.cos(d)))), atol=1e-9)
+    geodesic = np.degrees((gt.inv() * pred).magnitude())
+    assert (_deg(tilt) <= geodesic + 1e-9).all()
+    # broadcasting: one ground truth against many predictions
+    yaw1, tilt1 = root_yaw_tilt(P, G[0])
+    assert yaw1.shape == tilt1.shape == (n,)
 
 
 def test_jitter_and_acceleration():

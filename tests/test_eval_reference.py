@@ -10,15 +10,22 @@ import pandas as pd
 import pytest
 
 from airpose_lib.eval.ablation import ablation_table, per_seed_table
+from airpose_lib.eval.mean_body import GENDERED_LABEL, NEUTRAL_LABEL
 from airpose_lib.eval.reference import (
     RECORDING_FILES,
     REFERENCE_FILES,
+    RESULTS_ROOT,
+    ProvenanceError,
     compare_to_reference,
+    git_commit,
     install_recordings_reference,
     machine_description,
+    provenance_problems,
     read_reference_table,
     recordings_report,
+    reference_outputs,
     reference_report,
+    require_clean_checkout,
     side_by_side,
     train_wall_s,
     write_reference,
@@ -26,6 +33,44 @@ from airpose_lib.eval.reference import (
 from airpose_lib.eval.significance import claims_table
 
 VARIANTS = ("baseline", "multiview", "fullcam", "airpose")
+
+
+# -- temporary git checkouts ----------------------------------------------------------------------
+def _git(root: Path, *args: str) -> str:
+    """Run git in ``root`` with a fixed identity and no signing (whatever the user's config)."""
+    cmd = ["git", "-c", "user.name=kit test", "-c", "user.email=kit@test", "-c", "commit.gpgsign=false", *args]
+    return subprocess.run(cmd, cwd=root, capture_output=True, text=True, check=True).stdout.strip()
+
+
+def _repo(root: Path, ignore: str = "*\n!.gitignore\n") -> Path:
+    """A git checkout at ``root`` with one commit: a .gitignore (default: everything else ignored)."""
+    if shutil.which("git") is None:
+        pytest.skip("needs git")
+    root.mkdir(parents=True, exist_ok=True)
+    _git(root, "init", "-q")
+    (root / ".gitignore").write_text(ignore)
+    _git(root, "add", ".gitignore")
+    _git(root, "commit", "-q", "-m", "first")
+    return root
+
+
+def _commit(root: Path, name: str) -> str:
+    """Commit a new file ``name`` (force-added past the .gitignore); the new HEAD."""
+    (root / name).write_text(name)
+    _git(root, "add", "-f", name)
+    _git(root, "commit", "-q", "-m", name)
+    return _git(root, "rev-parse", "HEAD")
+
+
+@pytest.fixture
+def clean_checkout(tmp_path, monkeypatch):
+    """tmp_path as a clean git checkout that ``results/`` belongs to (the kit's RESULTS_ROOT):
+    bundles written under it record its commit, and --write-reference may install them."""
+    import airpose_lib.eval.reference as reference
+
+    _repo(tmp_path)
+    monkeypatch.setattr(reference, "RESULTS_ROOT", tmp_path / "results")
+    return tmp_path
 
 
 def _runs(seeds=(1, 2, 3), shift=0.0, n=40):
@@ -39,17 +84,18 @@ def _runs(seeds=(1, 2, 3), shift=0.0, n=40):
     return runs
 
 
-def _oracle(n=40):
+def _references(n=40):
     z = np.linspace(-0.5, 0.5, n)
-    return pd.DataFrame({"method": "Oracle", "mpe_m": np.abs(z) + 0.1, "err_z_m": z, "reproj_px": 0.0})
+    neutral = pd.DataFrame({"method": NEUTRAL_LABEL, "mpe_m": np.abs(z) + 0.1, "err_z_m": z, "reproj_px": 0.0})
+    return pd.concat([neutral, neutral.assign(method=GENDERED_LABEL, mpe_m=neutral["mpe_m"] / 2)], ignore_index=True)
 
 
 def _bundle(tmp_path, runs, name="bundle"):
     per_seed = per_seed_table(runs, wall_s={k: 1.5 for k in runs})
-    return write_reference(tmp_path / name, table=ablation_table(runs, oracle=_oracle()), per_seed=per_seed,
-                           claims=claims_table(runs, n_resamples=200), oracle=_oracle(), profile="smoke",
+    return write_reference(tmp_path / name, table=ablation_table(runs, references=_references()), per_seed=per_seed,
+                           claims=claims_table(runs, n_resamples=200), references=_references(), profile="smoke",
                            command="airpose reproduce --profile smoke --only 02_ablation_table",
-                           step_wall_s={"train and evaluate": 12.34, "oracle": None}, extra={"seeds": [1, 2, 3]})
+                           step_wall_s={"train and evaluate": 12.34, "mean-body references": None}, extra={"seeds": [1, 2, 3]})
 
 
 def test_bundle_has_every_file_and_its_provenance(tmp_path):
@@ -57,7 +103,7 @@ def test_bundle_has_every_file_and_its_provenance(tmp_path):
     assert sorted(p.name for p in out.iterdir()) == sorted(REFERENCE_FILES)  # no temporary files left
     prov = json.loads((out / "provenance.json").read_text())
     assert prov["kit_version"] and prov["profile"] == "smoke" and prov["seeds"] == [1, 2, 3]
-    assert prov["wall_s"] == {"train and evaluate": 12.3, "oracle": None}
+    assert prov["wall_s"] == {"train and evaluate": 12.3, "mean-body references": None}
     assert set(prov["machine"]) >= {"platform", "cpu", "cores", "ram_gib"} and prov["machine"]["cores"] >= 1
     assert "commit" in prov["git"]
     table = read_reference_table(out)
@@ -65,7 +111,11 @@ def test_bundle_has_every_file_and_its_provenance(tmp_path):
     assert table.loc["Baseline", "MPE paper [m]"] == 0.5
     claims = pd.read_csv(out / "claims.csv", index_col=0)
     assert len(claims) == 6 and (claims["verdict"] == "holds").all()
-    assert pd.read_csv(out / "oracle.csv").loc[0, "abs_err_z_m"] == pytest.approx(_oracle()["err_z_m"].abs().mean())
+    references = pd.read_csv(out / "mean_body.csv", index_col="method")
+    assert list(references.index) == [NEUTRAL_LABEL, GENDERED_LABEL] and (references["images"] == 40).all()
+    assert references.loc[NEUTRAL_LABEL, "abs_err_z_m"] == pytest.approx(20 / 78)  # |z| = 1/78, 3/78 ... 39/78
+    assert references.loc[GENDERED_LABEL, "mpe_m"] == pytest.approx(references.loc[NEUTRAL_LABEL, "mpe_m"] / 2)
+    assert list(table.index)[4:] == [NEUTRAL_LABEL, GENDERED_LABEL]
     assert len(pd.read_csv(out / "per_seed.csv")) == 12
 
 
@@ -122,7 +172,7 @@ def test_one_reference_seed_uses_the_stated_tolerance():
     assert (cmp["basis"] == "10% of the reference (one seed)").all()
 
 
-def test_reproduce_report_compares_and_writes_only_when_asked(tmp_path):
+def test_reproduce_report_compares_and_writes_only_when_asked(tmp_path, clean_checkout):
     root = tmp_path / "results"
     bundle = _bundle(tmp_path, _runs())
     msg = reference_report(bundle, "smoke", root=root)
@@ -156,7 +206,8 @@ def test_training_wall_time_is_read_from_result_json_when_present(tmp_path):
         ("baseline", 1): 42.0, ("baseline", 2): None, ("airpose", 1): None}
 
 
-def test_airpose_reproduce_compares_after_notebook_02_and_writes_only_with_the_flag(tmp_path, monkeypatch, capsys):
+def test_airpose_reproduce_compares_after_notebook_02_and_writes_only_with_the_flag(tmp_path, monkeypatch, capsys,
+                                                                                     clean_checkout):
     import airpose_lib.eval.reference as reference
     import airpose_lib.reproduce as rep
     from airpose_lib import cli
@@ -182,7 +233,8 @@ def test_airpose_reproduce_compares_after_notebook_02_and_writes_only_with_the_f
     assert "0 differ by more than the reference's seed spread" in capsys.readouterr().out
 
 
-def test_airpose_reproduce_installs_and_compares_the_recordings_after_notebook_05(tmp_path, monkeypatch, capsys):
+def test_airpose_reproduce_installs_and_compares_the_recordings_after_notebook_05(tmp_path, monkeypatch, capsys,
+                                                                                   clean_checkout):
     import airpose_lib.eval.reference as reference
     import airpose_lib.reproduce as rep
     from airpose_lib import cli
@@ -221,7 +273,7 @@ def _claims(holds):
                          "holds": holds})
 
 
-def test_recordings_reference_installs_and_reports_changed_verdicts(tmp_path):
+def test_recordings_reference_installs_and_reports_changed_verdicts(tmp_path, clean_checkout):
     nb = tmp_path / "05_airpose_plus"
     nb.mkdir()
     with pytest.raises(FileNotFoundError, match="paper_claims.csv"):
@@ -236,3 +288,132 @@ def test_recordings_reference_installs_and_reports_changed_verdicts(tmp_path):
     _claims([True, False, False]).to_csv(nb / "paper_claims.csv", index=False)  # one verdict flips
     msg = recordings_report(nb, "cpu", root=tmp_path / "results")
     assert msg.startswith("reference: 1 of 3") and "uav2 (person1): True -> False" in msg
+
+
+# -- provenance: reference results from a clean commit --------------------------------------------
+def test_dirty_means_tracked_changes_or_new_files_never_ignored_ones(tmp_path):
+    root = _repo(tmp_path / "repo", ignore="runs/\n")
+    head = _git(root, "rev-parse", "HEAD")
+    assert git_commit(root) == {"commit": head, "dirty": False} and require_clean_checkout(root)["commit"] == head
+    (root / "runs").mkdir()
+    (root / "runs" / "out.csv").write_text("ignored")  # a run folder git ignores: still clean
+    assert git_commit(root)["dirty"] is False
+    (root / "new.py").write_text("x = 1")  # new code, not yet committed: dirty
+    assert git_commit(root)["dirty"] is True
+    (root / "new.py").unlink()
+    (root / ".gitignore").write_text("runs/\nmore/\n")  # a change to a tracked file: dirty
+    assert git_commit(root)["dirty"] is True
+    with pytest.raises(ProvenanceError, match="changes that are not committed") as e:
+        require_clean_checkout(root)
+    assert str(root) in str(e.value) and "\n" not in str(e.value)
+    assert git_commit(tmp_path / "nowhere") == {"commit": None, "dirty": None}
+    _git(root, "checkout", "--", ".gitignore")
+    # A reproduction's own outputs, written by its first writer, do not make it dirty for the next
+    # ones (seen: notebook 02 wrote results/smoke/, then notebook 05's install refused); an input
+    # beside them (the committed backbone) and another profile's results do.
+    outputs = reference_outputs("smoke")
+    assert "results/smoke/table1.csv" in outputs and "results/smoke/recordings/" in outputs
+    (root / "results" / "smoke" / "recordings").mkdir(parents=True)
+    (root / "results" / "smoke" / "table1.csv").write_text("new")
+    (root / "results" / "smoke" / "recordings" / "paper_claims.csv").write_text("new")
+    assert git_commit(root, outputs)["dirty"] is False and git_commit(root)["dirty"] is True
+    require_clean_checkout(root, outputs)
+    for other in ("results/smoke/pretrained_backbone.pt", "results/cpu/table1.csv"):
+        (root / other).parent.mkdir(parents=True, exist_ok=True)
+        (root / other).write_text("x")
+        assert git_commit(root, outputs)["dirty"] is True, other
+        (root / other).unlink()
+    (tmp_path / "plain").mkdir()
+    with pytest.raises(ProvenanceError, match="not a git checkout"):
+        require_clean_checkout(tmp_path / "plain")
+
+
+def _provenance(path: Path, commit, dirty) -> Path:
+    path.write_text(json.dumps({"profile": "cpu", "git": {"commit": commit, "dirty": dirty}}))
+    return path
+
+
+def test_provenance_check_on_hand_made_repositories(tmp_path):
+    """main: first - a - b (HEAD); side: first - c. A clean record of a, b or first passes; c (not
+    an ancestor), an unknown commit, a dirty or unknown state and a missing file do not."""
+    root = _repo(tmp_path / "repo")
+    first = _git(root, "rev-parse", "HEAD")
+    a = _commit(root, "a")
+    _git(root, "checkout", "-q", "-b", "side", first)
+    c = _commit(root, "c")
+    _git(root, "checkout", "-q", "-")
+    b = _commit(root, "b")
+    assert _git(root, "rev-parse", "HEAD") == b
+    p = tmp_path / "provenance.json"
+    for commit in (first, a, b):
+        assert provenance_problems(_provenance(p, commit, False), root) == []
+    assert provenance_problems(_provenance(p, c, False), root) == [f"its commit {c[:12]} is not an ancestor of HEAD "
+                                                                   f"in {root}"]
+    (unknown,) = provenance_problems(_provenance(p, "f" * 40, False), root)
+    assert unknown.startswith(f"its commit {'f' * 12} is not a commit of the repository at {root}")
+    assert provenance_problems(_provenance(p, a, True), root) == ["it was made from a checkout with uncommitted changes"]
+    assert provenance_problems(_provenance(p, a, None), root) == ["it does not say whether the checkout was clean"]
+    assert provenance_problems(_provenance(p, None, None), root) == [
+        "it does not say whether the checkout was clean", "it names no git commit"]
+    (missing,) = provenance_problems(tmp_path / "none.json", root)
+    assert missing.startswith("no readable provenance")
+    # the writer records the same git state the check reads
+    out = _bundle(tmp_path, _runs())
+    prov = json.loads((out / "provenance.json").read_text())
+    assert set(prov["git"]) == {"commit", "dirty"}
+
+
+def test_write_reference_refuses_a_dirty_checkout_in_one_line(tmp_path, monkeypatch, capsys, clean_checkout):
+    import airpose_lib.reproduce as rep
+    from airpose_lib import cli
+
+    bundle = _bundle(tmp_path, _runs())  # made from the clean checkout: its provenance passes
+    assert provenance_problems(bundle / "provenance.json", clean_checkout) == []
+    (clean_checkout / ".gitignore").write_text("*\n")  # now a tracked change
+    with pytest.raises(ProvenanceError, match="not committed"):
+        reference_report(bundle, "smoke", write=True, root=tmp_path / "results")
+    assert not (tmp_path / "results").exists()
+
+    def never(*a, **k):
+        raise AssertionError("--write-reference ran the notebooks of a dirty checkout")
+
+    monkeypatch.setattr(rep, "run_profile", never)
+    assert cli.main(["reproduce", "--only", "02", "--write-reference"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith(f"airpose: error: {clean_checkout} has changes that are not committed")
+
+
+def test_write_reference_refuses_a_bundle_made_from_a_dirty_checkout(tmp_path, clean_checkout):
+    bundle = _bundle(tmp_path, _runs())
+    prov = json.loads((bundle / "provenance.json").read_text())
+    prov["git"]["dirty"] = True
+    (bundle / "provenance.json").write_text(json.dumps(prov))
+    with pytest.raises(ProvenanceError, match="uncommitted changes; reference results must come from a clean commit"):
+        reference_report(bundle, "smoke", write=True, root=tmp_path / "results")
+    assert not (tmp_path / "results").exists()
+
+
+# Committed results that predate the clean-commit rule, with why; each must leave this list when
+# it is regenerated (the test below fails if a listed bundle is clean).
+STALE_REFERENCES = {
+    "results/cpu/provenance.json": "Table I before the validation split (issue 28); the next cpu reference run",
+    "results/cpu/recordings/provenance.json": "recordings before the validation split; the next cpu reference run",
+}
+
+
+def test_committed_reference_results_come_from_clean_commits_of_this_history():
+    """Every provenance.json under results/ records a clean commit that is an ancestor of HEAD
+    (a bundle listed in STALE_REFERENCES must still be stale: the list cannot outlive it)."""
+    repo = RESULTS_ROOT.parent
+    if not (repo / ".git").exists():
+        pytest.skip("not a git checkout")
+    if _git(repo, "rev-parse", "--is-shallow-repository") == "true":
+        pytest.skip("a shallow clone lacks the commits the bundles name")
+    found = sorted(p.relative_to(repo).as_posix() for p in RESULTS_ROOT.rglob("provenance.json"))
+    assert "results/smoke/provenance.json" in found
+    for rel in found:
+        problems = provenance_problems(repo / rel, repo)
+        if rel in STALE_REFERENCES:
+            assert problems, f"{rel} is clean now: remove it from STALE_REFERENCES"
+        else:
+            assert not problems, f"{rel}: {problems}"

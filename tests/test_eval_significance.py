@@ -1,9 +1,15 @@
-"""Paired bootstrap and Table I's claim table against cases with a known answer."""
+"""Paired bootstrap over two-view samples and Table I's claim table against cases with a known answer."""
 import numpy as np
 import pandas as pd
 import pytest
 
-from airpose_lib.eval.significance import claims_table, paired_bootstrap, paired_differences
+from airpose_lib.eval.significance import (
+    PAPER_GAIN_SHARE,
+    claims_table,
+    paired_bootstrap,
+    paired_sample_errors,
+    paper_relative_gain,
+)
 
 
 def test_interval_matches_the_normal_theory_interval():
@@ -18,7 +24,7 @@ def test_interval_matches_the_normal_theory_interval():
     assert r.low == pytest.approx(r.mean - half, abs=0.08 * half)
     assert r.high == pytest.approx(r.mean + half, abs=0.08 * half)
     np.testing.assert_allclose(r.per_seed, d.mean(axis=1))
-    assert r.n_images == 800
+    assert r.n_units == 800
 
 
 def test_interval_covers_the_true_mean_about_95_percent_of_the_time():
@@ -64,17 +70,82 @@ def _table(values, samples=None):
                          "mpe_m": v, "mpjpe_m": v / 10})
 
 
-def test_differences_are_paired_by_sample_and_view():
+def test_sample_errors_average_the_views_and_pair_by_sample():
     a = _table([1.0, 2.0, 3.0, 4.0])
-    b = _table([0.5, 0.5, 0.5, 0.5]).iloc[::-1]  # another row order: pairing is by (sample, view)
-    seeds, d = paired_differences({("baseline", 1): a, ("multiview", 1): b}, "baseline", "multiview", "mpe_m")
+    b = _table([0.5, 0.5, 0.5, 1.5]).iloc[::-1]  # another row order: pairing is by (sample, view)
+    seeds, ea, eb = paired_sample_errors({("baseline", 1): a, ("multiview", 1): b}, "baseline", "multiview",
+                                         "mpe_m")
     assert seeds == [1]
-    np.testing.assert_allclose(d, [[0.5, 1.5, 2.5, 3.5]])
-    # an image missing in one seed is dropped from every seed (the same images in each)
+    np.testing.assert_allclose(ea, [[1.5, 3.5]])  # (1 + 2) / 2, (3 + 4) / 2
+    np.testing.assert_allclose(eb, [[0.5, 1.0]])
+    # a view missing in one seed drops its whole sample from every seed and both variants
     runs = {("baseline", 1): a, ("multiview", 1): b, ("baseline", 2): a.iloc[1:], ("multiview", 2): b}
-    seeds, d = paired_differences(runs, "baseline", "multiview", "mpe_m")
-    assert seeds == [1, 2] and d.shape == (2, 3)
-    np.testing.assert_allclose(d[0], [1.5, 2.5, 3.5])
+    seeds, ea, eb = paired_sample_errors(runs, "baseline", "multiview", "mpe_m")
+    assert seeds == [1, 2] and ea.shape == eb.shape == (2, 1)
+    np.testing.assert_allclose(ea, [[3.5], [3.5]])
+    # so does a non-finite error
+    c = a.copy()
+    c.loc[2, "mpe_m"] = np.nan
+    seeds, ea, _ = paired_sample_errors({("baseline", 1): c, ("multiview", 1): b}, "baseline", "multiview", "mpe_m")
+    np.testing.assert_allclose(ea, [[1.5]])
+    with pytest.raises(ValueError, match="repeats"):
+        paired_sample_errors({("baseline", 1): pd.concat([a, a]), ("multiview", 1): b}, "baseline", "multiview",
+                             "mpe_m")
+
+
+def test_hand_checkable_pair_interval():
+    """Two samples whose view differences are (1, 3) and (0, 0): per-sample differences 2 and 0.
+    A resample of the two samples has mean 0, 1 or 2 with probability 1/4, 1/2, 1/4, so the 95 %
+    interval is exactly [0, 2] around the mean 1. Resampling the four views instead would count
+    the view pair twice and draw means such as 0.25 or 1.75 as well."""
+    a = _table([1.0, 3.0, 0.0, 0.0])
+    b = _table([0.0, 0.0, 0.0, 0.0])
+    _, ea, eb = paired_sample_errors({("baseline", 1): a, ("multiview", 1): b}, "baseline", "multiview", "mpe_m")
+    np.testing.assert_allclose(ea - eb, [[2.0, 0.0]])
+    r = paired_bootstrap(ea - eb, n_resamples=4000, seed=0)
+    assert (r.mean, r.low, r.high, r.n_units) == (1.0, 0.0, 2.0, 2)
+
+
+def _one_and_two_views(rng, n=300, seeds=(1, 2, 3)):
+    """Per-view tables with one view per sample, and the same with that view duplicated."""
+    level = rng.uniform(0.5, 1.5, size=n)
+    one, two = {}, {}
+    for s in seeds:
+        for v, shift in (("baseline", 0.05), ("multiview", 0.0)):
+            e = level + shift + rng.normal(0, 0.1, size=n)
+            one[v, s] = pd.DataFrame({"sample": np.arange(n), "view": 0, "mpe_m": e, "mpjpe_m": e / 10})
+            two[v, s] = pd.DataFrame({"sample": np.repeat(np.arange(n), 2), "view": np.tile([0, 1], n),
+                                      "mpe_m": np.repeat(e, 2), "mpjpe_m": np.repeat(e, 2) / 10})
+    return one, two
+
+
+def test_two_identical_views_double_nothing():
+    """Known answer: a second view that repeats the first adds no information, so the pair-level
+    interval is exactly the one-view interval. The view-level bootstrap of before narrowed it by
+    about sqrt(2), as if it had twice the samples."""
+    one, two = _one_and_two_views(np.random.default_rng(11))
+    t1, t2 = claims_table(one, order=("baseline", "multiview")), claims_table(two, order=("baseline", "multiview"))
+    cols = ["difference [m]", "CI low [m]", "CI high [m]", "samples", "verdict"]
+    pd.testing.assert_frame_equal(t1[cols], t2[cols], check_exact=True)
+    assert (t2["samples"] == 300).all()
+    # the old unit: one column per (sample, view)
+    per_view = np.stack([two["baseline", s]["mpe_m"].to_numpy() - two["multiview", s]["mpe_m"].to_numpy()
+                         for s in (1, 2, 3)])
+    old = paired_bootstrap(per_view, n_resamples=4000, seed=0)
+    new = paired_bootstrap(per_view.reshape(3, -1, 2).mean(-1), n_resamples=4000, seed=0)
+    assert old.mean == pytest.approx(new.mean, abs=1e-12)
+    assert (new.high - new.low) / (old.high - old.low) == pytest.approx(np.sqrt(2), rel=0.08)
+
+
+def test_seeds_are_pooled_per_sample():
+    """The unit is a sample with all its seeds: moving an error between seeds within a sample
+    changes no interval; the per-seed means and the verdict's every-seed rule still see the seeds."""
+    rng = np.random.default_rng(12)
+    d = rng.normal(0.1, 1.0, size=(3, 400))
+    shuffled = rng.permuted(d, axis=0)  # each column's seed values in another order
+    a, b = paired_bootstrap(d, seed=3), paired_bootstrap(shuffled, seed=3)
+    assert (a.low, a.high) == pytest.approx((b.low, b.high), abs=1e-12)
+    assert not np.allclose(a.per_seed, b.per_seed)
 
 
 def _runs(effects, seeds=(1, 2, 3), n=200, noise=0.05, seed_effects=None):
@@ -96,7 +167,7 @@ def test_claims_hold_when_every_seed_shows_a_clear_ordering():
     assert len(t) == 6 and (t["verdict"] == "holds").all() and t["sign in every seed"].all()
     assert t.loc["MPE: Baseline + Fullcam > AirPose", "difference [m]"] == pytest.approx(0.1, abs=0.01)
     assert t.loc["MPJPE: Baseline + Fullcam > AirPose", "difference [m]"] == pytest.approx(0.01, abs=0.001)
-    assert (t["CI low [m]"] > 0).all() and (t["seeds"] == 3).all() and (t["images"] == 400).all()
+    assert (t["CI low [m]"] > 0).all() and (t["seeds"] == 3).all() and (t["samples"] == 200).all()
 
 
 def test_no_effect_is_not_significant_and_a_reversal_is_reversed():
@@ -156,3 +227,60 @@ def test_block_bootstrap_covers_the_mean_of_a_correlated_series():
     cover = lambda block: np.mean([(lambda r: r.low <= 0 <= r.high)(  # noqa: E731
         paired_bootstrap(x, n_resamples=500, seed=i, block=block)) for i, x in enumerate(series)])
     assert cover(30) >= 0.85 and cover(1) <= 0.6
+
+
+# -- effect sizes ---------------------------------------------------------------------------------
+def test_paper_relative_gains_from_its_table_i():
+    # hand-computed from the paper's Table I: MPE 0.50 0.46 0.22 0.15, MPJPE 0.091 0.084 0.077 0.072
+    assert paper_relative_gain("baseline", "multiview", "MPE") == pytest.approx(0.04 / 0.50)
+    assert paper_relative_gain("fullcam", "airpose", "MPE") == pytest.approx(0.07 / 0.22)  # 32 %
+    assert paper_relative_gain("multiview", "fullcam", "MPJPE") == pytest.approx(0.007 / 0.084)  # 8.3 %
+    assert np.isnan(paper_relative_gain("baseline", "multiview", "PA-MPJPE"))
+
+
+def test_hand_checkable_relative_gain_interval():
+    """e_A = (1, 3), e_B = (1, 1): the gain is the ratio of the means, (0 + 2) / (1 + 3) = 0.5 (not
+    the mean of the ratios, 1/3). The resamples {0, 0}, {0, 1}, {1, 1} give 0, 2/4 and 4/6, so the
+    95 % interval is [0, 2/3]."""
+    e_a, e_b = np.array([[1.0, 3.0]]), np.array([[1.0, 1.0]])
+    r = paired_bootstrap(e_a - e_b, n_resamples=4000, seed=0, base=e_a)
+    assert r.relative == 0.5 and r.relative_low == 0.0 and r.relative_high == pytest.approx(2 / 3)
+    assert np.isnan(paired_bootstrap(e_a - e_b, n_resamples=10).relative)  # no base, no gain
+    with pytest.raises(ValueError, match="base"):
+        paired_bootstrap(e_a - e_b, base=e_a[:, :1])
+
+
+def test_relative_gain_interval_is_paired():
+    """B removes exactly 10 % of A's error on every sample, however hard the sample: every resample
+    gives 10 %, so the interval is the point. Resampling A and B independently would not."""
+    rng = np.random.default_rng(13)
+    e_a = rng.uniform(0.2, 3.0, size=(3, 500))
+    r = paired_bootstrap(e_a - 0.9 * e_a, seed=1, base=e_a)
+    assert (r.relative, r.relative_low, r.relative_high) == pytest.approx((0.1, 0.1, 0.1), abs=1e-12)
+
+
+def _scaled_runs(factors, n=50):
+    """Per-view tables whose errors are ``factor x`` a per-sample difficulty shared by the variants."""
+    difficulty = np.random.default_rng(14).uniform(0.5, 2.0, size=2 * n)
+    return {(v, 1): _table(f * difficulty) for v, f in zip(("baseline", "multiview", "fullcam", "airpose"), factors)}
+
+
+def test_claims_give_the_kit_gain_next_to_the_papers_and_whether_it_reaches_a_third():
+    # MPE gains: 3 % (paper 8 %: a third is 2.67 %), 17 % (paper 52.2 %: 17.39 %), 11 % (paper 31.8 %: 10.6 %)
+    f = np.cumprod([1.0, 0.97, 0.83, 0.89])
+    t = claims_table(_scaled_runs(f), n_resamples=500)
+    mpe = t[t["metric"] == "MPE"]
+    np.testing.assert_allclose(mpe["gain [%]"], [3.0, 17.0, 11.0], atol=1e-9)
+    np.testing.assert_allclose(mpe["gain CI low [%]"], [3.0, 17.0, 11.0], atol=1e-9)  # a shared difficulty
+    np.testing.assert_allclose(mpe["paper gain [%]"], [8.0, 100 * 0.24 / 0.46, 100 * 0.07 / 0.22])
+    assert list(mpe["of paper's size"]) == [True, False, True]
+    assert PAPER_GAIN_SHARE == pytest.approx(1 / 3)
+    # a reversal is a negative gain, never of the paper's size
+    t = claims_table(_scaled_runs([1.0, 1.05, 0.5, 0.4]), n_resamples=200)
+    row = t.loc["MPJPE: Baseline > Baseline + Multi-view"]
+    assert row["gain [%]"] == pytest.approx(-5.0) and not row["of paper's size"]
+    # a missing variant: the paper's gain is still shown
+    t = claims_table({k: v for k, v in _scaled_runs(f).items() if k[0] != "airpose"}, n_resamples=200)
+    row = t.loc["MPE: Baseline + Fullcam > AirPose"]
+    assert row["verdict"] == "not run" and row["paper gain [%]"] == pytest.approx(100 * 0.07 / 0.22)
+    assert np.isnan(row["gain [%]"])

@@ -6,6 +6,7 @@ import numpy as np
 import pandas as pd
 import pytest
 import torch
+from scipy.spatial.transform import Rotation
 
 from airpose_lib.eval import (
     PER_VIEW_METRICS,
@@ -37,6 +38,13 @@ def test_per_view_table_values():
     assert np.allclose(t["mpe_m"], 0.5) and np.allclose(t["err_z_m"], 0.5) and np.allclose(t["err_x_m"], 0)
     assert np.allclose(t["mpjpe_m"], 0, atol=1e-12)  # a translated skeleton: pelvis aligned
     assert np.allclose(t["root_rot_deg"], 0, atol=1e-6)
+    assert np.allclose(t[["root_yaw_deg", "root_tilt_deg"]], 0, atol=1e-6)
+    # the bodies turned by 30 deg about their up axis (upright, facing away): all yaw, no tilt
+    turn = torch.as_tensor(Rotation.from_euler("y", 30, degrees=True).as_matrix())
+    t = per_view_table({**pred, "phi": gt["phi"] @ turn}, gt)
+    np.testing.assert_allclose(t[["root_rot_deg", "root_yaw_deg"]], 30.0, atol=1e-9)
+    np.testing.assert_allclose(t["root_tilt_deg"], 0.0, atol=1e-6)
+    assert per_view_table({k: v for k, v in pred.items() if k != "phi"}, gt)["root_yaw_deg"].isna().all()
     # one view's joints perturbed: only that row changes
     pred["joints"] = gt["j3d_cam"].clone()
     pred["joints"][1, 1, 3, 0] += 0.22

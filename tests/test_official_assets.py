@@ -74,7 +74,8 @@ def _tree_state(root: Path) -> dict:
 @pytest.fixture(scope="module")
 def synth(tmp_path_factory, open_model_files):
     root = tmp_path_factory.mktemp("official_synth")
-    info = write_official_synthetic_fixture(root, n_subjects=3, n_positions=2, n_cameras=2, seed=0)
+    # 5 subjects: 2 training, 2 validation (the last training subjects), 1 test
+    info = write_official_synthetic_fixture(root, n_subjects=5, n_positions=2, n_cameras=2, seed=0)
     return info
 
 
@@ -238,8 +239,12 @@ def test_path_remapping(tmp_path, synth):
 
 
 def test_split_by_subjects_matches_the_lists(synth, tmp_path):
-    for split in ("train", "test"):
+    for split in ("train", "val", "test"):
         assert official_split_files(synth["root"], split, "subjects", num_test_subjects=1) == synth[split]
+        assert official_split_files(synth["root"], split, "lists") == synth[split]
+    assert len(synth["train"]) == len(synth["val"]) == 4 and not set(synth["train"]) & set(synth["val"])
+    everything = official_split_files(synth["root"], "train", "lists", num_val_subjects=0)
+    assert everything == synth["train"] + synth["val"]  # the authors' whole training split
     # without list files the subject rule is used
     shutil.copytree(synth["root"] / "dataset", tmp_path / "dataset")
     for f in ("train_pkls.pkl", "test_pkls.pkl"):

@@ -122,7 +122,8 @@ def test_evaluation_and_features_take_the_device(tmp_path, open_model_files):
     state["config"]["device"] = "cuda:3"  # as a GPU run records it
     torch.save(state, tmp_path / "gpu.pt")
     model, loaded = load_trained_model(tmp_path / "gpu.pt", "auto")
-    assert loaded.device == "cuda:3" and all(p.device.type == "cpu" for p in model.parameters())
+    auto = "cuda" if torch.cuda.is_available() else "cpu"  # auto: the GPU where there is one
+    assert loaded.device == "cuda:3" and all(p.device.type == auto for p in model.parameters())
     if not torch.cuda.is_available():
         with pytest.raises(ValueError, match="CPU-only torch"):
             load_trained_model(tmp_path / "gpu.pt", "cuda")

@@ -63,7 +63,8 @@ def test_a_bad_value_or_key_in_a_profile_names_the_file_and_the_field(tmp_path):
 
 
 def test_errors_name_the_file_and_the_fix(tmp_path):
-    with pytest.raises(ProfileError, match=r"unknown profile 'nope' \(no .*nope\.yaml\); available: cpu, paper, smoke"):
+    with pytest.raises(ProfileError, match=r"unknown profile 'nope' \(no .*nope\.yaml\); "
+                                           r"available: cpu, cpu_paper_layout, paper, smoke"):
         read_profile("nope")
     with pytest.raises(ValueError, match="missing.yaml does not exist"):  # a ValueError, as before
         profile_section(tmp_path / "missing.yaml", "train")
@@ -158,3 +159,43 @@ def test_a_bad_value_in_a_section_names_the_file_and_a_bad_option_the_options(tm
         finetune_config("smoke", stepz=3)
     train, corpus = prior_profile(_with_key(tmp_path, "prior", "seed", 7))
     assert train.seed == 7 and corpus.seed == 7  # a key of both configs goes to each
+
+
+def test_a_profile_inherits_another_mapping_by_mapping(tmp_path):
+    (tmp_path / "base.yaml").write_text("description: base\ntrain:\n  steps: 3\n  lr: 0.1\n"
+                                        "data:\n  still:\n    seed: 0\n    scene: {focal: 1.0, num_views: 2}\n"
+                                        "finetune:\n  steps: 5\nnotebooks:\n  a: {x: [1, 2]}\n")
+    (tmp_path / "child.yaml").write_text("inherits: base\ndescription: child\ntrain:\n  steps: 4\n"
+                                         "data:\n  still:\n    scene: {focal: 2.0}\nfinetune:\n"
+                                         "notebooks:\n  a: {x: [3]}\n")
+    child = read_profile("child", folder=tmp_path)
+    assert child == {"description": "child", "train": {"steps": 4, "lr": 0.1},
+                     "data": {"still": {"seed": 0, "scene": {"focal": 2.0, "num_views": 2}}},
+                     "finetune": None, "notebooks": {"a": {"x": [3]}}}  # lists and empty sections replace
+    assert profile_section("child", "finetune", folder=tmp_path) == {}
+    assert read_profile(tmp_path / "child.yaml", folder=tmp_path) == child
+    assert read_profile("base", folder=tmp_path)["train"] == {"steps": 3, "lr": 0.1}  # the parent unchanged
+    (tmp_path / "mine.yaml").write_text("inherits: child.yaml\ntrain: {lr: 0.2}\n")  # a path beside the file
+    assert read_profile(tmp_path / "mine.yaml", folder=tmp_path)["train"] == {"steps": 4, "lr": 0.2}
+
+
+def test_a_bad_inheritance_names_the_file(tmp_path):
+    (tmp_path / "a.yaml").write_text("inherits: b\ntrain: {}\n")
+    (tmp_path / "b.yaml").write_text("inherits: a\n")
+    with pytest.raises(ProfileError, match=r"a\.yaml: `inherits: b` comes back to .*b\.yaml"):
+        read_profile("b", folder=tmp_path)
+    (tmp_path / "c.yaml").write_text("inherits: [a, b]\n")
+    with pytest.raises(ProfileError, match=r"c\.yaml: `inherits:` must name one profile"):
+        read_profile("c", folder=tmp_path)
+    (tmp_path / "d.yaml").write_text("inherits: nope\n")
+    with pytest.raises(ProfileError, match=r"unknown profile 'nope'"):
+        read_profile("d", folder=tmp_path)
+
+
+def test_the_paper_layout_profile_is_cpu_on_other_data():
+    cpu, paper = read_profile("cpu"), read_profile("cpu_paper_layout")
+    assert set(paper) == set(cpu)
+    for section in set(cpu) - {"data", "description", "train"}:
+        assert paper[section] == cpu[section], section
+    assert paper["train"] == {**cpu["train"], "pretrained": "profile:cpu"}  # cpu's backbone
+    assert {k: v for k, v in paper["data"]["still"].items() if k != "scene"} == cpu["data"]["still"]

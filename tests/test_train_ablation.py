@@ -12,7 +12,7 @@ def tiny_profile(tmp_path_factory, open_model_files):
     from airpose_lib.data.generate import GenerationConfig, generate_still_dataset
 
     root = tmp_path_factory.mktemp("tiny_still")
-    generate_still_dataset(GenerationConfig(num_samples=8, shard_size=4, crop_size=32, seed=0), root,
+    generate_still_dataset(GenerationConfig(num_samples=16, shard_size=4, crop_size=32, seed=0), root,
                            workers=1, progress=False, record=False)
     profile = tmp_path_factory.mktemp("profile") / "tiny.yaml"
     profile.write_text(yaml.safe_dump({"description": "test", "train": {

@@ -187,7 +187,7 @@ def test_ddp_two_processes_match_single_process(tmp_path, open_model_files):
 
     Dropout off and BatchNorm frozen: both are per process by design (see train.loop)."""
     cfg = tiny_config(steps=2, val_every=None, keep_checkpoints=0, data={"n": 8, "genders": 1},
-                      model={"num_iterations": 2, "dropout": 0.0})
+                      model={"num_iterations": 2, "dropout": 0.0}, device="cpu")  # gloo, also beside a GPU
     single = train("airpose", config=cfg, out_dir=tmp_path / "single", **FAKES)
     ddp = train("airpose", config=cfg.replace(world_size=2), out_dir=tmp_path / "ddp", **FAKES)
     assert ddp.step == 2 and ddp.config["world_size"] == 2

@@ -155,6 +155,46 @@ def test_pretrain_loss_is_zero_for_the_ground_truth(bodies):
     assert heads["heading"].shape == (2, 12) and heads["theta6d"].shape == (2, 21, 6) and heads["j2d"].shape == (2, 22, 2)
 
 
+def test_pretrain_root_terms_geodesic_and_camera_frame(bodies):
+    """phi_loss="geodesic" is the angle of the root error in radians; j3d_frame="camera" targets the
+    pelvis-centred joints turned by each view's phi; both are zero for the ground truth."""
+    from scipy.spatial.transform import Rotation
+
+    from airpose_lib.errors import ConfigError
+    from airpose_lib.losses.pretrain import PretrainLossConfig, camera_frame_joints
+
+    J = torch.tensor([[[0.0, 1.0, 0.0], [1.0, 1.0, 0.0], [0.0, 2.0, 0.5]]], dtype=torch.float64)
+    Ry = torch.tensor([[[0.0, 0.0, 1.0], [0.0, 1.0, 0.0], [-1.0, 0.0, 0.0]]], dtype=torch.float64)  # 90 deg about y
+    assert torch.allclose(camera_frame_joints(J, Ry), torch.tensor([[[0.0, 0, 0], [0, 0, -1], [0.5, 1, 0]]],
+                                                                   dtype=torch.float64))
+    batch = _batch(bodies, B=2)
+    B, V = batch["phi"].shape[:2]
+    S = 64
+    batch["images"] = torch.zeros(B, V, 3, S, S)
+    cfg = PretrainLossConfig(phi_loss="geodesic", j3d_frame="camera")
+    loss = PretrainLoss(cfg, body_models=bodies)
+    theta = axis_angle_to_matrix(batch["theta"])
+    J0, _ = BodyForward(bodies["neutral"])(theta, batch["beta"], vertices=False)
+    phi = batch["phi"].flatten(0, 1)
+    rep = lambda x: x.unsqueeze(1).expand(B, V, *x.shape[1:]).flatten(0, 1)  # noqa: E731
+    from airpose_lib.geometry import full_to_crop_pixels
+
+    uv = full_to_crop_pixels(batch["j2d"], batch["bbox"], S) / (S / 2) - 1
+    out = {"heading": torch.zeros(B * V, 12), "phi6d": matrix_to_rot6d(phi),
+           "theta6d": rep(matrix_to_rot6d(theta)), "beta": rep(batch["beta"]),
+           "j3d": camera_frame_joints(rep(J0), phi), "j2d": uv.flatten(0, 1)}
+    terms = loss(out, batch, 12)
+    assert terms["phi"].item() == pytest.approx(0.0, abs=1e-5) and terms["j3d"].item() == pytest.approx(0.0, abs=1e-8)
+    assert PretrainLoss(body_models=bodies)(out, batch, 12)["j3d"].item() > 1e-3  # model frame: not the target
+    turn = torch.as_tensor(Rotation.from_rotvec([0.0, 0.0, np.deg2rad(30.0)]).as_matrix(), dtype=phi.dtype)
+    out["phi6d"] = matrix_to_rot6d(phi @ turn)  # every view off by 30 deg
+    assert loss(out, batch, 12)["phi"].item() == pytest.approx(np.deg2rad(30.0), rel=1e-4)
+    with pytest.raises(ConfigError, match="phi_loss"):
+        PretrainLossConfig(phi_loss="l1")
+    with pytest.raises(ConfigError, match="j3d_frame"):
+        PretrainLossConfig(j3d_frame="world")
+
+
 def test_feature_key_changes_with_the_backbone_and_the_data(tmp_path):
     import yaml
 
@@ -189,7 +229,7 @@ def test_a_second_pretraining_stage_starts_from_the_first(tmp_path, monkeypatch,
 
     monkeypatch.setenv("AIRPOSE_CACHE", str(tmp_path / "cache"))
     root = tmp_path / "data"
-    generate_still_dataset(GenerationConfig(num_samples=8, shard_size=4, crop_size=32, seed=0), root,
+    generate_still_dataset(GenerationConfig(num_samples=16, shard_size=4, crop_size=32, seed=0), root,
                            workers=1, progress=False, record=False)
     section = {"steps": 1, "batch_size": 2, "backbone": "resnet18", "lr": 1e-3, "seed": 0, "checkpoint_every": 1,
                "val_every": None, "log_every": 1, "num_workers": 0, "model": {"n_heading_bins": 12}}
@@ -234,7 +274,7 @@ def test_earlier_stages_keep_their_dataset_when_the_profile_data_grow(tmp_path, 
     from airpose_lib.train.pretrain import ensure_backbone, pretrain_stages, stage_keys
 
     monkeypatch.setenv("AIRPOSE_CACHE", str(tmp_path / "cache"))
-    small = {"num_samples": 4, "shard_size": 2, "crop_size": 32, "seed": 0}
+    small = {"num_samples": 8, "shard_size": 2, "crop_size": 32, "seed": 0}  # 2 train, 1 val, 1 test shards
     section = {"steps": 1, "batch_size": 2, "backbone": "resnet18", "lr": 1e-3, "seed": 0, "checkpoint_every": 1,
                "val_every": None, "log_every": 1, "num_workers": 0, "model": {"n_heading_bins": 12}}
     before = tmp_path / "grow.yaml"  # the profile when its dataset was the small one: two stages
@@ -245,14 +285,14 @@ def test_earlier_stages_keep_their_dataset_when_the_profile_data_grow(tmp_path, 
 
     after = tmp_path / "grown" / "grow.yaml"  # the dataset grew; a third stage was added
     after.parent.mkdir()
-    after.write_text(yaml.safe_dump({"data": {"still": {**small, "num_samples": 6}}, "pretrain": {
-        **section, "continue_from": {"steps": 1, "data": {"still": {"num_samples": 4}}, "continue_from": {"steps": 2}}}}))
+    after.write_text(yaml.safe_dump({"data": {"still": {**small, "num_samples": 10}}, "pretrain": {
+        **section, "continue_from": {"steps": 1, "data": {"still": {"num_samples": 8}}, "continue_from": {"steps": 2}}}}))
     stages = pretrain_stages(str(after))
     assert [c.steps for c in stages] == [2, 1, 1]
     assert [c.data.get("fingerprint") for c in stages] == [small_fp, small_fp, None]
     assert stages[0].data["root"] == str(default_root("grow").with_name(f"still_grow-{small_fp[:12]}"))
     root = tmp_path / "data"
-    generate_still_dataset(GenerationConfig(**{**small, "num_samples": 6}), root, workers=1, progress=False,
+    generate_still_dataset(GenerationConfig(**{**small, "num_samples": 10}), root, workers=1, progress=False,
                            record=False)
     fp = load_manifest(root)["fingerprint"]
     keys = stage_keys(stages, fp)
@@ -265,7 +305,7 @@ def test_earlier_stages_keep_their_dataset_when_the_profile_data_grow(tmp_path, 
     assert record["continued_from"]["key"] == keys[1]
     earlier = json.loads(path.with_name(f"{keys[1]}.json").read_text())
     assert earlier["data_fingerprint"] == small_fp and earlier["config"]["data"]["root"] == stages[0].data["root"]
-    assert load_manifest(Path(stages[0].data["root"]))["totals"]["samples"] == 4  # generated for them
+    assert load_manifest(Path(stages[0].data["root"]))["totals"]["samples"] == 8  # generated for them
 
 
 def test_regressor_with_its_last_backbone_block_trainable(tmp_path, monkeypatch, open_model_files):
@@ -278,7 +318,7 @@ def test_regressor_with_its_last_backbone_block_trainable(tmp_path, monkeypatch,
 
     monkeypatch.setenv("AIRPOSE_CACHE", str(tmp_path / "cache"))
     root = tmp_path / "data"
-    generate_still_dataset(GenerationConfig(num_samples=8, shard_size=4, crop_size=32, seed=0), root,
+    generate_still_dataset(GenerationConfig(num_samples=16, shard_size=4, crop_size=32, seed=0), root,
                            workers=1, progress=False, record=False)
     torch.manual_seed(1)
     trunk = PretrainNet("resnet18").backbone
@@ -336,3 +376,88 @@ def test_the_committed_cpu_backbone_keeps_its_key():
         chain.append(record["key"])
         record = record.get("continued_from")
     assert keys == chain[::-1]
+
+
+def test_training_and_pretraining_never_read_the_test_split(tmp_path, monkeypatch, open_model_files):
+    """Never choose on the test split: a pretraining (its validation and gate) and a regressor
+    training (its features and validation) open the train and val splits only, every profile's
+    training and pretraining settings name no test split, and a config that does is refused."""
+    import yaml
+
+    from airpose_lib.data import dataset as dataset_module
+    from airpose_lib.data.generate import GenerationConfig, generate_still_dataset
+    from airpose_lib.data.manifest import load_manifest
+    from airpose_lib.errors import ConfigError
+    from airpose_lib.model.variants import VARIANTS
+    from airpose_lib.profiles import profile_names
+    from airpose_lib.train import train
+    from airpose_lib.train.config import TrainConfig, load_train_config
+    from airpose_lib.train.pretrain import ensure_backbone, pretrain_stages
+
+    for name in profile_names():
+        configs = [load_train_config(name, v) for v in VARIANTS] + pretrain_stages(name)
+        assert all("test" not in (c.train_split, c.val_split) for c in configs), name
+    for field in ("train_split", "val_split"):
+        with pytest.raises(ConfigError, match=field):
+            TrainConfig(**{field: "test"})
+
+    opened = []
+    init = dataset_module.StillFrameDataset.__init__
+
+    def recording(self, root, split="train", *args, **kwargs):
+        opened.append(split)
+        init(self, root, split, *args, **kwargs)
+
+    monkeypatch.setattr(dataset_module.StillFrameDataset, "__init__", recording)
+    monkeypatch.setenv("AIRPOSE_CACHE", str(tmp_path / "cache"))
+    root = tmp_path / "data"
+    generate_still_dataset(GenerationConfig(num_samples=6, shard_size=2, crop_size=32, seed=0, val_fraction=0.3),
+                           root, workers=1, progress=False, record=False)
+    profile = tmp_path / "p.yaml"
+    profile.write_text(yaml.safe_dump({"pretrain": {
+        "steps": 1, "batch_size": 2, "backbone": "resnet18", "lr": 1e-3, "seed": 0, "checkpoint_every": 1,
+        "val_every": 1, "log_every": 1, "num_workers": 0, "model": {"n_heading_bins": 12}}}))
+    backbone = ensure_backbone(str(profile), root, load_manifest(root)["fingerprint"], out_root=tmp_path / "runs")
+    assert json.loads(backbone.with_suffix(".json").read_text())["gate_split"] == "val"
+    cfg = TrainConfig(variant="airpose", task="regressor", pretrained=str(backbone), backbone="resnet18", steps=1,
+                      batch_size=2, lr=1e-3, data={"root": str(root)}, val_every=1, checkpoint_every=1, log_every=1,
+                      progress=False, loss={"vertex_subsample": 50})
+    train("airpose", config=cfg, out_dir=tmp_path / "run", resume=False)
+    assert "val" in opened and "train" in opened and "test" not in opened, opened
+
+
+def test_gate_reports_the_root_error_as_yaw_tilt_and_flips():
+    """The pretraining gate on a stub whose root head is the truth turned about the body's up axis
+    (30 deg for most crops, 180 deg for a quarter): yaw median 30, tilt 0, a quarter above 90 deg."""
+    from scipy.spatial.transform import Rotation
+
+    from airpose_lib.train.pretrain import gate_metrics
+
+    rng = np.random.default_rng(0)
+    n, V = 8, 2
+    # upright bodies (tilt is measured between up axes) with random headings in the camera
+    phi = torch.as_tensor(Rotation.from_euler("y", rng.uniform(-np.pi, np.pi, (n * V, 1))).as_matrix(),
+                          dtype=torch.float32).reshape(n, V, 3, 3)
+    turns = np.where(np.arange(n * V) % 4 == 0, 180.0, 30.0)
+    turn = torch.as_tensor(Rotation.from_euler("y", turns[:, None], degrees=True).as_matrix(), dtype=torch.float32)
+    items = [{"images": torch.zeros(V, 3, 8, 8), "phi": phi[i], "theta": torch.zeros(21, 3)} for i in range(n)]
+
+    class Stub(nn.Module):
+        n_heading_bins = 12
+
+        def __init__(self):
+            super().__init__()
+            self.k = 0
+
+        def forward(self, images):
+            N = images.shape[0]
+            R = phi.flatten(0, 1)[self.k:self.k + N] @ turn[self.k:self.k + N]  # turn about the body's y
+            self.k += N
+            return {"phi6d": matrix_to_rot6d(R), "theta6d": matrix_to_rot6d(torch.eye(3).expand(N, 21, 3, 3)),
+                    "heading": torch.zeros(N, 12)}
+
+    gate = gate_metrics(Stub(), items, batch_size=4)
+    assert gate["n"] == n * V and gate["root_rot_over_90"] == pytest.approx(0.25)
+    assert gate["root_yaw_median_deg"] == pytest.approx(30.0, abs=1e-3)
+    assert gate["root_tilt_median_deg"] == pytest.approx(0.0, abs=1e-3)
+    assert gate["root_rot_median_deg"] == pytest.approx(30.0, abs=1e-3)

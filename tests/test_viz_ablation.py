@@ -8,7 +8,7 @@ import pandas as pd  # noqa: E402
 from matplotlib.colors import to_hex  # noqa: E402
 
 from airpose_lib.eval.ablation import ablation_table  # noqa: E402
-from airpose_lib.eval.oracle import ORACLE_LABEL  # noqa: E402
+from airpose_lib.eval.mean_body import GENDERED_LABEL, MEAN_BODY_LABELS, NEUTRAL_LABEL  # noqa: E402
 from airpose_lib.viz.ablation import SOURCE_COLORS, plot_table1  # noqa: E402
 
 
@@ -19,12 +19,13 @@ def _table():
                               ("airpose", 1.2 + 0.1 * s, 0.26)):
             runs[v, s] = pd.DataFrame({"sample": [0], "view": [0], "mpe_m": [mpe], "mpjpe_m": [mpjpe],
                                        "pa_mpjpe_m": [mpjpe / 2]})
-    return ablation_table(runs, oracle=pd.DataFrame({"mpe_m": [0.55]}))
+    return ablation_table(runs, references=pd.DataFrame({"method": [NEUTRAL_LABEL, GENDERED_LABEL],
+                                                         "mpe_m": [0.55, 0.45]}))
 
 
 def test_table1_figure_is_readable():
     t = _table()
-    fig = plot_table1(t, reference=t * 1.1, kit_label="kit (smoke)", oracle_label=ORACLE_LABEL)
+    fig = plot_table1(t, reference=t * 1.1, kit_label="kit (smoke)", line_rows=MEAN_BODY_LABELS)
     fig.canvas.draw()
     renderer = fig.canvas.get_renderer()
     legend = fig.legends[0]
@@ -42,13 +43,14 @@ def test_table1_figure_is_readable():
                 if hasattr(h, "get_facecolor")}
     assert swatches["kit (smoke)"] == to_hex(SOURCE_COLORS["kit"])
     assert swatches["paper"] == to_hex(SOURCE_COLORS["paper"])
-    assert any("oracle" in t.get_text() for t in legend.get_texts())
-    assert fig.axes[0].lines and fig.axes[0].lines[-1].get_ydata()[0] == 0.55  # the floor line (MPE only)
-    assert not [ln for ln in fig.axes[1].lines if ln.get_linestyle() == "--"]
+    assert {NEUTRAL_LABEL, GENDERED_LABEL} <= {t.get_text() for t in legend.get_texts()}
+    # the two reference lines (MPE only), one dash style each
+    assert [(ln.get_ydata()[0], ln.get_linestyle()) for ln in fig.axes[0].lines[-2:]] == [(0.55, "--"), (0.45, ":")]
+    assert not [ln for ln in fig.axes[1].lines if ln.get_linestyle() in ("--", ":")]
 
 
 def test_without_reference_two_bars_per_method():
-    fig = plot_table1(_table().drop(index=ORACLE_LABEL))
+    fig = plot_table1(_table().drop(index=list(MEAN_BODY_LABELS)))
     assert all(len(ax.patches) == 8 for ax in fig.axes)
 
 

@@ -12,7 +12,8 @@ from airpose_lib.train import train
 def config(steps: int, batch_size: int):
     """The configuration the test compares across launches (dropout off: per-process masks)."""
     return tiny_config(steps=steps, batch_size=batch_size, val_every=None, checkpoint_every=2,
-                       data={"n": 9, "genders": 1}, model={"num_iterations": 2, "dropout": 0.0})
+                       data={"n": 9, "genders": 1}, model={"num_iterations": 2, "dropout": 0.0},
+                       device="cpu")  # gloo processes, also on a machine with fewer GPUs than processes
 
 
 if __name__ == "__main__":

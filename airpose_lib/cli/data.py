@@ -58,7 +58,7 @@ def _cmd_data_generate(args: argparse.Namespace) -> int:
     manifest = generate_still_dataset(config, root, workers=workers, profile=args.profile,
                                       progress=not args.quiet, record=args.record_manifest)
     t = manifest["totals"]
-    print(f"{root}: {t['train_samples']} train + {t['test_samples']} test samples "
+    print(f"{root}: {t['train_samples']} train + {t.get('val_samples', 0)} val + {t['test_samples']} test samples "
           f"({config.scene.num_views} views, {config.crop_size} px), {t['dropped']} of "
           f"{t['attempts']} attempts dropped (person left a frame), {len(manifest['shards'])} shards, "
           f"{t['bytes'] / 1e6:.1f} MB")

@@ -25,6 +25,10 @@ def _cmd_reproduce(args: argparse.Namespace) -> int:
             params = prof["notebooks"].get(entry.name, {})
             print(f"  {entry.name:<24} {entry.file:<28} {params}")
         return 0
+    if args.write_reference:  # before hours of notebooks, not after: reference results need a clean commit
+        from airpose_lib.eval.reference import require_clean_checkout
+
+        require_clean_checkout()
     report = run_profile(args.profile, only=args.only, out_dir=args.out, figures_dir=args.figures,
                          kernel_name=args.kernel, keep_going=args.keep_going,
                          log_output=args.log_output and not args.quiet, verbose=not args.quiet,
@@ -117,6 +121,6 @@ def add_reproduce(sub) -> None:
     rep.add_argument("--write-reference", action="store_true",
                      help="store notebook 02's Table I files as the reference in results/<profile>/, "
                           "notebook 05's recording tables in results/<profile>/recordings/ and, when every "
-                          "notebook ran, the run's HTML report in results/<profile>/report/ "
-                          "(default: only compare with them)")
+                          "notebook ran, the run's HTML report in results/<profile>/report/; refused unless "
+                          "the checkout is a clean commit (default: only compare with them)")
     rep.set_defaults(func=_cmd_reproduce)

@@ -82,7 +82,7 @@ def add_pretrain(sub) -> None:
         "pretrain", help="pretrain the profile's shared backbone (the CPU protocol's starting point)",
         description="Train (or find in the cache / the committed results/<profile>/) the backbone every "
                     "variant of the profile starts from: the `pretrain:` section, variant-neutral objective, "
-                    "gated on the test split.")
+                    "gated on the validation split.")
     pr.add_argument("--profile", type=parse_profile, default="smoke",
                     help="a kit profile (smoke, cpu, paper) or the path of your own profile YAML (default: smoke)")
     pr.add_argument("--write-reference", action="store_true",

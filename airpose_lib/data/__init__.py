@@ -3,11 +3,13 @@ manifests and the PyTorch datasets.
 
 Modules: ``scene`` (people, drone cameras, crop boxes, environment), ``poses`` (plausible body
 poses), ``motions`` and ``sequences`` (simulated recordings), ``detections`` (simulated keypoint
-detectors), ``official_layout`` (the official real-data folder layout, ``load_sequence``),
+detectors), ``official_layout`` (the official real-data folder layout, ``load_sequence``), ``markers``
+(ArUco markers on the ground: detection, camera poses, UAV 2 in UAV 1),
 ``appearance`` (skin / hair / clothing colours), ``render`` (textured scenes, pyvista),
 ``shards`` and ``manifest`` (files on disk), ``still_config`` (still-frame dataset settings),
 ``still_frames`` (sampling and rendering one shard's still frames), ``generate`` (shards on disk,
-resumption, workers: ``airpose data generate``), ``dataset`` (``StillFrameDataset``),
+resumption, workers: ``airpose data generate``), ``dataset`` (``StillFrameDataset``), ``mirror``
+(the left-right mirror augmentation),
 ``network_input`` (how a frame becomes the network's input: person box, previous-box rule,
 crop, normalisation; shared by the drones and fine-tuning).
 
@@ -45,10 +47,10 @@ _EXPORTS = {
 
 # Other modules' public names (their ``__all__``) are found on first use, in this order; the
 # renderer comes last because importing it starts VTK.
-_SEARCHED = ("official_synthetic", "official_real", "official_layout", "sequences",
+_SEARCHED = ("official_synthetic", "official_real", "official_layout", "sequences", "markers",
              "motions", "detections", "poses", "scene", "appearance", "manifest", "shards", "still_config",
              "still_frames", "generate",
-             "dataset", "render")
+             "mirror", "dataset", "render")
 
 __all__ = sorted(_EXPORTS)
 __getattr__, __dir__ = lazy_namespace(__name__, globals(), _SEARCHED, _EXPORTS, skip_failing=True)

@@ -28,6 +28,8 @@ jittered ones (``P`` and ``bbox`` follow the crop; see ``GenerationConfig.test_c
 
 Training augmentation (``augment=True``, the default for the train split) permutes the views
 (a swap for two views); every per-view field moves together, so the sample stays consistent.
+With ``mirror=True`` it also mirrors half the samples left-right (:mod:`.mirror`: the crops'
+columns flipped and every view's geometry, joints, root and pose mirrored with them).
 Shards are checked against the manifest's SHA-256 when the dataset is opened.
 """
 from __future__ import annotations
@@ -41,8 +43,10 @@ from torch.utils.data import Dataset
 from airpose_lib.errors import ConfigError
 
 from .manifest import check_complete, verify_shard
+from .mirror import mirror_sample
 from .network_input import IMAGENET_MEAN, IMAGENET_STD, normalize
 from .shards import ShardImages, read_shard
+from .still_config import SPLITS
 
 __all__ = ["StillFrameDataset", "PER_VIEW_KEYS", "SAMPLE_KEYS", "EXTRA_KEYS",
            "normalize_images", "denormalize_images", "decode_image", "swap_views"]
@@ -105,8 +109,12 @@ class StillFrameDataset(Dataset):
 
     Args:
         root: dataset folder (with ``manifest.yaml`` and ``shard_*.npz``).
-        split: ``"train"``, ``"test"`` or ``"all"``.
+        split: ``"train"``, ``"val"``, ``"test"`` or ``"all"`` (a dataset generated before the
+            validation split existed has no ``"val"`` shards: that split is then empty and refused).
         augment: random view permutation; default True for the train split, else False.
+        mirror: with ``augment``, also mirror each sample with probability 1/2
+            (:func:`~.mirror.mirror_sample`; torch's RNG, seeded per sample like the view swap).
+            Off by default; no effect without ``augment`` (validation and test stay as stored).
         verify: check every shard's size and SHA-256 against the manifest when opening.
         crops: ``"jittered"`` (the stored crops) or ``"tight"`` (the tight-box crops that test
             shards also hold).
@@ -117,15 +125,16 @@ class StillFrameDataset(Dataset):
     """
 
     def __init__(self, root: Path | str, split: str = "train", augment: bool | None = None, *,
-                 verify: bool = True, crops: str = "jittered") -> None:
-        if split not in ("train", "test", "all"):
-            raise ConfigError(f"split must be 'train', 'test' or 'all', got {split!r}")
+                 verify: bool = True, crops: str = "jittered", mirror: bool = False) -> None:
+        if split not in (*SPLITS, "all"):
+            raise ConfigError(f"split must be one of {', '.join(SPLITS)} or 'all', got {split!r}")
         if crops not in ("jittered", "tight"):
             raise ConfigError(f"crops must be 'jittered' or 'tight', got {crops!r}")
         self.crops = crops
         self.root = Path(root)
         self.split = split
         self.augment = (split == "train") if augment is None else bool(augment)
+        self.mirror = bool(mirror)
         self.manifest = check_complete(self.root)
         records = [r for r in self.manifest["shards"] if split == "all" or r["split"] == split]
         self.num_views = int(self.manifest["num_views"])
@@ -186,6 +195,9 @@ class StillFrameDataset(Dataset):
         item = {"images": normalize_images(self.rgb(i)), **self.ground_truth(i)}
         if self.augment:
             swap_views(item)
+            # drawn after the swap, so that mirroring leaves the swap's draws as they were
+            if self.mirror and bool(torch.rand(()) < 0.5):
+                item = mirror_sample(item, self.crop_size)
         return item
 
     def ground_truth(self, i: int) -> dict[str, torch.Tensor]:
@@ -200,4 +212,5 @@ class StillFrameDataset(Dataset):
 
     def __repr__(self) -> str:
         return (f"StillFrameDataset({str(self.root)!r}, split={self.split!r}, n={len(self)}, "
-                f"views={self.num_views}, S={self.crop_size}, augment={self.augment}, crops={self.crops!r})")
+                f"views={self.num_views}, S={self.crop_size}, augment={self.augment}, mirror={self.mirror}, "
+                f"crops={self.crops!r})")

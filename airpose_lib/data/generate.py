@@ -43,7 +43,7 @@ from .manifest import (
     write_manifest,
 )
 from .shards import sha256_file
-from .still_config import GENERATOR_VERSION, GenerationConfig, default_root, profile_config
+from .still_config import GENERATOR_VERSION, SPLITS, GenerationConfig, default_root, profile_config
 
 __all__ = [
     # the settings live in still_config; re-exported here because callers (CLI, training,
@@ -102,8 +102,7 @@ def _new_manifest(config: GenerationConfig, profile: str | None, body_models: di
         "num_views": config.scene.num_views,
         "image_format": config.image_format,
         "body_models": {"source": config.body_source, "sha256": body_models},
-        "splits": {"train": [k for k in range(config.num_shards) if config.shard_split(k) == "train"],
-                   "test": [k for k in range(config.num_shards) if config.shard_split(k) == "test"]},
+        "splits": {s: [k for k in range(config.num_shards) if config.shard_split(k) == s] for s in SPLITS},
         "totals": {},
         "config": config.to_dict(),
         "shards": [],
@@ -113,12 +112,11 @@ def _new_manifest(config: GenerationConfig, profile: str | None, body_models: di
 def _finish_manifest(manifest: dict, config: GenerationConfig) -> None:
     shards = sorted(manifest["shards"], key=lambda r: r["index"])
     manifest["shards"] = shards
-    samples = {s: sum(r["samples"] for r in shards if r["split"] == s) for s in ("train", "test")}
+    samples = {s: sum(r["samples"] for r in shards if r["split"] == s) for s in SPLITS}
     attempts = sum(r["attempts"] for r in shards)
     dropped = sum(r["dropped"] for r in shards)
     manifest["totals"] = {
-        "samples": samples["train"] + samples["test"], "train_samples": samples["train"],
-        "test_samples": samples["test"], "attempts": attempts, "dropped": dropped,
+        "samples": sum(samples.values()), **{f"{s}_samples": n for s, n in samples.items()}, "attempts": attempts, "dropped": dropped,
         "drop_rate": round(dropped / attempts, 4) if attempts else 0.0,
         "bytes": sum(r["bytes"] for r in shards),
     }

@@ -175,16 +175,27 @@ def _load_pickle(path: Path, what: str):
                                 f"{type(e).__name__}: {e}); {_RELEASE_HINT}") from None
 
 
+#: Training subjects of the official release held out as the validation split.
+VAL_SUBJECTS = 2
+
+
 def official_split_files(root: Path | str, split: str, split_by: str = "auto",
-                         num_test_subjects: int = 10) -> list[Path]:
+                         num_test_subjects: int = 10, num_val_subjects: int = VAL_SUBJECTS) -> list[Path]:
     """Per-sample pkl paths of a split, mapped under ``root``.
+
+    The release has a training and a test split only. ``"val"`` (where every choice is made, so
+    that the test split is read only for the reported table) is the last ``num_val_subjects``
+    subjects of the training split, and ``"train"`` is then the rest of it.
 
     Args:
         root: the folder holding ``dataset/``.
-        split: ``"train"``, ``"test"`` or ``"all"``.
+        split: ``"train"``, ``"val"``, ``"test"`` or ``"all"``.
         split_by: ``"lists"`` (``dataset/{train,test}_pkls.pkl``), ``"subjects"`` (the last
             ``num_test_subjects`` subjects are the test split) or ``"auto"`` (lists if both exist).
         num_test_subjects: test subjects for ``split_by="subjects"`` (10 in the paper).
+        num_val_subjects: training subjects held out as the validation split (0, or not fewer
+            than the training split has: no validation split, ``"train"`` is the authors' whole
+            training split).
 
     Raises:
         OfficialDataError: no ``dataset/`` folder, missing or unreadable list file, a listed pkl
@@ -195,8 +206,8 @@ def official_split_files(root: Path | str, split: str, split_by: str = "auto",
     if not ds.is_dir():
         raise OfficialDataError(f"{root} has no dataset/ folder: pass the folder that holds dataset/ and data/ "
                                 f"(the extracted copenet_synthetic archive)")
-    if split not in ("train", "test", "all"):
-        raise ValueError(f"split must be 'train', 'test' or 'all', got {split!r}")
+    if split not in ("train", "val", "test", "all"):
+        raise ValueError(f"split must be 'train', 'val', 'test' or 'all', got {split!r}")
     if split_by not in ("auto", "lists", "subjects"):
         raise ValueError(f"split_by must be 'auto', 'lists' or 'subjects', got {split_by!r}")
     have_lists = all((ds / f).is_file() for f in _LIST_FILES.values())
@@ -213,7 +224,7 @@ def official_split_files(root: Path | str, split: str, split_by: str = "auto",
                 f"prepare_aerialpeople_dataset.py wrote the train list into it before its fix afd33f9 of "
                 f"16 Dec 2021); run that script of the official HEAD again, or pass split_by='subjects' "
                 f"(--set data.split_by=subjects) to split by the authors' rule (last 10 subjects are the test split)")
-        files = lists["train"] + lists["test"] if split == "all" else lists[split]
+        files = lists["train"] + lists["test"] if split == "all" else lists["train" if split == "val" else split]
     else:
         files_all = sorted((ds / "pkls").glob("*/*.pkl"))
         if not files_all:
@@ -221,6 +232,12 @@ def official_split_files(root: Path | str, split: str, split_by: str = "auto",
         subjects = sorted({subject_of(f) for f in files_all})
         test = set(subjects[-num_test_subjects:]) if num_test_subjects > 0 else set()
         files = [f for f in files_all if split == "all" or (subject_of(f) in test) == (split == "test")]
+    subjects = sorted({subject_of(f) for f in files})
+    if split in ("train", "val") and 0 < num_val_subjects < len(subjects):  # some training subjects stay
+        held = set(subjects[-num_val_subjects:])
+        files = [f for f in files if (subject_of(f) in held) == (split == "val")]
+    elif split == "val":
+        files = []  # no validation split: refused below
     if not files:
         raise OfficialDataError(f"{root}: the {split!r} split is empty")
     missing = [f for f in files if not f.is_file()]
@@ -343,7 +360,7 @@ class OfficialSyntheticDataset(Dataset):
 
     Args:
         root: the folder holding ``dataset/`` and ``data/``.
-        split: ``"train"``, ``"test"`` or ``"all"``.
+        split: ``"train"``, ``"val"``, ``"test"`` or ``"all"``.
         augment: random view permutation (the official random camera swap); default True for the
             train split.
         input_size: crop side S (224 in the paper).
@@ -357,6 +374,7 @@ class OfficialSyntheticDataset(Dataset):
         views: which of the sample's cameras, in order (the official loader: 0 and 1).
         split_by: ``"auto"``, ``"lists"`` or ``"subjects"`` (:func:`official_split_files`).
         num_test_subjects: test subjects for ``split_by="subjects"``.
+        num_val_subjects: training subjects held out as ``"val"`` (:func:`official_split_files`).
         joints: ``"pkl"`` (default) or ``"model"`` (see the module docstring).
         body_source: body model for ``joints="model"`` (``"smplx"`` for the official data).
         frame_size: ``(W, H)`` of the full frame (1920 x 1080).
@@ -371,6 +389,7 @@ class OfficialSyntheticDataset(Dataset):
                  input_size: int = 224, *, jitter: bool | None = None, jitter_px: float = OFFICIAL_CROP_MARGIN,
                  jitter_seed: int | None = None,
                  views: Sequence[int] = (0, 1), split_by: str = "auto", num_test_subjects: int = 10,
+                 num_val_subjects: int = VAL_SUBJECTS,
                  joints: str = "pkl", body_source: str = "smplx",
                  frame_size: tuple[int, int] = OFFICIAL_FRAME_SIZE) -> None:
         if joints not in ("pkl", "model"):
@@ -379,7 +398,7 @@ class OfficialSyntheticDataset(Dataset):
             raise ValueError(f"input_size too small: {input_size}")
         self.root = Path(root)
         self.split = split
-        self.files = official_split_files(self.root, split, split_by, num_test_subjects)
+        self.files = official_split_files(self.root, split, split_by, num_test_subjects, num_val_subjects)
         self.augment = (split == "train") if augment is None else bool(augment)
         self.jitter = (split == "train") if jitter is None else bool(jitter)
         self.jitter_px = float(jitter_px)

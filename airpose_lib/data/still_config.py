@@ -17,11 +17,17 @@ from .appearance import AppearanceConfig
 from .manifest import DatasetError
 from .scene import SceneConfig
 
-__all__ = ["GENERATOR_VERSION", "GenerationConfig", "profile_config", "default_root"]
+__all__ = ["GENERATOR_VERSION", "SPLITS", "GenerationConfig", "profile_config", "default_root"]
 
 #: Bumped whenever the same configuration would produce different shards.
 #: 2: test crops are jittered like training crops; test shards also hold the tight-box crops.
-GENERATOR_VERSION = 2
+#: 3: a validation split (``val_fraction``) between the training and the test shards.
+GENERATOR_VERSION = 3
+
+#: The splits of a generated dataset, in shard order. ``val`` is made like ``test`` (test-protocol
+#: crops, tight crops too, subjects of its own): every choice is made on it, and ``test`` is read
+#: only to make the reported tables.
+SPLITS = ("train", "val", "test")
 
 # -- configuration --------------------------------------------------------------------------------
 @dataclass(frozen=True)
@@ -35,6 +41,9 @@ class GenerationConfig:
         crop_size: side S of the rendered crops (the network input; 224 in the paper).
         test_fraction: share of shards (the last ones, hence distinct subjects) in the test split;
             at least one test shard.
+        val_fraction: share of shards in the validation split, the shards just before the test
+            split (their own seeds and subjects, drawn like the test split); at least one
+            validation shard when positive and the dataset has three shards or more.
         image_format: ``"jpg"`` or ``"png"`` (lossless, ~3x larger).
         jpeg_quality: JPEG quality 1-100.
         anti_aliasing: MSAA on the rendered crops (slow in software rendering).
@@ -58,6 +67,7 @@ class GenerationConfig:
     seed: int = 0
     crop_size: int = 224
     test_fraction: float = 0.1
+    val_fraction: float = 0.1
     image_format: str = "jpg"
     jpeg_quality: int = 95
     anti_aliasing: bool = False
@@ -78,6 +88,9 @@ class GenerationConfig:
             raise ConfigError(f"image_format must be 'jpg' or 'png', got {self.image_format!r}")
         if not 0.0 <= self.test_fraction < 1.0:
             raise ConfigError(f"test_fraction must be in [0, 1), got {self.test_fraction}")
+        if not 0.0 <= self.val_fraction < 1.0 or self.val_fraction + self.test_fraction >= 1.0:
+            raise ConfigError(f"val_fraction must be in [0, 1) with val_fraction + test_fraction < 1, "
+                              f"got {self.val_fraction} (test_fraction {self.test_fraction})")
         if self.crop_size < 8:
             raise ConfigError(f"crop_size too small: {self.crop_size}")
 
@@ -92,13 +105,25 @@ class GenerationConfig:
             return 0  # a one-shard dataset is all training data
         return min(self.num_shards - 1, max(1, round(self.test_fraction * self.num_shards)))
 
+    @property
+    def num_val_shards(self) -> int:
+        if self.val_fraction == 0.0 or self.num_shards < 3:
+            return 0  # a dataset of one or two shards has no room for a third split
+        room = self.num_shards - self.num_test_shards - 1  # at least one training shard stays
+        return min(room, max(1, round(self.val_fraction * self.num_shards)))
+
     def shard_samples(self, k: int) -> int:
         """Samples in shard ``k`` (the last one may be smaller)."""
         return min(self.shard_size, self.num_samples - k * self.shard_size)
 
     def shard_split(self, k: int) -> str:
-        """``"train"`` or ``"test"``: the last shards (new subjects) are the test split."""
-        return "test" if k >= self.num_shards - self.num_test_shards else "train"
+        """``"train"``, ``"val"`` or ``"test"`` (:data:`SPLITS`): the last shards (new subjects)
+        are the test split, the ones before them the validation split."""
+        if k >= self.num_shards - self.num_test_shards:
+            return "test"
+        if k >= self.num_shards - self.num_test_shards - self.num_val_shards:
+            return "val"
+        return "train"
 
     # -- (de)serialisation ------------------------------------------------------------------------
     def to_dict(self) -> dict:

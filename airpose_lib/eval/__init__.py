@@ -13,6 +13,7 @@ from .metrics import (
     pa_mpjpe,
     procrustes_align,
     relative_camera_errors,
+    root_yaw_tilt,
     rotation_error,
     translation_error,
 )
@@ -29,7 +30,7 @@ from .tables import (
 
 __all__ = [
     "translation_error", "mpe", "align_root", "joint_errors", "mpjpe", "procrustes_align",
-    "pa_joint_errors", "pa_mpjpe", "rotation_error", "acceleration", "jitter", "acceleration_error",
+    "pa_joint_errors", "pa_mpjpe", "rotation_error", "root_yaw_tilt", "acceleration", "jitter", "acceleration_error",
     "relative_camera_errors",
     "PER_VIEW_METRICS", "per_view_table", "per_joint_table", "relative_camera_table",
     "sequence_table", "summarize", "paper_table", "to_long",

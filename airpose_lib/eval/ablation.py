@@ -3,8 +3,9 @@
 ``PAPER_TABLE_I`` holds the paper's numbers; :func:`per_seed_table` reduces each run's per-view
 table to its metric means, and :func:`ablation_table` aggregates those over seeds (mean and
 standard deviation), puts the paper's numbers in adjacent columns, so every reproduction shows
-both side by side, and adds the mean-body oracle row (:mod:`airpose_lib.eval.oracle`), the floor
-MPE is read against. Whether the orderings are significant is :mod:`airpose_lib.eval.significance`.
+both side by side, and adds the mean-body reference rows (:mod:`airpose_lib.eval.mean_body`: what
+a stature-blind estimate with the ground-truth pose gets, neutral and of the true gender), the
+scale MPE is read against. Whether the orderings are significant is :mod:`airpose_lib.eval.significance`.
 """
 from __future__ import annotations
 
@@ -13,9 +14,9 @@ from collections.abc import Mapping
 import numpy as np
 import pandas as pd
 
-from .oracle import ORACLE_LABEL
+from .mean_body import GENDERED_LABEL, MEAN_BODY_LABELS, NEUTRAL_LABEL
 
-__all__ = ["VARIANT_LABELS", "PAPER_TABLE_I", "PER_SEED_METRICS", "TABLE_COLUMNS", "per_seed_table",
+__all__ = ["VARIANT_LABELS", "PAPER_TABLE_I", "ROOT_FLIP_DEG", "PER_SEED_METRICS", "TABLE_COLUMNS", "per_seed_table",
            "ablation_table", "paper_gaps", "ablation_findings", "table_to_markdown", "table_to_latex"]
 
 #: Row names of Table I for the kit's variant names.
@@ -33,7 +34,18 @@ PAPER_TABLE_I = pd.DataFrame(
 )
 
 
-#: Per-seed metric -> (per-view column, how the images of one run are reduced).
+#: Root-orientation errors above this (degrees) are counted apart: a body turned more than a
+#: quarter turn away from the truth (a front/back flip, not imprecision).
+ROOT_FLIP_DEG = 90.0
+
+
+def _share_above_flip_pct(errors_deg: pd.Series) -> float:
+    """Percentage of the images whose geodesic root error exceeds :data:`ROOT_FLIP_DEG`."""
+    return 100.0 * float((errors_deg > ROOT_FLIP_DEG).mean())
+
+
+#: Per-seed metric -> (per-view column, how the images of one run are reduced: a pandas method's
+#: name or a function of the column).
 PER_SEED_METRICS = {
     "mpe_m": ("mpe_m", "mean"),
     "mpjpe_m": ("mpjpe_m", "mean"),
@@ -41,6 +53,9 @@ PER_SEED_METRICS = {
     "mpjpe_true_root_m": ("mpjpe_true_root_m", "mean"),
     "pa_mpjpe_m": ("pa_mpjpe_m", "mean"),
     "root_rot_median_deg": ("root_rot_deg", "median"),
+    "root_yaw_median_deg": ("root_yaw_deg", "median"),
+    "root_tilt_median_deg": ("root_tilt_deg", "median"),
+    "root_above90_pct": ("root_rot_deg", _share_above_flip_pct),
 }
 #: Per-seed metric -> Table I column (``ablation_table``).
 TABLE_COLUMNS = {
@@ -50,6 +65,9 @@ TABLE_COLUMNS = {
     "mpjpe_true_root_m": "MPJPE true root [m]",
     "pa_mpjpe_m": "PA-MPJPE [m]",
     "root_rot_median_deg": "root orient. median [deg]",
+    "root_yaw_median_deg": "root yaw median [deg]",
+    "root_tilt_median_deg": "root tilt median [deg]",
+    "root_above90_pct": "root orient. > 90 deg [%]",
     "mpe_tight_m": "MPE tight box [m]",
     "mpjpe_tight_m": "MPJPE tight box [m]",
     "mpe_camera0_m": "MPE camera 0 [m]",
@@ -71,7 +89,8 @@ def per_seed_table(per_view: Mapping[tuple[str, int], pd.DataFrame],
             0's; the kit's ``mpe_m`` averages both cameras).
     Returns:
         columns ``variant, method, seed`` and those of :data:`PER_SEED_METRICS` present in every
-        table (root orientation: the median over images), ``mpe_tight_m``, ``mpjpe_tight_m`` when
+        table (root orientation: the medians over images of the geodesic, yaw and tilt errors and
+        the percentage above :data:`ROOT_FLIP_DEG`), ``mpe_tight_m``, ``mpjpe_tight_m`` when
         every run has a tight-box table, ``images``, and ``wall_s`` when given; Table I order.
     """
     unknown = {v for v, _ in per_view} - set(VARIANT_LABELS)
@@ -86,7 +105,7 @@ def per_seed_table(per_view: Mapping[tuple[str, int], pd.DataFrame],
         row = {"variant": variant, "method": VARIANT_LABELS[variant], "seed": seed}
         for m in present:
             col, how = PER_SEED_METRICS[m]
-            row[m] = float(getattr(t[col], how)())
+            row[m] = float(how(t[col]) if callable(how) else getattr(t[col], how)())
         if tight:
             tt = per_view_tight[variant, seed]
             row["mpe_tight_m"], row["mpjpe_tight_m"] = float(tt["mpe_m"].mean()), float(tt["mpjpe_m"].mean())
@@ -104,18 +123,19 @@ def per_seed_table(per_view: Mapping[tuple[str, int], pd.DataFrame],
 
 
 def ablation_table(per_view: Mapping[tuple[str, int], pd.DataFrame],
-                   oracle: pd.DataFrame | None = None,
+                   references: pd.DataFrame | None = None,
                    per_view_tight: Mapping[tuple[str, int], pd.DataFrame] | None = None,
                    camera0: bool = False) -> pd.DataFrame:
-    """Kit numbers (mean and std over seeds) next to the paper's, and the oracle floor.
+    """Kit numbers (mean and std over seeds) next to the paper's, and the mean-body references.
 
     Args:
         per_view: (variant, seed) -> the per-view table of that run
             (:func:`airpose_lib.eval.tables.per_view_table`: columns ``mpe_m``, ``mpjpe_m``,
             ``pa_mpjpe_m``, optionally ``mpjpe_shape_m`` and ``root_rot_deg``; one row per test
             image and view).
-        oracle: per-view table of :func:`airpose_lib.eval.oracle.oracle_per_view` (``mpe_m``):
-            adds the oracle row, MPE only (its other columns are NaN, shown as ``-``).
+        references: per-view rows of :func:`airpose_lib.eval.mean_body.mean_body_references`
+            (``method``, ``mpe_m``): adds one row per reference (``method``), MPE only (its other
+            columns are NaN, shown as ``-``).
         per_view_tight: the same runs evaluated on tight-box test crops: adds the tight-box
             MPE / MPJPE columns (only when every run has one).
         camera0: add ``MPE camera 0 [m]`` (the official code's printed MPE: view 0 alone).
@@ -124,7 +144,8 @@ def ablation_table(per_view: Mapping[tuple[str, int], pd.DataFrame],
         ``MPE std [m]``, ``MPE paper [m]``, ``MPJPE [m]``, ``MPJPE std [m]``, ``MPJPE paper [m]``,
         then the extra columns present (``MPJPE shape-aware [m]``, ``MPJPE true root [m]`` (the
         body pose alone: Table I's MPJPE with the true root orientation), ``PA-MPJPE [m]``,
-        ``root orient. median [deg]``, ``MPE tight box [m]``, ``MPJPE tight box [m]``; means over
+        ``root orient. median [deg]``, ``root yaw median [deg]``, ``root tilt median [deg]``,
+        ``root orient. > 90 deg [%]``, ``MPE tight box [m]``, ``MPJPE tight box [m]``; means over
         seeds) and ``seeds``. The std is over the seeds' means (NaN for one seed).
     """
     runs = per_seed_table(per_view, per_view_tight, camera0=camera0)
@@ -142,26 +163,40 @@ def ablation_table(per_view: Mapping[tuple[str, int], pd.DataFrame],
             out[column] = g[m].mean()
     out["seeds"] = g["seed"].count().astype("Int64")
     out = out.loc[[m for m in VARIANT_LABELS.values() if m in g.groups]]  # Table I order
-    if oracle is not None:
-        row = pd.DataFrame({"MPE [m]": [float(oracle["mpe_m"].mean())]}, index=[ORACLE_LABEL])
-        out = pd.concat([out, row.reindex(columns=out.columns)])
+    if references is not None:
+        mpe = references.groupby("method", sort=False)["mpe_m"].mean()
+        mpe = mpe.reindex([m for m in MEAN_BODY_LABELS if m in mpe.index] + [m for m in mpe.index
+                                                                              if m not in MEAN_BODY_LABELS])
+        rows = pd.DataFrame({"MPE [m]": mpe.to_numpy(float)}, index=list(mpe.index))
+        out = pd.concat([out, rows.reindex(columns=out.columns)])
         out["seeds"] = out["seeds"].astype("Int64")
     out.index.name = "method"
     return out
 
 
+#: Mean-body reference row -> its ratio column in :func:`paper_gaps` and its name in the findings.
+_REFERENCE_NAMES = {NEUTRAL_LABEL: "neutral mean body", GENDERED_LABEL: "true-gender mean body"}
+
+
+def _variant_rows(table: pd.DataFrame) -> list[str]:
+    """The variant rows of :func:`ablation_table` (the mean-body reference rows left out)."""
+    return [m for m in table.index if m not in MEAN_BODY_LABELS]
+
+
 def paper_gaps(table: pd.DataFrame) -> pd.DataFrame:
-    """How far each variant is from the paper and from the oracle floor, as ratios.
+    """How far each variant is from the paper and from the mean-body references, as ratios.
 
     Returns:
         one row per variant of :func:`ablation_table`: ``MPE kit / paper``, ``MPJPE kit / paper``
-        and, with an oracle row, ``MPE kit / oracle`` (how many times the stature floor).
+        and, per reference row, ``MPE kit / neutral mean body`` and ``MPE kit / true-gender mean
+        body`` (how many times what a stature-blind estimate with the ground-truth pose gets).
     """
-    rows = [m for m in table.index if m != ORACLE_LABEL]
+    rows = _variant_rows(table)
     out = pd.DataFrame({"MPE kit / paper": table.loc[rows, "MPE [m]"] / table.loc[rows, "MPE paper [m]"],
                         "MPJPE kit / paper": table.loc[rows, "MPJPE [m]"] / table.loc[rows, "MPJPE paper [m]"]})
-    if ORACLE_LABEL in table.index:
-        out["MPE kit / oracle"] = table.loc[rows, "MPE [m]"] / table.loc[ORACLE_LABEL, "MPE [m]"]
+    for label, name in _REFERENCE_NAMES.items():
+        if label in table.index:
+            out[f"MPE kit / {name}"] = table.loc[rows, "MPE [m]"] / table.loc[label, "MPE [m]"]
     return out
 
 
@@ -174,20 +209,36 @@ def _listed(rows: pd.DataFrame) -> str:
     return "; ".join(f"{r['claim']} ({_signed_length(r['difference [m]'])})" for _, r in rows.iterrows()) or "none"
 
 
+def _gains(claims: pd.DataFrame) -> str | None:
+    """The effect-size line of :func:`ablation_findings` (None when the claims have no gains)."""
+    if not {"gain [%]", "paper gain [%]", "of paper's size"} <= set(claims.columns):
+        return None
+    measured = claims[claims["gain [%]"].notna() & claims["paper gain [%]"].notna()]
+    if measured.empty:
+        return None
+    sizes = "; ".join(f"{r['claim']} {r['gain [%]']:.1f} % ({r['gain CI low [%]']:.1f} to "
+                      f"{r['gain CI high [%]']:.1f}) against the paper's {r['paper gain [%]']:.1f} %"
+                      for _, r in measured.iterrows())
+    reach = int(measured["of paper's size"].astype(bool).sum())
+    return (f"* **Effect sizes** (relative gain, 95 % interval, the paper's): {reach} of {len(measured)} reach "
+            f"a third of the paper's gain. {sizes}.")
+
+
 def ablation_findings(table: pd.DataFrame, claims: pd.DataFrame | None = None) -> str:
     """What a run's Table I says, as Markdown built from its own tables (notebook 02's summary):
     no number in it is typed by hand, so it cannot contradict the tables above it.
 
     Args:
-        table: :func:`ablation_table` (variant rows in Table I order, optional oracle row and
+        table: :func:`ablation_table` (variant rows in Table I order, optional reference rows and
             extra columns; a column that is absent or NaN is left out of the text).
         claims: :func:`airpose_lib.eval.significance.claims_table` (index ``claim``, columns
             ``difference [m]`` and ``verdict``; or ``claim`` as a column, as in ``claims.csv``), or None.
     Returns:
-        a bulleted Markdown paragraph: AirPose against the paper and the oracle floor, the claims'
-        verdicts, what the root orientation adds to MPJPE, and the seed count's caveat.
+        a bulleted Markdown paragraph: AirPose against the paper and the mean-body references, the claims'
+        verdicts and (when ``claims`` has them) their relative gains next to the paper's, what the
+        root orientation adds to MPJPE, and the seed count's caveat.
     """
-    rows = [m for m in table.index if m != ORACLE_LABEL]
+    rows = _variant_rows(table)
     best = "AirPose" if "AirPose" in rows else rows[-1]
     r = table.loc[best]
 
@@ -196,11 +247,15 @@ def ablation_findings(table: pd.DataFrame, claims: pd.DataFrame | None = None) -
 
     head = (f"* **{best}**: MPE {r['MPE [m]']:.3f} m (the paper's {r['MPE paper [m]']:.3f} m), "
             f"MPJPE {r['MPJPE [m]']:.3f} m (the paper's {r['MPJPE paper [m]']:.3f} m)")
-    if ORACLE_LABEL in table.index:
-        floor = float(table.loc[ORACLE_LABEL, "MPE [m]"])
-        head += (f"; the oracle floor of this data is MPE {floor:.3f} m, so {best}'s MPE is "
-                 f"{r['MPE [m]'] / floor:.2f} x the floor and the paper's is "
-                 f"{'below' if r['MPE paper [m]'] < floor else 'above'} it")
+    refs = {name: float(table.loc[label, "MPE [m]"]) for label, name in _REFERENCE_NAMES.items()
+            if label in table.index}
+    if refs:
+        head += ("; a stature-blind estimate with the ground-truth pose gets MPE "
+                 + " and ".join(f"{v:.3f} m with the {name}" for name, v in refs.items())
+                 + f" on this data, so {best}'s MPE is "
+                 + " and ".join(f"{r['MPE [m]'] / v:.2f} x the {name}'s" for name, v in refs.items())
+                 + ", and the paper's " + " and ".join(
+                     f"{'below' if r['MPE paper [m]'] < v else 'above'} the {name}'s" for name, v in refs.items()))
     lines = [head + "."]
     if claims is not None and len(claims):
         claims = claims if "claim" in claims.columns else claims.reset_index()  # claims_table's index
@@ -208,10 +263,18 @@ def ablation_findings(table: pd.DataFrame, claims: pd.DataFrame | None = None) -
         lines.append(f"* **Claims**: {int((verdicts == 'holds').sum())} of the paper's {len(claims)} orderings "
                      f"hold with significance. Not significant: {_listed(claims[verdicts == 'not significant'])}. "
                      f"Reversed: {_listed(claims[verdicts == 'reversed'])}.")
+        gains = _gains(claims)
+        if gains is not None:
+            lines.append(gains)
     if has("MPJPE true root [m]"):
         others = ", ".join(f"{m} {table.loc[m, 'MPJPE true root [m]']:.3f}" for m in rows if m != best)
-        root = (f" (median root-orientation error {r['root orient. median [deg]']:.1f} deg)"
-                if has("root orient. median [deg]") else "")
+        root = ""
+        if has("root orient. median [deg]"):
+            root = f"median root-orientation error {r['root orient. median [deg]']:.1f} deg"
+            if all(has(c) for c in ("root yaw median [deg]", "root tilt median [deg]", "root orient. > 90 deg [%]")):
+                root += (f": yaw {r['root yaw median [deg]']:.1f} deg and tilt {r['root tilt median [deg]']:.1f} deg "
+                         f"median, {r['root orient. > 90 deg [%]']:.1f} % of the images above 90 deg")
+            root = f" ({root})"
         lines.append(f"* **Root orientation**: with the ground-truth root orientation, {best}'s MPJPE is "
                      f"{r['MPJPE true root [m]']:.3f} m ({others}); the predicted root orientation{root} "
                      f"adds {(r['MPJPE [m]'] - r['MPJPE true root [m]']) * 1000:.1f} mm to the "

@@ -18,7 +18,10 @@ PA-MPJPE
     MPJPE after the similarity transform (scale, rotation, translation) that best maps the
     prediction onto the ground truth (Umeyama), a common complement.
 Root orientation error
-    Geodesic angle between the predicted and ground-truth root rotations.
+    Geodesic angle between the predicted and ground-truth root rotations, and its two readable
+    parts: the yaw error, the wrapped difference of the body headings in the camera
+    (``geometry.heading_of``, the pretrained backbone's heading), and the tilt error, the angle
+    between the predicted and true body up axes (what the rotation does out of the heading).
 Jitter
     Mean norm of the second finite difference (acceleration) of joint positions over a sequence,
     per frame^2, or per s^2 when ``fps`` is given.
@@ -33,7 +36,7 @@ from __future__ import annotations
 import torch
 from torch import Tensor
 
-from airpose_lib.geometry import geodesic_angle, relative_camera_pose
+from airpose_lib.geometry import geodesic_angle, heading_of, relative_camera_pose
 
 __all__ = [
     "translation_error",
@@ -45,6 +48,7 @@ __all__ = [
     "pa_joint_errors",
     "pa_mpjpe",
     "rotation_error",
+    "root_yaw_tilt",
     "acceleration",
     "jitter",
     "acceleration_error",
@@ -129,6 +133,33 @@ def pa_mpjpe(j_pred: Tensor, j_gt: Tensor, scale: bool = True) -> Tensor:
 def rotation_error(R_pred: Tensor, R_gt: Tensor) -> Tensor:
     """Geodesic angle between rotations: ``(..., 3, 3)`` x2 -> ``(...)`` radians in ``[0, pi]``."""
     return geodesic_angle(R_pred, R_gt)
+
+
+#: The body's up axis in its model frame (SMPL-X: +Y up, facing +Z).
+_UP = 1
+
+
+def root_yaw_tilt(R_pred: Tensor, R_gt: Tensor) -> tuple[Tensor, Tensor]:
+    """The root-orientation error split into yaw and tilt.
+
+    Args:
+        R_pred, R_gt: ``(..., 3, 3)`` root rotations (model -> camera), broadcastable.
+
+    Returns:
+        ``yaw (...)``: ``|heading_of(R_pred) - heading_of(R_gt)|`` wrapped to ``[0, pi]`` (the
+        body's heading in the camera's x-z plane, :func:`airpose_lib.geometry.heading_of`);
+        ``tilt (...)``: the angle between the predicted and true body up axes ``R[..., :, 1]``,
+        ``[0, pi]``. Radians. A turn about the body's own up axis is all yaw and no tilt (the yaw
+        is the turn's angle when that axis lies along the camera's y axis); the tilt never exceeds
+        the geodesic error.
+    """
+    d = heading_of(R_pred) - heading_of(R_gt)
+    yaw = torch.atan2(torch.sin(d), torch.cos(d)).abs()
+    u, v = R_pred[..., :, _UP], R_gt[..., :, _UP]
+    u, v = torch.broadcast_tensors(u, v)
+    # atan2(|u x v|, u . v): accurate near 0 and pi, where acos of the dot product is not
+    tilt = torch.atan2(torch.linalg.vector_norm(torch.linalg.cross(u, v), dim=-1), (u * v).sum(-1))
+    return yaw, tilt
 
 
 def acceleration(x: Tensor, fps: float | None = None) -> Tensor:

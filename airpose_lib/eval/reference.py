@@ -3,10 +3,12 @@ new run against them.
 
 Notebook 02 writes a results bundle into its output folder with :func:`write_reference`:
 
-* ``table1.csv`` / ``table1.md``: Table I (kit mean and seed std, paper, extra columns, oracle row);
+* ``table1.csv`` / ``table1.md``: Table I (kit mean and seed std, paper, extra columns, the
+  mean-body reference rows);
 * ``per_seed.csv``: one row per variant x seed with the metric means (what the check compares);
 * ``claims.csv`` / ``claims.md``: the six ordering claims with difference, interval and verdict;
-* ``oracle.csv``: the mean-body oracle's MPE summary (the floor of the data);
+* ``mean_body.csv``: the MPE summary of the mean-body references, neutral and of the true gender
+  (what a stature-blind estimate with the ground-truth pose gets on the data);
 * ``provenance.json``: kit version, git commit, machine, command and the wall time of each step
   (notebook 02 adds the device and precision each network trained with, :func:`train_settings`).
 
@@ -14,6 +16,11 @@ Notebook 02 writes a results bundle into its output folder with :func:`write_ref
 writes there); without the flag, a run whose profile has a committed bundle prints
 :func:`compare_to_reference`: every variant mean that moved by more than the reference's own
 seed spread.
+
+Reference results come from a clean commit, and their provenance names it: ``--write-reference``
+refuses (:class:`ProvenanceError`) when the checkout has changes (:func:`require_clean_checkout`)
+or when the bundle's ``provenance.json`` records a dirty checkout or a commit that is not an
+ancestor of HEAD (:func:`provenance_problems`, the check a test runs on the committed files).
 """
 from __future__ import annotations
 
@@ -31,16 +38,18 @@ import pandas as pd
 
 from airpose_lib import __version__
 from airpose_lib.atomic import atomic_path
+from airpose_lib.errors import UserError
 
 from .ablation import PER_SEED_METRICS, table_to_markdown
 
-__all__ = ["REFERENCE_FILES", "RESULTS_ROOT", "reference_dir", "machine_description", "git_commit", "provenance_record",
-           "train_settings", "train_wall_s", "oracle_summary", "write_reference", "read_reference_table", "side_by_side",
+__all__ = ["REFERENCE_FILES", "RESULTS_ROOT", "ProvenanceError", "reference_dir", "machine_description", "git_commit",
+           "require_clean_checkout", "reference_outputs", "provenance_problems", "provenance_record",
+           "train_settings", "train_wall_s", "mean_body_summary", "write_reference", "read_reference_table", "side_by_side",
            "compare_to_reference", "check_against_reference", "install_reference", "reference_report",
            "RECORDING_FILES", "install_recordings_reference", "recordings_report"]
 
 #: The files of a results bundle.
-REFERENCE_FILES = ("table1.csv", "table1.md", "per_seed.csv", "claims.csv", "claims.md", "oracle.csv",
+REFERENCE_FILES = ("table1.csv", "table1.md", "per_seed.csv", "claims.csv", "claims.md", "mean_body.csv",
                    "provenance.json")
 #: ``results/`` at the root of the checkout this package lives in.
 RESULTS_ROOT = Path(__file__).resolve().parents[2] / "results"
@@ -87,17 +96,100 @@ def machine_description() -> dict:
             "load_average": [round(x, 2) for x in load] if load else None}
 
 
-def git_commit(root: str | Path | None = None) -> dict:
-    """``{"commit": sha or None, "dirty": bool or None}`` of the checkout at ``root``."""
+class ProvenanceError(UserError, RuntimeError):
+    """Reference results that would not come from a clean commit: the message names the checkout
+    or the ``provenance.json`` and the fix."""
+
+
+def _git(root: Path, *args: str) -> subprocess.CompletedProcess:
+    return subprocess.run(["git", *args], cwd=root, capture_output=True, text=True, timeout=10)
+
+
+def reference_outputs(profile: str) -> tuple[str, ...]:
+    """The paths (relative to the checkout; a trailing ``/``: a folder) that a reproduction with
+    ``--write-reference`` writes for ``profile``: its own outputs, which do not make the checkout
+    dirty for the writers that come after the first (notebook 02's bundle, then notebook 05's
+    recordings, then the report). Inputs under ``results/<profile>/`` (the committed backbone) are
+    not among them: a change to one is a change to what the results depend on."""
+    base = f"results/{Path(str(profile)).stem}/"
+    return (*(base + name for name in REFERENCE_FILES), base + "recordings/", base + "report/")
+
+
+def git_commit(root: str | Path | None = None, outputs: tuple[str, ...] = ()) -> dict:
+    """``{"commit": sha or None, "dirty": bool or None}`` of the checkout at ``root`` (default:
+    the one ``results/`` belongs to).
+
+    Dirty: a change to a tracked file (staged or not) or an untracked file that git does not ignore
+    (new code counts; run folders, caches and other ignored files do not), other than the
+    ``outputs`` being written (:func:`reference_outputs`). None: not a git checkout, or git failed.
+    """
     root = Path(root) if root is not None else RESULTS_ROOT.parent
     try:
-        sha = subprocess.run(["git", "rev-parse", "HEAD"], cwd=root, capture_output=True, text=True,
-                             timeout=10, check=True).stdout.strip()
-        status = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], cwd=root,
-                                capture_output=True, text=True, timeout=10, check=True).stdout
+        sha = _git(root, "rev-parse", "HEAD")
+        status = _git(root, "status", "--porcelain", "--untracked-files=all")  # files, not folders
     except (OSError, subprocess.SubprocessError):
         return {"commit": None, "dirty": None}
-    return {"commit": sha, "dirty": bool(status.strip())}
+    if sha.returncode or status.returncode:
+        return {"commit": None, "dirty": None}
+    changed = [line[3:].split(" -> ")[-1].strip('"') for line in status.stdout.splitlines() if line.strip()]
+    own = lambda path: any(path == o or (o.endswith("/") and path.startswith(o)) for o in outputs)  # noqa: E731
+    return {"commit": sha.stdout.strip(), "dirty": any(not own(path) for path in changed)}
+
+
+def require_clean_checkout(root: str | Path | None = None, outputs: tuple[str, ...] = ()) -> dict:
+    """:func:`git_commit` of a checkout that may write reference results (``outputs``: what this
+    reproduction has already written there, :func:`reference_outputs`).
+
+    Raises:
+        ProvenanceError: not a git checkout, or it has changes (:func:`git_commit`'s rule).
+    """
+    root = Path(root) if root is not None else RESULTS_ROOT.parent
+    state = git_commit(root, outputs)
+    if state["commit"] is None:
+        raise ProvenanceError(f"{root}: not a git checkout (or git failed), so reference results could not name "
+                              f"their commit; write them from a clone of the repository")
+    if state["dirty"]:
+        raise ProvenanceError(f"{root} has changes that are not committed (see `git status`); reference results "
+                              f"must come from a clean commit: commit or remove the changes, then run again")
+    return state
+
+
+def provenance_problems(path: str | Path, root: str | Path | None = None) -> list[str]:
+    """What is wrong with a results bundle's ``provenance.json`` as a record of a clean commit.
+
+    Args:
+        path: the ``provenance.json`` (``git: {"commit", "dirty"}`` of :func:`provenance_record`).
+        root: the checkout whose HEAD the commit must precede (default: the one ``results/``
+            belongs to).
+    Returns:
+        one sentence per problem, [] when the file records a clean checkout at a commit that is an
+        ancestor of (or equal to) HEAD (``git merge-base --is-ancestor``).
+    """
+    root = Path(root) if root is not None else RESULTS_ROOT.parent
+    try:
+        record = json.loads(Path(path).read_text())
+    except (OSError, ValueError) as e:
+        return [f"no readable provenance ({type(e).__name__}: {e})"]
+    git = record.get("git") if isinstance(record, dict) else None
+    git = git if isinstance(git, dict) else {}
+    commit, dirty = git.get("commit"), git.get("dirty")
+    problems = []
+    if dirty is True:
+        problems.append("it was made from a checkout with uncommitted changes")
+    elif dirty is not False:
+        problems.append("it does not say whether the checkout was clean")
+    if not isinstance(commit, str) or not commit:
+        return problems + ["it names no git commit"]
+    try:
+        ancestor = _git(root, "merge-base", "--is-ancestor", commit, "HEAD")
+    except (OSError, subprocess.SubprocessError) as e:
+        return problems + [f"git could not check its commit {commit[:12]} ({type(e).__name__})"]
+    if ancestor.returncode == 1:
+        problems.append(f"its commit {commit[:12]} is not an ancestor of HEAD in {root}")
+    elif ancestor.returncode:
+        problems.append(f"its commit {commit[:12]} is not a commit of the repository at {root} "
+                        f"({' '.join(ancestor.stderr.split()) or 'git failed'})")
+    return problems
 
 
 def _run_result(run) -> dict:
@@ -147,17 +239,18 @@ def train_settings(runs: Mapping) -> dict:
 
 
 # -- the bundle -----------------------------------------------------------------------------------
-def oracle_summary(oracle: pd.DataFrame) -> pd.DataFrame:
-    """One row: the oracle's MPE mean, median, 90th percentile, signed / absolute depth error and
-    reprojection residual over the test images (``oracle_per_view`` columns)."""
+def mean_body_summary(references: pd.DataFrame) -> pd.DataFrame:
+    """One row per mean-body reference (``method``): MPE mean, median, 90th percentile, signed /
+    absolute depth error and reprojection residual over the test images
+    (:func:`airpose_lib.eval.mean_body.mean_body_references` columns)."""
     return pd.DataFrame([{
-        "method": oracle["method"].iloc[0] if "method" in oracle else "oracle",
-        "mpe_m": oracle["mpe_m"].mean(), "mpe_median_m": oracle["mpe_m"].median(),
-        "mpe_p90_m": oracle["mpe_m"].quantile(0.9),
-        "err_z_m": oracle["err_z_m"].mean(), "abs_err_z_m": oracle["err_z_m"].abs().mean(),
-        "reproj_px": oracle["reproj_px"].mean() if "reproj_px" in oracle else np.nan,
-        "images": len(oracle),
-    }])
+        "method": method,
+        "mpe_m": t["mpe_m"].mean(), "mpe_median_m": t["mpe_m"].median(),
+        "mpe_p90_m": t["mpe_m"].quantile(0.9),
+        "err_z_m": t["err_z_m"].mean(), "abs_err_z_m": t["err_z_m"].abs().mean(),
+        "reproj_px": t["reproj_px"].mean() if "reproj_px" in t else np.nan,
+        "images": len(t),
+    } for method, t in references.groupby("method", sort=False)])
 
 
 def _write_text(path: Path, text: str) -> None:
@@ -166,9 +259,10 @@ def _write_text(path: Path, text: str) -> None:
 
 
 def provenance_record(profile: str, command: str) -> dict:
-    """What every results bundle records about how it was made: profile, kit version, git commit,
-    time (UTC), machine and the command."""
-    return {"profile": profile, "kit_version": __version__, "git": git_commit(),
+    """What every results bundle records about how it was made: profile, kit version, git commit
+    (clean but for the profile's own reference outputs, :func:`reference_outputs`), time (UTC),
+    machine and the command."""
+    return {"profile": profile, "kit_version": __version__, "git": git_commit(outputs=reference_outputs(profile)),
             "created_at": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
             "machine": machine_description(), "command": command}
 
@@ -179,7 +273,7 @@ def _write_csv(path: Path, frame: pd.DataFrame, index: bool) -> None:
 
 
 def write_reference(out_dir: str | Path, *, table: pd.DataFrame, per_seed: pd.DataFrame, claims: pd.DataFrame,
-                    oracle: pd.DataFrame | None, profile: str, command: str,
+                    references: pd.DataFrame | None, profile: str, command: str,
                     step_wall_s: Mapping[str, float | None], extra: Mapping | None = None) -> Path:
     """Write a results bundle (:data:`REFERENCE_FILES`), each file atomically.
 
@@ -188,7 +282,8 @@ def write_reference(out_dir: str | Path, *, table: pd.DataFrame, per_seed: pd.Da
         table: :func:`airpose_lib.eval.ablation.ablation_table`.
         per_seed: :func:`airpose_lib.eval.ablation.per_seed_table`.
         claims: :func:`airpose_lib.eval.significance.claims_table`.
-        oracle: :func:`airpose_lib.eval.oracle.oracle_per_view` (None: no ``oracle.csv``).
+        references: :func:`airpose_lib.eval.mean_body.mean_body_references` (None: no
+            ``mean_body.csv``).
         profile: the reproduction profile.
         command: the command that regenerates the bundle.
         step_wall_s: step name -> wall time in seconds (None when unknown).
@@ -202,8 +297,8 @@ def write_reference(out_dir: str | Path, *, table: pd.DataFrame, per_seed: pd.Da
     _write_csv(out / "per_seed.csv", per_seed, index=False)
     _write_csv(out / "claims.csv", claims, index=True)
     _write_text(out / "claims.md", table_to_markdown(claims, digits=4))
-    if oracle is not None:
-        _write_csv(out / "oracle.csv", oracle_summary(oracle), index=False)
+    if references is not None:
+        _write_csv(out / "mean_body.csv", mean_body_summary(references), index=False)
     provenance = {
         **provenance_record(profile, command),
         "wall_s": {k: (round(float(v), 1) if v is not None else None) for k, v in step_wall_s.items()},
@@ -298,16 +393,32 @@ def check_against_reference(new_per_seed: pd.DataFrame, ref_dir: str | Path) -> 
     return comparison, f"{int(comparison['differs'].sum())} of {len(comparison)} variant means differ from {ref_dir}"
 
 
+def _checkout_of(root: str | Path | None) -> Path:
+    """The checkout a results folder belongs to (the folder above ``results/``)."""
+    return Path(root if root is not None else RESULTS_ROOT).parent
+
+
 def install_reference(bundle: str | Path, profile: str, command: str | None = None,
                       root: str | Path | None = None) -> Path:
     """Copy a run's results bundle into ``results/<profile>/`` (what ``--write-reference`` does).
 
     ``command`` replaces the bundle's recorded command (the one that really ran). Files are
     copied atomically one by one; a file of the bundle that is absent is removed from the target.
+
+    Raises:
+        ProvenanceError: the checkout ``root`` belongs to has changes (:func:`require_clean_checkout`),
+            or the bundle's provenance has :func:`provenance_problems` against it.
     """
     src, dst = Path(bundle), reference_dir(profile, root)
     if not (src / "per_seed.csv").is_file():
         raise FileNotFoundError(f"{src}: no results bundle (per_seed.csv); run notebook 02 first")
+    checkout = _checkout_of(root)
+    require_clean_checkout(checkout, reference_outputs(profile))
+    problems = provenance_problems(src / "provenance.json", checkout)
+    if problems:
+        raise ProvenanceError(f"{src / 'provenance.json'}: {'; '.join(problems)}; reference results must come "
+                              f"from a clean commit: rerun notebook 02 from one (airpose reproduce "
+                              f"--profile {profile} --only 02_ablation_table --write-reference)")
     for name in REFERENCE_FILES:
         if not (src / name).is_file():
             (dst / name).unlink(missing_ok=True)
@@ -372,11 +483,13 @@ def install_recordings_reference(notebook_dir: str | Path, profile: str, command
         command: the command that made them (recorded in ``provenance.json``).
     Raises:
         FileNotFoundError: a file of :data:`RECORDING_FILES` is missing (notebook 05 did not finish).
+        ProvenanceError: the checkout ``root`` belongs to has changes (:func:`require_clean_checkout`).
     """
     src, dst = Path(notebook_dir), reference_dir(profile, root) / "recordings"
     missing = [n for n in RECORDING_FILES if not (src / n).is_file()]
     if missing:
         raise FileNotFoundError(f"{src}: no {', '.join(missing)}; run notebook 05_airpose_plus first")
+    require_clean_checkout(_checkout_of(root), reference_outputs(profile))
     for name in RECORDING_FILES:
         with atomic_path(dst / name) as tmp:
             shutil.copyfile(src / name, tmp)

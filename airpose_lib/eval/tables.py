@@ -37,7 +37,7 @@ __all__ = [
 
 #: Metric columns of :func:`per_view_table`.
 PER_VIEW_METRICS = ("mpe_m", "mpjpe_m", "mpjpe_shape_m", "mpjpe_true_root_m", "pa_mpjpe_m", "root_rot_deg",
-                    "err_x_m", "err_y_m", "err_z_m")
+                    "root_yaw_deg", "root_tilt_deg", "err_x_m", "err_y_m", "err_z_m")
 
 
 def _t(x) -> Tensor:
@@ -58,8 +58,9 @@ def _ids(sample_ids, n: int) -> np.ndarray:
 
 
 def per_view_table(pred: Mapping, gt: Mapping, method: str = "", sample_ids=None) -> pd.DataFrame:
-    """One row per (sample, view): MPE, MPJPE (pelvis aligned), PA-MPJPE, root-orientation error and
-    the translation error per camera axis (signed, prediction - ground truth).
+    """One row per (sample, view): MPE, MPJPE (pelvis aligned), PA-MPJPE, root-orientation error
+    (geodesic, and its yaw and tilt parts, :func:`airpose_lib.eval.metrics.root_yaw_tilt`) and the
+    translation error per camera axis (signed, prediction - ground truth).
 
     ``mpjpe_m`` is Table I's MPJPE: when both sides have ``joints_zero_beta`` (the official
     evaluation's bodies: zero betas, root rotation, no translation) it is computed on those, and
@@ -72,7 +73,8 @@ def per_view_table(pred: Mapping, gt: Mapping, method: str = "", sample_ids=None
     Args:
         pred, gt: ``tau (N, V, 3)``, ``phi (N, V, 3, 3)``, ``joints`` / ``j3d_cam (N, V, 22, 3)``,
             optionally ``joints_zero_beta (N, V, 22, 3)`` (and in ``pred``
-            ``joints_zero_beta_true_root (N, V, 22, 3)``). ``phi`` is optional (the column is then NaN).
+            ``joints_zero_beta_true_root (N, V, 22, 3)``). ``phi`` is optional (the root columns are
+            then NaN).
         method: value of the ``method`` column.
         sample_ids: ``(N,)`` identifiers (default ``0..N-1``).
 
@@ -92,9 +94,14 @@ def per_view_table(pred: Mapping, gt: Mapping, method: str = "", sample_ids=None
                               if official and "joints_zero_beta_true_root" in pred
                               else torch.full((N, V), float("nan"))),
         "pa_mpjpe_m": M.pa_mpjpe(jp, jg),
-        "root_rot_deg": (torch.rad2deg(M.rotation_error(_t(pred["phi"]), _t(gt["phi"])))
-                         if "phi" in pred and "phi" in gt else torch.full((N, V), float("nan"))),
     }
+    if "phi" in pred and "phi" in gt:
+        phi_p, phi_g = _t(pred["phi"]), _t(gt["phi"])
+        yaw, tilt = M.root_yaw_tilt(phi_p, phi_g)
+        cols.update(root_rot_deg=torch.rad2deg(M.rotation_error(phi_p, phi_g)), root_yaw_deg=torch.rad2deg(yaw),
+                    root_tilt_deg=torch.rad2deg(tilt))
+    else:
+        cols.update({k: torch.full((N, V), float("nan")) for k in ("root_rot_deg", "root_yaw_deg", "root_tilt_deg")})
     d = tau_p - tau_g
     cols.update(err_x_m=d[..., 0], err_y_m=d[..., 1], err_z_m=d[..., 2])
     frame = pd.DataFrame({

@@ -5,7 +5,7 @@
   ground truth of the kit's generated recordings (notebooks 03, 04, 05); :mod:`.recording_tables`:
   the tables and figure inputs those notebooks show of it.
 - :mod:`.ablation`: Table I, the variants trained (or the official checkpoints) and evaluated,
-  the oracle, the claims, the results bundle and the qualitative samples (notebook 02).
+  the mean-body references, the claims, the results bundle and the qualitative samples (notebook 02).
 - :mod:`.online`: drone fleets over a recording, online = offline, faults, float16 (notebook 06).
 - :mod:`.body_model`: the shape-space sweep of notebook 00.
 - :mod:`.scene`: the 3D scene of a recording (notebook 07).

@@ -1,13 +1,13 @@
-"""Notebook 02, Table I: the four variants trained and evaluated, the oracle, the claims, and the
-qualitative figures' inputs.
+"""Notebook 02, Table I: the four variants trained and evaluated, the mean-body references, the
+claims, and the qualitative figures' inputs.
 
 :func:`run_ablation_experiment` trains and evaluates the variants on the kit's data
 (:func:`airpose_lib.train.ablation.run_ablation`) or, with the official data source, evaluates the
 authors' checkpoints on the official synthetic test split (:func:`airpose_lib.train.official.official_ablation`);
-what differs between the two (the seeds, the test split, no oracle on the official data, the
-caption) is settled here so that the notebook reads the same for both. :func:`ablation_oracle`,
-:func:`ablation_claims` and :func:`write_ablation_bundle` time their step into the experiment's
-``wall``, which the results bundle records.
+what differs between the two (the seeds, the test split, no mean-body reference on the official
+data, the caption) is settled here so that the notebook reads the same for both.
+:func:`ablation_references`, :func:`ablation_claims` and :func:`write_ablation_bundle` time their
+step into the experiment's ``wall``, which the results bundle records.
 
 :func:`ablation_samples` runs the first seed's network of every variant on the first ``n`` test
 samples and returns, ready to plot (:mod:`airpose_lib.viz.ablation`), the crops, the predicted
@@ -32,7 +32,7 @@ from airpose_lib.body.genders import GENDER_NAMES
 from airpose_lib.data import StillFrameDataset, default_root
 from airpose_lib.data.official_synthetic import OfficialSyntheticDataset
 from airpose_lib.eval.ablation import per_seed_table
-from airpose_lib.eval.oracle import oracle_per_view
+from airpose_lib.eval.mean_body import mean_body_references
 from airpose_lib.eval.reference import train_settings, train_wall_s, write_reference
 from airpose_lib.eval.significance import claims_table
 from airpose_lib.geometry import axis_angle_to_matrix, crop_intrinsics, full_to_crop_pixels, project_points
@@ -42,7 +42,7 @@ from airpose_lib.train import load_trained_model, predict
 from airpose_lib.train.ablation import run_ablation
 from airpose_lib.train.official import official_ablation
 
-__all__ = ["AblationExperiment", "run_ablation_experiment", "ablation_oracle", "ablation_claims",
+__all__ = ["AblationExperiment", "run_ablation_experiment", "ablation_references", "ablation_claims",
            "write_ablation_bundle", "AblationSamples", "ablation_samples"]
 
 
@@ -139,13 +139,13 @@ def run_ablation_experiment(profile: str, source: DataSource, variants: Sequence
     return AblationExperiment(profile, source.source, list(variants), list(seeds), runs, test, wall)
 
 
-def ablation_oracle(exp: AblationExperiment, max_samples: int | None = None) -> pd.DataFrame | None:
-    """:func:`~airpose_lib.eval.oracle.oracle_per_view` on the kit's test split (None on the
-    official data, whose arrays the oracle does not read)."""
+def ablation_references(exp: AblationExperiment, max_samples: int | None = None) -> pd.DataFrame | None:
+    """:func:`~airpose_lib.eval.mean_body.mean_body_references` on the kit's test split, neutral
+    and of the true gender (None on the official data, whose arrays they do not read)."""
     t0 = time.perf_counter()
-    oracle = None if exp.official else oracle_per_view(exp.test.arrays, max_samples=max_samples)
-    exp.wall["oracle"] = time.perf_counter() - t0
-    return oracle
+    references = None if exp.official else mean_body_references(exp.test.arrays, max_samples=max_samples)
+    exp.wall["mean-body references"] = time.perf_counter() - t0
+    return references
 
 
 def ablation_claims(exp: AblationExperiment, n_resamples: int = 2000) -> pd.DataFrame:
@@ -157,13 +157,13 @@ def ablation_claims(exp: AblationExperiment, n_resamples: int = 2000) -> pd.Data
 
 
 def write_ablation_bundle(exp: AblationExperiment, folder: str | Path, *, table: pd.DataFrame,
-                          claims: pd.DataFrame, oracle: pd.DataFrame | None,
+                          claims: pd.DataFrame, references: pd.DataFrame | None,
                           eval_max_samples: int | None = None) -> Path:
     """The run's results bundle (:func:`~airpose_lib.eval.reference.write_reference`), with every
     step's wall time, each network's training time and the device and precision it trained with."""
     steps = {**exp.wall, **{f"train {v} seed {s}": w for (v, s), w in exp.train_wall().items()}}
     training = {f"{v} seed {s}": t for (v, s), t in train_settings(exp.runs).items()}
-    return write_reference(folder, table=table, per_seed=exp.per_seed(), claims=claims, oracle=oracle,
+    return write_reference(folder, table=table, per_seed=exp.per_seed(), claims=claims, references=references,
                            profile=exp.profile,
                            command=f"airpose reproduce --profile {exp.profile} --only 02_ablation_table",
                            step_wall_s=steps, extra={"seeds": list(exp.seeds), "variants": list(exp.variants),

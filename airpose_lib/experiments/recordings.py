@@ -26,9 +26,11 @@ Methods (keys of :attr:`RecordingExperiment.estimates`):
 - ``"AirPose (pre-trained)"``, ``"Baseline"``, ``"AirPose"`` (fine-tuned on person 1),
   ``"AirPose+"`` (AirPose's estimates refined offline).
 
-The error tables also have a row ``"Oracle (GT pose, mean body)"`` where ground truth exists
-(:func:`airpose_lib.eval.oracle.oracle_recording_estimate`): the floor of every position error,
-UAV2-in-UAV1 included, for an estimate that cannot read the person's stature.
+The error tables also have a row :data:`~airpose_lib.eval.mean_body.NEUTRAL_LABEL` where ground
+truth exists (:func:`airpose_lib.eval.mean_body.mean_body_recording_estimate`): the ground-truth
+pose and 2D joints on the neutral mean body, what every position error, UAV2-in-UAV1 included,
+comes to for an estimate that reads everything but the person's stature (a reference, not a
+bound: a network may read stature from the body's proportions).
 """
 from __future__ import annotations
 
@@ -49,7 +51,7 @@ from airpose_lib.data.official_real import load_official_real
 from airpose_lib.data.sequences import ensure_sequences
 from airpose_lib.engine.checkpoint import StaleRunError
 from airpose_lib.eval import metrics as M
-from airpose_lib.eval.oracle import ORACLE_LABEL, oracle_recording_estimate
+from airpose_lib.eval.mean_body import NEUTRAL_LABEL, mean_body_recording_estimate
 from airpose_lib.eval.recordings import (
     body_joints,
     per_view_params,
@@ -506,11 +508,12 @@ def _run_recording_experiment(profile: str, out: Path, sequences: dict | None, s
             mask = scored_frames(est)
             fps = float(seq.ground_truth.get("fps", 30.0))
             t = recording_table(est, seq.ground_truth, joints[person], fps=fps, sequence=person, mask=mask)
-            # the physical floor: ground-truth pose and 2D joints, mean body (eval/oracle.py)
-            oracle = oracle_recording_estimate(seq.ground_truth, body)
-            floor = recording_table({ORACLE_LABEL: oracle}, seq.ground_truth, {ORACLE_LABEL: body_joints(oracle, body)},
-                                    fps=fps, sequence=person, mask=mask)
-            tables += [t, floor]
+            # the stature-blind reference: ground-truth pose and 2D joints, mean body (eval/mean_body.py)
+            mean_body = mean_body_recording_estimate(seq.ground_truth, body)
+            reference = recording_table({NEUTRAL_LABEL: mean_body}, seq.ground_truth,
+                                        {NEUTRAL_LABEL: body_joints(mean_body, body)}, fps=fps, sequence=person,
+                                        mask=mask)
+            tables += [t, reference]
     table = pd.concat(tables, ignore_index=True) if tables else pd.DataFrame()
     return RecordingExperiment(profile=profile, out_dir=out, sequences=seqs, estimates=estimates, joints=joints,
                                tables=table, checkpoints=checkpoints, fit_info=fit_info,

@@ -25,6 +25,7 @@ from .rotations import (
     axis_angle_to_matrix,
     axis_angle_to_rot6d,
     geodesic_angle,
+    heading_of,
     matrix_to_axis_angle,
     matrix_to_rot6d,
     rot6d_to_axis_angle,
@@ -50,6 +51,7 @@ __all__ = [
     "axis_angle_to_rot6d",
     "rot6d_to_axis_angle",
     "geodesic_angle",
+    "heading_of",
     # camera
     "intrinsics_matrix",
     "split_intrinsics",

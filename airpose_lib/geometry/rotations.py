@@ -28,6 +28,7 @@ __all__ = [
     "axis_angle_to_rot6d",
     "rot6d_to_axis_angle",
     "geodesic_angle",
+    "heading_of",
 ]
 
 # Floor on column norms in Gram-Schmidt: keeps a degenerate network output (zero or colinear
@@ -113,3 +114,20 @@ def geodesic_angle(R1: Tensor, R2: Tensor) -> Tensor:
     )
     sin = 0.5 * torch.linalg.vector_norm(skew, dim=-1)
     return torch.atan2(sin, cos)
+
+
+def heading_of(phi: Tensor) -> Tensor:
+    """Heading of the body in the camera, radians in ``(-pi, pi]``.
+
+    The targets of the pretrained backbone's heading head (``losses.pretrain.heading_bin``) and the
+    yaw of the root-orientation error (``eval.metrics.root_yaw_tilt``): one definition for both.
+
+    Args:
+        phi: ``(..., 3, 3)`` root rotation (model -> camera); the model faces +Z.
+
+    Returns:
+        ``(...)`` azimuth of the body's forward axis ``phi[..., :, 2]`` in the camera's x-z plane
+        (0: facing away from the camera, pi: facing it).
+    """
+    forward = phi[..., :, 2]
+    return torch.atan2(forward[..., 0], forward[..., 2])

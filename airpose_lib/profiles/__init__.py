@@ -1,4 +1,5 @@
-"""The reproduction profiles: ``smoke``, ``cpu`` and ``paper`` (one YAML file each, in this folder).
+"""The reproduction profiles: ``smoke``, ``cpu`` and ``paper`` (one YAML file each, in this folder),
+and ``cpu_paper_layout`` (cpu on still frames with the paper's camera layout).
 
 A profile is the one place where sizes live: every section configures one part of the kit
 (``data: still:`` the still-frame data, ``sequences:`` the recordings, ``train:``, ``pretrain:``,
@@ -7,6 +8,12 @@ the only code that knows where the files are and how they are read; each package
 section into its config through :func:`section_config` (unknown keys with the closest known one,
 bad values, both named with the file and the section), behind its own public name
 (``train.load_train_config``, ``data.still_config.profile_config`` ...).
+
+A profile may start from another: ``inherits: cpu`` (a profile name: ``cpu.yaml`` beside the file,
+else the kit's; or a YAML path relative to the file) takes that profile's sections and lays its
+own over them, mapping by mapping (a value that is not a mapping, a list or an empty section
+included, replaces the inherited one), so that a variant of a profile (``cpu_paper_layout``: cpu
+on other data) says only what differs.
 
 A profile is named (``"smoke"``) or given as the path of a YAML file of the same format. Readers
 raise :class:`~airpose_lib.errors.ProfileError` (one line naming the file and the fix; the
@@ -26,15 +33,16 @@ from airpose_lib import config_fields
 from airpose_lib.config_fields import config_from
 from airpose_lib.errors import ProfileError, ProfileSettingError
 
-__all__ = ["PROFILES_DIR", "ProfileError", "ProfileSettingError", "profile_names", "profile_path", "read_profile",
-           "profile_section", "section_where", "section_config"]
+__all__ = ["PROFILES_DIR", "INHERITS", "ProfileError", "ProfileSettingError", "profile_names", "profile_path",
+           "read_profile", "profile_section", "section_where", "section_config"]
 
 #: Folder of the kit's ``<name>.yaml`` profile files.
 PROFILES_DIR = Path(__file__).resolve().parent
 
 
 def profile_names(folder: str | Path = PROFILES_DIR) -> list[str]:
-    """Names of the profiles in ``folder`` (the kit's: ``["cpu", "paper", "smoke"]``), sorted."""
+    """Names of the profiles in ``folder`` (the kit's: ``["cpu", "cpu_paper_layout", "paper", "smoke"]``),
+    sorted."""
     return sorted(p.stem for p in Path(folder).glob("*.yaml"))
 
 
@@ -57,13 +65,48 @@ def profile_path(profile: str | Path, folder: str | Path = PROFILES_DIR) -> Path
     return path
 
 
+#: The key of a profile that names the profile it starts from (see the module docstring).
+INHERITS = "inherits"
+
+
 def read_profile(profile: str | Path, folder: str | Path = PROFILES_DIR) -> dict:
-    """A profile file's content: ``{section: settings}``.
+    """A profile's content: ``{section: settings}``, with the sections of the profile it
+    ``inherits`` from (recursively) under its own.
 
     Raises:
-        ProfileError: no such profile, an empty file, invalid YAML, or not a mapping of sections.
+        ProfileError: no such profile, an empty file, invalid YAML, not a mapping of sections, or
+            an ``inherits:`` that names no profile or comes back to a file already read.
     """
-    path = profile_path(profile, folder)
+    return _read_inheriting(profile_path(profile, folder), folder, ())
+
+
+def _read_inheriting(path: Path, folder: str | Path, seen: tuple[Path, ...]) -> dict:
+    raw = _read_file(path)
+    parent = raw.pop(INHERITS, None)
+    if parent is None:
+        return raw
+    if not isinstance(parent, str):
+        raise ProfileError(f"{path}: `{INHERITS}:` must name one profile (e.g. `{INHERITS}: cpu`), "
+                           f"not {parent!r}; fix the file")
+    beside = path.parent / (parent if parent.endswith((".yaml", ".yml")) else f"{parent}.yaml")
+    parent_path = beside if beside.is_file() else profile_path(parent, folder)
+    chain = (*seen, path.resolve())
+    if parent_path.resolve() in chain:
+        raise ProfileError(f"{path}: `{INHERITS}: {parent}` comes back to {parent_path}; a profile cannot "
+                           "inherit from itself, fix the chain")
+    return _merge(_read_inheriting(parent_path, folder, chain), raw)
+
+
+def _merge(base: dict, over: Mapping) -> dict:
+    """``over`` laid over ``base``: mappings merge key by key, anything else replaces."""
+    out = dict(base)
+    for k, v in over.items():
+        out[k] = _merge(out[k], v) if isinstance(v, Mapping) and isinstance(out.get(k), Mapping) else v
+    return out
+
+
+def _read_file(path: Path) -> dict:
+    """One YAML file's mapping of sections (its ``inherits:`` not resolved)."""
     try:
         raw = yaml.safe_load(path.read_text())
     except (yaml.YAMLError, UnicodeDecodeError) as e:

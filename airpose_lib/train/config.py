@@ -59,8 +59,9 @@ class TrainConfig:
         data: the still-frame dataset: ``root`` (a generated dataset folder) or ``profile`` (whose
             ``data: still:`` dataset is used, generated on first use; default: ``profile`` above),
             other keys are passed to ``StillFrameDataset`` (e.g. ``augment``).
-        train_split, val_split: split names passed to the dataset (the generated datasets have
-            ``train`` and ``test``; validation uses ``test`` by default: there is no third split).
+        train_split, val_split: split names passed to the dataset (``train``, ``val``, ``test``):
+            the validation loss, and every choice made on it, reads ``val``; ``test`` is read only
+            by the evaluation that makes the reported tables, and a training refuses it.
         num_workers: DataLoader worker processes per training process.
         checkpoint_every: write a checkpoint every this many steps (and always at the end).
         keep_checkpoints: numbered checkpoints kept besides ``last.pt`` (0: only ``last.pt``).
@@ -111,7 +112,7 @@ class TrainConfig:
     profile: str | None = None
     data: dict = field(default_factory=dict)
     train_split: str = "train"
-    val_split: str = "test"
+    val_split: str = "val"
     num_workers: int = 0
     checkpoint_every: int = 500
     keep_checkpoints: int = 2
@@ -159,6 +160,10 @@ class TrainConfig:
         if self.batch_size < self.world_size:
             raise ConfigError(f"batch_size {self.batch_size} must be at least world_size {self.world_size} "
                               "(every process needs a sample)")
+        # Never choose on the test split: a training (its validation loss included) does not read it.
+        require(self.train_split != "test", "train_split", "not 'test' (the reported tables' split)", self.train_split)
+        require(self.val_split != "test", "val_split", "not 'test' (choose on 'val'; the test split makes the "
+                "reported tables only)", self.val_split)
         require(self.precision in ("fp32", "bf16", "fp16"), "precision", "'fp32', 'bf16' or 'fp16'", self.precision)
         require(self.checkpoint_every >= 1, "checkpoint_every", ">= 1", self.checkpoint_every)
         require(self.log_every >= 1, "log_every", ">= 1", self.log_every)

@@ -23,6 +23,7 @@ from airpose_lib.atomic import atomic_path
 from airpose_lib.data.dataset import PER_VIEW_KEYS, StillFrameDataset, swap_views
 from airpose_lib.data.manifest import load_manifest
 from airpose_lib.data.shards import sha256_file
+from airpose_lib.errors import ConfigError
 from airpose_lib.folder_lock import file_lock
 from airpose_lib.model.backbone import build_backbone
 from airpose_lib.paths import cache_dir
@@ -115,10 +116,17 @@ class FeatureDataset(Dataset):
         data_root: dataset folder; split / crops: as the feature file was made.
         features: the ``(N, V, C)`` array or its ``.npy`` path (:func:`ensure_features`).
         augment: random view permutation (default: train split).
+        mirror: refused when true: the cached features are those of the stored crops, and a
+            mirrored sample needs the features of the flipped crops (mirror in pretraining instead,
+            a ``pretrain:`` stage's ``data: {mirror: true}``).
     """
 
     def __init__(self, data_root: str | Path, split: str, features: np.ndarray | str | Path, *,
-                 crops: str = "jittered", augment: bool | None = None) -> None:
+                 crops: str = "jittered", augment: bool | None = None, mirror: bool = False) -> None:
+        if mirror:
+            raise ConfigError("data.mirror needs the crops, but the regressor task trains on features cached "
+                              "from the stored crops; set mirror in a `pretrain:` stage's `data:` (or train the "
+                              "supervised task)")
         # verified like any read of the shards (once per process): features cached from an intact
         # copy must never be served with labels read from a damaged one
         self.still = StillFrameDataset(data_root, split, augment=False, crops=crops)

@@ -316,6 +316,8 @@ def start_training(cfg: TrainConfig, out: Path, resume: bool = True, *, model_fa
         finally:
             dist.destroy_process_group()
     if cfg.world_size > 1:
+        for rank in range(cfg.world_size):  # every process's device exists, or one line before any starts
+            resolve_device(cfg.device, rank)
         return _spawn(cfg, out, resume, factories, stop_at)
     return run_training(cfg, out, resume, *factories, stop_at=stop_at)
 
@@ -497,6 +499,8 @@ def _run_training(cfg: TrainConfig, out_dir: Path, resume: bool, model_factory: 
     if threads:
         torch.set_num_threads(threads)
     if cfg.deterministic:
+        if device.type == "cuda":  # cuBLAS is deterministic only with a fixed workspace (CUDA docs);
+            os.environ.setdefault("CUBLAS_WORKSPACE_CONFIG", ":4096:8")  # read when cuBLAS starts
         torch.use_deterministic_algorithms(True, warn_only=True)
     out_dir = Path(out_dir)
 

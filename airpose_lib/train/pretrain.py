@@ -16,7 +16,7 @@ stage it starts from, so a user without the committed file rebuilds the whole ch
 
 The file holds the backbone's weights in float16 (half the size; the features differ from the
 float32 network's by about 1e-3 relative, far below what the regressors resolve) and a JSON
-record: backbone name, key, the gate's measurements on the test split, the wall time and the
+record: backbone name, key, the gate's measurements on the validation split, the wall time and the
 command that rebuilds it (``airpose pretrain --profile <profile>``).
 """
 from __future__ import annotations
@@ -38,8 +38,9 @@ from airpose_lib.data.manifest import load_manifest
 from airpose_lib.data.shards import sha256_file
 from airpose_lib.engine.checkpoint import kit_version, load_checkpoint
 from airpose_lib.engine.launch import resolve_device, single_process
-from airpose_lib.errors import DamagedFileError, ProfileError, ProfileSettingError, reading
-from airpose_lib.eval.metrics import rotation_error
+from airpose_lib.errors import ConfigError, DamagedFileError, ProfileError, ProfileSettingError, reading
+from airpose_lib.eval.metrics import root_yaw_tilt, rotation_error
+from airpose_lib.eval.reference import git_commit
 from airpose_lib.folder_lock import file_lock
 from airpose_lib.geometry import axis_angle_to_matrix, rot6d_to_matrix
 from airpose_lib.losses.pretrain import heading_bin
@@ -50,11 +51,16 @@ from airpose_lib.profiles import profile_section, section_where
 from .config import TrainConfig
 from .loop import check_data_root, default_model_factory, start_training
 
-__all__ = ["PRETRAIN_VERSION", "pretrain_config", "pretrain_stages", "backbone_key", "stage_keys", "ensure_backbone",
-           "profile_backbone", "profile_backbone_key", "export_backbone", "import_torchvision_backbone", "gate_metrics", "reference_backbone_path", "write_reference_backbone"]
+__all__ = ["PRETRAIN_VERSION", "DATA_OPTIONS", "pretrain_config", "pretrain_stages", "backbone_key",
+           "stage_keys", "ensure_backbone", "profile_backbone", "profile_backbone_key", "OTHER_PROFILE",
+           "other_profile", "own_backbone_key", "other_profile_backbone", "export_backbone",
+           "import_torchvision_backbone", "gate_metrics", "reference_backbone_path",
+           "write_reference_backbone"]
 
 #: Bumped when the same settings would train another backbone.
 PRETRAIN_VERSION = 1
+#: Training-data options a pretraining stage's ``data:`` may set (StillFrameDataset keywords).
+DATA_OPTIONS = ("mirror",)
 _REPO = Path(__file__).resolve().parents[2]
 
 
@@ -68,7 +74,9 @@ def pretrain_stages(profile: str, **overrides) -> list[TrainConfig]:
     ``data: still:`` settings with those changes (e.g. the smaller dataset that earlier stages were
     trained on, when the profile's grew). Its ``cfg.data`` then holds that dataset's ``root``,
     ``fingerprint`` and ``generation`` settings; the other stages take the dataset that
-    :func:`ensure_backbone` is given.
+    :func:`ensure_backbone` is given. A stage's ``data:`` may also set the training augmentation
+    (:data:`DATA_OPTIONS`, e.g. ``mirror: true``, :class:`~airpose_lib.data.dataset.StillFrameDataset`'s
+    keywords); they are part of the stage's key.
     """
     settings = profile_section(profile, "pretrain")
     chain = [settings]
@@ -91,12 +99,15 @@ def pretrain_stages(profile: str, **overrides) -> list[TrainConfig]:
         if "data" in extra:  # an override's data replaces the section's
             data = extra.pop("data") or {}
         cfg = config_from(TrainConfig, {**values, **extra}, "training options").replace(profile=name)
+        unknown = set(data) - {"still", *DATA_OPTIONS}
+        if unknown:
+            raise ProfileError(f"profile {profile}: a pretraining stage's `data:` takes only `still:` "
+                               f"(changes to the profile's `data: still:`) and {', '.join(DATA_OPTIONS)}, "
+                               f"not {sorted(unknown)}")
+        options = {k: data[k] for k in DATA_OPTIONS if k in data}
         if "still" in data:
-            if set(data) != {"still"}:
-                raise ProfileError(f"profile {profile}: a pretraining stage's `data:` takes only `still:` "
-                                   f"(changes to the profile's `data: still:`), not {sorted(set(data) - {'still'})}")
             cfg = cfg.replace(data=_stage_dataset(profile, name, data["still"] or {}))
-        return cfg
+        return cfg.replace(data={**cfg.data, **options}) if options else cfg
 
     return [stage(values, overrides if i == 0 else {}) for i, values in reversed(list(enumerate(chain)))]
 
@@ -128,6 +139,9 @@ def backbone_key(cfg: TrainConfig, data_fingerprint: str, start_key: str | None 
                              "val_every", "val_batches", "device", "num_threads", "profile",
                              "trainable_from", "backbone_lr_scale")}  # the last two: regressor-task fields
     settings["pretrained"] = start_key
+    options = {k: cfg.data[k] for k in DATA_OPTIONS if cfg.data.get(k)}
+    if options:  # only when set, so that the keys of the backbones made before the options stay
+        settings["data_options"] = options
     for name, default in (("lr_schedule", "constant"), ("warmup_steps", 0), ("precision", "fp32"),
                           ("sync_batchnorm", False)):
         if settings.get(name) == default:  # added after the first committed backbone, whose key stays
@@ -148,17 +162,23 @@ def gate_metrics(model: torch.nn.Module, dataset, batch_size: int = 32, max_samp
     """The pretrained heads on held-out data: heading accuracy, root-rotation and body-pose errors.
 
     Returns ``heading_acc`` (fraction), ``root_rot_median_deg`` / ``root_rot_mean_deg`` of the
-    linear ``phi6d`` head, ``theta_mean_deg`` (mean over the 21 joints) and ``n`` crops.
+    linear ``phi6d`` head with its yaw and tilt medians (:func:`~airpose_lib.eval.metrics.root_yaw_tilt`)
+    and the share of crops above 90 deg (``root_rot_over_90``, a fraction), ``theta_mean_deg``
+    (mean over the 21 joints) and ``n`` crops.
     """
     model = model.to(device).eval()
     n_bins = model.n_heading_bins
-    rot, th, hit = [], [], []
+    rot, yaw, tilt, th, hit = [], [], [], [], []
     n = 0
     for batch in DataLoader(dataset, batch_size=batch_size, shuffle=False):
         B, V = batch["phi"].shape[:2]
         out = {k: v.cpu() for k, v in model(batch["images"].flatten(0, 1).to(device)).items()}
         phi = batch["phi"].flatten(0, 1)
-        rot.append(torch.rad2deg(rotation_error(rot6d_to_matrix(out["phi6d"]).double(), phi.double())))
+        R = rot6d_to_matrix(out["phi6d"]).double()
+        rot.append(torch.rad2deg(rotation_error(R, phi.double())))
+        y, t = root_yaw_tilt(R, phi.double())
+        yaw.append(torch.rad2deg(y))
+        tilt.append(torch.rad2deg(t))
         theta = axis_angle_to_matrix(batch["theta"]).unsqueeze(1).expand(B, V, 21, 3, 3).flatten(0, 1)
         th.append(torch.rad2deg(rotation_error(rot6d_to_matrix(out["theta6d"]).double(), theta.double())).mean(-1))
         hit.append(out["heading"].argmax(-1) == heading_bin(phi, n_bins))
@@ -167,7 +187,9 @@ def gate_metrics(model: torch.nn.Module, dataset, batch_size: int = 32, max_samp
             break
     rot_all, th_all, hit_all = torch.cat(rot), torch.cat(th), torch.cat(hit)
     return {"heading_acc": float(hit_all.float().mean()), "root_rot_median_deg": float(rot_all.median()),
-            "root_rot_mean_deg": float(rot_all.mean()), "theta_mean_deg": float(th_all.mean()),
+            "root_rot_mean_deg": float(rot_all.mean()), "root_yaw_median_deg": float(torch.cat(yaw).median()),
+            "root_tilt_median_deg": float(torch.cat(tilt).median()),
+            "root_rot_over_90": float((rot_all > 90.0).double().mean()), "theta_mean_deg": float(th_all.mean()),
             "n": int(len(rot_all))}
 
 
@@ -272,7 +294,7 @@ def _with_data(stages: list[TrainConfig], data_root: str | Path, data_fingerprin
     """The dataset in ``data_root`` (``root`` and ``fingerprint``) for the stages that have none
     of their own."""
     given = {"root": str(data_root), "fingerprint": data_fingerprint}
-    return [cfg if "generation" in cfg.data else cfg.replace(data=given) for cfg in stages]
+    return [cfg if "generation" in cfg.data else cfg.replace(data={**cfg.data, **given}) for cfg in stages]
 
 
 def ensure_backbone(profile: str, data_root: str | Path, data_fingerprint: str, out_root: str | Path | None = None,
@@ -281,7 +303,7 @@ def ensure_backbone(profile: str, data_root: str | Path, data_fingerprint: str, 
 
     Args:
         profile: reproduction profile (its ``pretrain:`` section).
-        data_root: the still-frame dataset to pretrain on (train split; the test split gates).
+        data_root: the still-frame dataset to pretrain on (train split; the validation split gates).
         data_fingerprint: that dataset's configuration fingerprint (part of the key).
         out_root: parent of the pretraining run folders (default ``<runs>/pretrain/<profile>``).
         device: where the stages that must be trained train and are gated (default: their
@@ -307,7 +329,7 @@ def ensure_backbone(profile: str, data_root: str | Path, data_fingerprint: str, 
 def _train_stage(profile: str, cfg: TrainConfig, key: str, start: Path | None, out_root: str | Path | None,
                  progress: bool) -> Path:
     """Train one stage (from ``start``'s backbone, or from scratch) on its dataset (``cfg.data``),
-    gate it on that dataset's test split, export it as ``key``."""
+    gate it on that dataset's validation split, export it as ``key``."""
     target = cache_dir() / "backbones" / f"{key}.pt"
     target.parent.mkdir(parents=True, exist_ok=True)
     with file_lock(target.with_suffix(".lock")):
@@ -318,7 +340,8 @@ def _train_stage(profile: str, cfg: TrainConfig, key: str, start: Path | None, o
         if "generation" in cfg.data:  # a dataset of the stage's own, made only when the stage trains
             ensure_still_dataset(config=GenerationConfig.from_dict(cfg.data["generation"]), root=data_root,
                                  progress=progress)
-        cfg = cfg.replace(pretrained=None if start is None else str(start), data={"root": str(data_root)})
+        options = {k: cfg.data[k] for k in DATA_OPTIONS if k in cfg.data}
+        cfg = cfg.replace(pretrained=None if start is None else str(start), data={"root": str(data_root), **options})
         out = Path(out_root) if out_root is not None else run_path("pretrain", Path(str(profile)).stem)
         t0 = time.time()
         # One process trains a backbone (the others, torchrun's ranks included, wait on the lock
@@ -329,11 +352,11 @@ def _train_stage(profile: str, cfg: TrainConfig, key: str, start: Path | None, o
             run = start_training(run_cfg, out / key)
         wall = time.time() - t0
         model = _load_pretrain_model(run.checkpoint, cfg)
-        gate = gate_metrics(model, StillFrameDataset(data_root, "test", augment=False),  # the whole test split
+        gate = gate_metrics(model, StillFrameDataset(data_root, "val", augment=False),  # the whole validation split
                             device=resolve_device(cfg.device))
         meta = {"backbone": cfg.backbone, "key": key, "profile": profile, "kit_version": kit_version(),
-                "config": cfg.to_dict(), "data_fingerprint": data_fingerprint, "gate": gate,
-                "train_wall_s": round(wall, 1), "steps": run.step,
+                "config": cfg.to_dict(), "data_fingerprint": data_fingerprint, "gate": gate, "gate_split": "val",
+                "train_wall_s": round(wall, 1), "steps": run.step, "git": git_commit(),  # the code that trained it
                 "command": f"airpose pretrain --profile {profile}"}
         if start is not None:
             earlier = json.loads(Path(start).with_suffix(".json").read_text())
@@ -360,6 +383,36 @@ def profile_backbone(profile: str, progress: bool = False) -> Path:
     """The backbone of a profile for its own still-frame dataset (generated first if missing)."""
     root = ensure_still_dataset(profile, progress=progress)
     return ensure_backbone(profile, root, load_manifest(Path(root))["fingerprint"], progress=progress)
+
+
+#: ``pretrained: profile:<name>`` in a training config: the backbone of profile ``<name>`` for its
+#: own data (e.g. ``cpu_paper_layout`` trains its regressors on cpu's features).
+OTHER_PROFILE = "profile:"
+
+
+def other_profile(pretrained: str | None) -> str | None:
+    """The profile named by ``pretrained: profile:<name>``; None for any other value."""
+    if pretrained is None or not str(pretrained).startswith(OTHER_PROFILE):
+        return None
+    name = str(pretrained)[len(OTHER_PROFILE):]
+    if not name:
+        raise ConfigError(f"pretrained: {pretrained!r} names no profile; write e.g. `pretrained: profile:cpu`")
+    return name
+
+
+def own_backbone_key(profile: str) -> str:
+    """The key of :func:`profile_backbone` (from the profile's settings; no dataset is read)."""
+    fingerprint = profile_config(profile).fingerprint()
+    return stage_keys(_with_data(pretrain_stages(profile), default_root(profile), fingerprint), fingerprint)[-1]
+
+
+def other_profile_backbone(profile: str, progress: bool = False) -> Path:
+    """:func:`profile_backbone`, without making the profile's dataset when the backbone is at hand
+    (in the cache, or the committed reference)."""
+    key = own_backbone_key(profile)
+    with file_lock(cache_dir() / "backbones" / f"{key}.lock"):
+        found = _at_hand(profile, key)
+    return found if found is not None else profile_backbone(profile, progress)
 
 
 def write_reference_backbone(profile: str, backbone_file: str | Path) -> Path:

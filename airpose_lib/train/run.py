@@ -2,7 +2,8 @@
 
 :func:`train` resolves what the run needs before the training starts (:func:`prepare_data`: the
 still-frame dataset, generated if missing; the profile's pretrained backbone, pretrained if missing
-(:func:`airpose_lib.train.pretrain.ensure_backbone`); the feature caches of the ``regressor`` task),
+(:func:`airpose_lib.train.pretrain.ensure_backbone`), or another profile's (``pretrained:
+profile:<name>``); the feature caches of the ``regressor`` task),
 then hands the resolved config to the loop (:func:`airpose_lib.train.loop.start_training`). The
 loop itself never makes a prerequisite, so the pretraining, which is a run of the loop, and the
 loop do not import each other.
@@ -29,7 +30,7 @@ from airpose_lib.folder_lock import file_lock
 from .config import TrainConfig, load_train_config
 from .features import ensure_features
 from .loop import TrainResult, check_data_root, default_out_dir, start_training
-from .pretrain import ensure_backbone
+from .pretrain import ensure_backbone, other_profile, other_profile_backbone
 
 __all__ = ["train", "prepare_data"]
 
@@ -117,10 +118,12 @@ def prepare_data(cfg: TrainConfig, progress: bool | None = None, device: str | t
         fingerprint = load_manifest(Path(data["root"]))["fingerprint"]
         cfg = cfg.replace(pretrained=str(ensure_backbone(cfg.profile, data["root"], fingerprint, progress=show,
                                                          device=str(device))))
+    elif (other := other_profile(cfg.pretrained)) is not None:  # another profile's, for its own data
+        cfg = cfg.replace(pretrained=str(other_profile_backbone(other, progress=show)))
     if cfg.task == "regressor":
         if cfg.pretrained is None:
             raise ConfigError("the regressor task trains on the features of a pretrained backbone: set pretrained")
-        for split in {cfg.train_split, cfg.val_split}:
+        for split in {cfg.train_split} | ({cfg.val_split} if cfg.val_every is not None else set()):
             ensure_features(cfg.pretrained, data["root"], split, progress=show, cut=cfg.trainable_from,
                             device=device)
     return cfg

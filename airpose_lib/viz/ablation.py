@@ -2,7 +2,7 @@
 each variant's estimate on a few test samples (skeletons, positions, meshes)."""
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 
 import numpy as np
 import pandas as pd
@@ -18,19 +18,23 @@ __all__ = ["SOURCE_COLORS", "plot_table1", "plot_ablation_samples", "plot_ablati
 SOURCE_COLORS = {"kit": "#0072B2", "reference": "#56B4E9", "paper": "#999999"}
 
 
+#: Dash styles of :func:`plot_table1`'s line rows, in order.
+_LINE_STYLES = ("--", ":", "-.")
+
 #: Markers of the per-view position estimates (UAV1, UAV2, ...) in the top views.
 VIEW_MARKERS = "o^sD"
 
 def plot_table1(table: pd.DataFrame, reference: pd.DataFrame | None = None, kit_label: str = "kit",
-                metrics: tuple[str, ...] = ("MPE", "MPJPE"), oracle_label: str | None = None):
+                metrics: tuple[str, ...] = ("MPE", "MPJPE"), line_rows: Sequence[str] = ()):
     """Table I as grouped bars: this run (seed std as error bars), the committed reference and
     the paper, one panel per metric on a log axis (the kit's and the paper's MPE can differ by
     more than 10x; a linear axis would flatten the paper's bars).
 
     Args:
         table: :func:`airpose_lib.eval.ablation.ablation_table` (``<metric> [m]``, ``<metric> std [m]``,
-            ``<metric> paper [m]``); a row named ``oracle_label`` is drawn as a dashed floor line
-            on the panels where it has a value, not as bars.
+            ``<metric> paper [m]``); a row named in ``line_rows`` (the mean-body references,
+            ``eval.mean_body.MEAN_BODY_LABELS``) is drawn as a horizontal line, one dash style
+            each, on the panels where it has a value, not as bars.
         reference: Table I of the committed reference (``results/<profile>/table1.csv``) or None.
         kit_label: legend entry of this run's bars (e.g. ``"kit (cpu, 3 seeds)"``).
     Returns:
@@ -40,7 +44,7 @@ def plot_table1(table: pd.DataFrame, reference: pd.DataFrame | None = None, kit_
     from matplotlib.lines import Line2D
     from matplotlib.patches import Patch
 
-    rows = [m for m in table.index if m != oracle_label]
+    rows = [m for m in table.index if m not in line_rows]
     sources = [("kit", kit_label, table)] + ([("reference", "committed reference", reference)]
                                              if reference is not None else []) + [("paper", "paper", None)]
     width = 0.8 / len(sources)
@@ -65,13 +69,13 @@ def plot_table1(table: pd.DataFrame, reference: pd.DataFrame | None = None, kit_
                     ax.annotate(f"{yi:.2f}" if yi >= 0.995 else f"{yi:.3f}", (xi, top), xytext=(0, 2),
                                 textcoords="offset points", ha="center", va="bottom", fontsize=6, rotation=90)
             values.append(y)
-        floor = table[f"{metric} [m]"].get(oracle_label, np.nan) if oracle_label is not None else np.nan
-        if np.isfinite(floor):
-            ax.axhline(floor, color=METHOD_COLORS["Ground truth"], ls="--", lw=1.2)
-            values.append(np.array([floor]))
-            if not any(h.get_label().startswith("oracle") for h in handles):
-                handles.append(Line2D([], [], color=METHOD_COLORS["Ground truth"], ls="--",
-                                      label="oracle floor (GT pose, mean body)"))
+        for label, dashes in zip(line_rows, _LINE_STYLES):
+            level = table[f"{metric} [m]"].get(label, np.nan)
+            if np.isfinite(level):
+                ax.axhline(level, color=METHOD_COLORS["Ground truth"], ls=dashes, lw=1.2)
+                values.append(np.array([level]))
+                if not any(h.get_label() == label for h in handles):
+                    handles.append(Line2D([], [], color=METHOD_COLORS["Ground truth"], ls=dashes, label=label))
         finite = np.concatenate(values)
         finite = finite[np.isfinite(finite) & (finite > 0)]
         ax.set_yscale("log")
@@ -80,9 +84,11 @@ def plot_table1(table: pd.DataFrame, reference: pd.DataFrame | None = None, kit_
         ax.set_xticks(x, [m.replace(" + ", "\n+ ") for m in rows], fontsize=8)
         ax.set_ylabel(f"{metric} [m] (log scale)")
         ax.set_title(metric)
-    fig.legend(handles=handles, loc="upper center", ncol=len(handles), frameon=False, fontsize=8,
+    # the reference lines' labels are long: at most three entries a row, the panels below the rows
+    ncol = min(len(handles), 3)
+    fig.legend(handles=handles, loc="upper center", ncol=ncol, frameon=False, fontsize=8,
                bbox_to_anchor=(0.5, 1.0))
-    fig.tight_layout(rect=(0, 0, 1, 0.90))
+    fig.tight_layout(rect=(0, 0, 1, 0.96 - 0.06 * -(-len(handles) // ncol)))
     return fig
 
 

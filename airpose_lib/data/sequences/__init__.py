@@ -30,6 +30,12 @@ Model of one recording (all numbers configurable in :class:`SequenceConfig`):
   stored ``K``, image sizes and all 2D ground truth refer to the stored images. The scene (ground
   texture, sky, sun, background objects beyond the orbit, per-vertex clothing colours) reuses the
   still-frame renderer :class:`airpose_lib.data.render.SceneRenderer` and appearance model.
+* **Options, off by default** (off, they change neither a byte of a frame nor the settings that
+  key the cache): ``field``, a camera pipeline that makes the frames behave like field footage
+  (exposure, white balance, tone curve, sensor noise, motion blur, lens distortion,
+  compression; :mod:`.field`); ``markers``, printed ArUco markers on the ground as in the
+  paper's scene, from which each drone's pose and UAV 2 in UAV 1 can be measured
+  (:mod:`airpose_lib.data.markers`).
 
 Ground-truth arrays (:data:`GROUND_TRUTH_KEYS`; F frames, V views; the paper's root convention
 ``V_world = R_wb V0 + t_wb`` about the model origin, cameras OpenCV ``x_cam = R_cw x_world +
@@ -37,7 +43,7 @@ t_cw``) are documented in :func:`simulate_sequence`.
 
 Modules: ``config`` (cameras, persons, flights, :class:`SequenceConfig`, a profile's recordings),
 ``flight`` (the drones' paths and camera poses), ``simulate`` (ground truth without pixels),
-``renderer`` (the frames), ``recording`` (one recording on disk, detector files),
+``renderer`` (the frames), ``field`` (the opt-in field camera pipeline on them), ``recording`` (one recording on disk, detector files),
 ``cache`` (a profile's recordings, made only when missing or outdated).
 """
 from __future__ import annotations
@@ -55,6 +61,7 @@ from .config import (
     scale_intrinsics,
     sequence_configs_from_profile,
 )
+from .field import FieldConfig
 from .flight import look_at_rotation
 from .recording import generate_sequence, recording_detections, refresh_detections
 from .renderer import SequenceRenderer, render_sequence
@@ -66,6 +73,7 @@ __all__ = [
     "PersonSpec",
     "PERSONS",
     "FlightConfig",
+    "FieldConfig",
     "SequenceConfig",
     "SimulatedSequence",
     "GROUND_TRUTH_KEYS",

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import dataclasses
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -13,6 +13,9 @@ from airpose_lib.body.genders import GENDER_CODES
 from airpose_lib.config_fields import config_from
 from airpose_lib.errors import ConfigError, ProfileError, ProfileSettingError
 from airpose_lib.profiles import profile_section, section_where
+
+from ..markers import MarkerLayout
+from .field import FieldConfig
 
 __all__ = [
     "CameraSpec",
@@ -166,6 +169,13 @@ class SequenceConfig:
             image), as the still frames' joints +- 20 px.
         detector_seed: seed of the simulated keypoint detectors (None: derived from ``seed``).
         anti_aliasing: MSAA on the renders (as the still frames); about half the speed on a CPU.
+        field: the field camera pipeline on the rendered frames (:mod:`.field`); off by default,
+            and then absent from :meth:`to_dict` (the recordings' cache key), so the clean
+            recordings keep their key and every byte.
+        markers: ArUco markers printed on the ground (:class:`~airpose_lib.data.markers.MarkerLayout`,
+            world coordinates), as in the paper's scene; None (default) = none, and then absent
+            from :meth:`to_dict` like ``field``. A profile turns the default layout on with
+            ``markers: {}``.
     """
 
     person: str | PersonSpec = "person1"
@@ -175,11 +185,13 @@ class SequenceConfig:
     cameras: tuple[CameraSpec, ...] = PAPER_CAMERAS
     render_scale: float = 0.5
     seed: int = 0
-    flight: FlightConfig = field(default_factory=FlightConfig)
+    flight: FlightConfig = dataclasses.field(default_factory=FlightConfig)
     jpeg_quality: int = 92
     bbox_margin_px: float = 20.0
     detector_seed: int | None = None
     anti_aliasing: bool = True
+    field: FieldConfig = FieldConfig()
+    markers: MarkerLayout | None = None
 
     def __post_init__(self) -> None:
         if self.n_frames < 1:
@@ -209,6 +221,11 @@ class SequenceConfig:
         """Plain (JSON-able) settings, recorded with every generated sequence."""
         d = dataclasses.asdict(self)
         d["person"] = dataclasses.asdict(self.person_spec)
+        # Options that are off leave the settings (and the cache key) as before they existed.
+        if not self.field.enabled:
+            del d["field"]
+        if self.markers is None:
+            del d["markers"]
         return d
 
     @classmethod
@@ -230,6 +247,10 @@ class SequenceConfig:
                                           for k, v in d["flight"].items()})
         if "time_offsets" in d:
             d["time_offsets"] = tuple(float(x) for x in d["time_offsets"])
+        if isinstance(d.get("field"), Mapping):
+            d["field"] = config_from(FieldConfig, d["field"], "field")
+        if isinstance(d.get("markers"), Mapping):
+            d["markers"] = config_from(MarkerLayout, d["markers"], "markers")
         return cls(**d)
 
 

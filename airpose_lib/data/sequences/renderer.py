@@ -1,5 +1,7 @@
 """Rendering of a simulated recording, frame by frame: the person's posed mesh in a fixed outdoor
-scene, seen by each drone's calibrated camera (non-square pixels, off-centre principal point)."""
+scene (with ArUco markers on the ground when the recording's ``markers`` option is on), seen by
+each drone's calibrated camera (non-square pixels, off-centre principal point), then, when the
+recording's ``field`` option is on, the field camera pipeline (:mod:`.field`)."""
 from __future__ import annotations
 
 from collections.abc import Iterator
@@ -9,7 +11,9 @@ import numpy as np
 from airpose_lib.body.forward import rest_body
 
 from ..appearance import BodyPaint, sample_appearance
+from ..markers import MarkerLayout, marker_tile, tile_corners_world
 from ..scene import Distractor, EnvironmentSample
+from .field import field_frame, field_rng, person_image_velocity
 from .simulate import SimulatedSequence, person_body_model
 
 __all__ = ["SequenceRenderer", "render_sequence"]
@@ -59,7 +63,34 @@ def _scene_renderer_class():
             cam.SetClippingRange(n, f)
             self._pl.renderer.camera_set = True
 
+        def add_markers(self, layout: MarkerLayout, ambient: float) -> None:
+            """Printed ArUco markers lying on the ground: one textured quad each, lit as the
+            ground (``ambient``). They float :data:`_MARKER_LIFT_M` above it so the depth test
+            never mixes them with the ground quad; the markers' geometry keeps ``y = 0``."""
+            import pyvista as pv  # (lazily, as above)
+
+            corners = tile_corners_world(layout) + np.array([0.0, _MARKER_LIFT_M, 0.0])
+            # pyvista puts image row 0 at the top (v = 1): TL, TR, BR, BL -> (0,1) (1,1) (1,0) (0,0)
+            uv = np.array([[0.0, 1.0], [1.0, 1.0], [1.0, 0.0], [0.0, 0.0]])
+            for mid, quad in zip(layout.ids, corners):
+                mesh = pv.PolyData.from_regular_faces(quad, np.array([[0, 3, 2, 1]]))  # normal up
+                mesh.active_texture_coordinates = uv
+                mesh.point_data["Normals"] = np.tile([0.0, 1.0, 0.0], (4, 1))
+                mesh.point_data.active_normals = mesh.point_data["Normals"]
+                tile = marker_tile(layout, mid, _MARKER_PX_PER_CELL)
+                tex = pv.Texture(np.repeat(tile[..., None], 3, axis=-1))
+                tex.interpolate = True
+                tex.mipmap = True  # a few hundred texels shrunk to ~50 px: mip-mapped, not aliased
+                self._pl.add_mesh(mesh, texture=tex, ambient=ambient, diffuse=0.75, specular=0.0,
+                                  reset_camera=False, render=False, name=f"marker{mid}")
+
     return _Renderer
+
+
+#: Height of the rendered markers above the ground quad, metres (depth-test separation only).
+_MARKER_LIFT_M = 0.003
+#: Texels per marker cell of the rendered markers' textures.
+_MARKER_PX_PER_CELL = 16
 
 
 class SequenceRenderer:
@@ -108,9 +139,16 @@ class SequenceRenderer:
             light_intensity=0.9, ambient=0.35, distractors=dist)
         for r in self._renderers.values():
             r.set_environment(self.environment)
+            if sim.config.markers is not None:  # off: no actor added, the scene as before
+                r.add_markers(sim.config.markers, self.environment.ambient)
+        # The field pipeline's motion blur follows the person's image motion (the drone's and
+        # the person's together); computed only when the option is on.
+        self._field = sim.config.field
+        self._velocity = person_image_velocity(sim.gt["j2d"]) if self._field.enabled else None
 
     def render_frames(self, frames=None, chunk: int = 32) -> Iterator[tuple[int, list[np.ndarray]]]:
-        """Yield ``(frame_index, [image (H, W, 3) uint8 RGB per view])`` in order."""
+        """Yield ``(frame_index, [image (H, W, 3) uint8 RGB per view])`` in order (after the field
+        pipeline when the recording's ``field`` option is on)."""
         gt = self.sim.gt
         F, V = self.sim.num_frames, self.sim.num_views
         frames = np.arange(F) if frames is None else np.asarray(list(frames), dtype=np.int64)
@@ -126,7 +164,11 @@ class SequenceRenderer:
                     R_wb, t_wb = gt["R_wb"][i, v], gt["t_wb"][i, v]
                     r = self._renderers[self._size_of_view[v]]
                     r.set_body(v0[k, v] @ R_wb.T + t_wb, self.faces, self.colors)
-                    images.append(r.render(gt["K"][v], gt["R_cw"][i, v], gt["t_cw"][i, v]))
+                    img = r.render(gt["K"][v], gt["R_cw"][i, v], gt["t_cw"][i, v])
+                    if self._field.enabled:  # off: the rendered frame itself, byte for byte
+                        img = field_frame(img, self._field, field_rng(self.sim.config.seed, i, v),
+                                          K=gt["K"][v], velocity_px=self._velocity[i, v])
+                    images.append(img)
                 yield int(i), images
 
     def close(self) -> None:

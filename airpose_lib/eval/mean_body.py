@@ -1,19 +1,26 @@
-"""The physical floor of MPE on the kit's data: a perfect monocular estimate that cannot read stature.
+"""Mean-body references of MPE on the kit's data: what a stature-blind estimate gets.
 
 A single image fixes a person's position only up to the person's size: a body k times taller
-at k times the distance projects to the same pixels. The "oracle" of Table I knows everything a
-network could read from one view exactly -- the ground-truth root orientation phi and body pose
-theta, and the ground-truth 2D joints -- but not the shape, so it poses the *mean* body
-(neutral model, beta = 0) and solves the translation tau that reprojects its 22 body joints onto
-the ground-truth 2D joints. Its MPE against the ground-truth tau is what remains of the stature
-(and gender) spread of the test subjects: no monocular network can beat it on average without
-reading body size from the pixels (issue 11, point 8).
+at k times the distance projects to the same pixels. A mean-body reference knows the ground-truth
+root orientation phi, body pose theta and 2D joints of each view, but not the shape: it poses a
+*mean* body (beta = 0) and solves the translation tau that reprojects its 22 body joints onto the
+ground-truth 2D joints. Its MPE against the ground-truth tau is what the stature spread of the
+test subjects costs an estimate that reads everything but stature exactly. Two references:
 
-On a two-drone recording (:func:`oracle_recording_estimate`) the same oracle, frame by frame and
-view by view, is the floor of UAV2's position in UAV1 as well: two views do not fix the scale
-either (the whole scene, cameras included, can grow by k with the same images), so a body of
-the wrong size puts both drones k times too far and UAV2's position in UAV1 is off by
-``|k - 1|`` times the drones' distance.
+* **neutral** (:data:`NEUTRAL_LABEL`): the neutral model's mean body for every subject;
+* **true gender** (:data:`GENDERED_LABEL`): the mean body of the subject's own gender (the male or
+  female model, beta = 0), what a stature-blind estimate of the right gender gets. Gender is
+  visible in an image, so this is the nearer mark for a network.
+
+Neither is a bound: within a gender, the body's proportions predict stature closely (issue 28),
+so a network may read stature from the pixels and beat both. They are references for scale, not
+limits.
+
+On a two-drone recording (:func:`mean_body_recording_estimate`) the neutral reference, frame by
+frame and view by view, gives UAV2's position in UAV1 as well: two views do not fix the scale
+either (the whole scene, cameras included, can grow by k with the same images), so a body of the
+wrong size puts both drones k times too far and UAV2's position in UAV1 is off by ``|k - 1|``
+times the drones' distance.
 
 tau is solved in two steps per view: the algebraic (DLT-style) least-squares solution, linear in
 tau, then a few Gauss-Newton steps on the pixel reprojection error.
@@ -28,12 +35,18 @@ import torch
 
 from airpose_lib.body import load_body_model
 from airpose_lib.body.forward import BodyForward, axis_angle_rotations
+from airpose_lib.body.genders import GENDER_NAMES
 from airpose_lib.geometry import axis_angle_to_matrix
 
-__all__ = ["ORACLE_LABEL", "solve_translation", "mean_body_joints", "oracle_per_view", "oracle_recording_estimate"]
+__all__ = ["NEUTRAL_LABEL", "GENDERED_LABEL", "MEAN_BODY_LABELS", "solve_translation", "mean_body_joints",
+           "mean_body_per_view", "mean_body_references", "mean_body_recording_estimate"]
 
-#: Row name of the oracle in Table I.
-ORACLE_LABEL = "Oracle (GT pose, mean body)"
+#: Row name of the neutral mean-body reference (Table I, the recordings' error tables).
+NEUTRAL_LABEL = "Reference: neutral mean body (GT pose)"
+#: Row name of the mean body of the subject's true gender.
+GENDERED_LABEL = "Reference: true-gender mean body (GT pose)"
+#: Both, in table order.
+MEAN_BODY_LABELS = (NEUTRAL_LABEL, GENDERED_LABEL)
 
 
 def _project(P: np.ndarray, K: np.ndarray) -> np.ndarray:
@@ -83,18 +96,20 @@ def solve_translation(X: np.ndarray, uv: np.ndarray, K: np.ndarray, gauss_newton
     return tau
 
 
-def mean_body_joints(theta: np.ndarray, body_model=None, body_source: str = "open") -> np.ndarray:
-    """The 22 body joints of the mean body (neutral model, beta = 0) in its model frame.
+def mean_body_joints(theta: np.ndarray, body_model=None, body_source: str = "open",
+                     gender: str = "neutral") -> np.ndarray:
+    """The 22 body joints of a mean body (beta = 0) in its model frame.
 
     Args:
         theta: ``(N, 21, 3)`` axis-angle body pose.
-        body_model: an ``smplx.SMPLX`` (default: ``load_body_model(body_source, "neutral")``).
+        body_model: an ``smplx.SMPLX`` (default: ``load_body_model(body_source, gender)``).
+        gender: the model whose mean body is posed when ``body_model`` is None.
     Returns:
         ``(N, 22, 3)`` joints with identity root orientation, zero translation (the paper's
         ``X0``: ``X = phi X0 + tau``), float64.
     """
     if body_model is None:
-        body_model = load_body_model(body_source, "neutral", dtype=torch.float64)
+        body_model = load_body_model(body_source, gender, dtype=torch.float64)
     body = BodyForward(body_model, vertices=None).double()  # float64 whatever the model's dtype
     theta = torch.as_tensor(np.asarray(theta), dtype=torch.float64)
     with torch.no_grad():
@@ -102,16 +117,33 @@ def mean_body_joints(theta: np.ndarray, body_model=None, body_source: str = "ope
     return joints.numpy()
 
 
-def oracle_per_view(arrays: Mapping[str, np.ndarray], body_model=None, body_source: str = "open",
-                    gauss_newton_steps: int = 5, max_samples: int | None = None) -> pd.DataFrame:
-    """Per-view MPE of the mean-body oracle on a still-frame split.
+def _gendered_joints(theta: np.ndarray, gender: np.ndarray, body_models: Mapping | None,
+                     body_source: str) -> np.ndarray:
+    """:func:`mean_body_joints` of each sample's own gender: ``theta (N, 21, 3)``, ``gender (N,)``
+    codes (``body.genders``) -> ``(N, 22, 3)``."""
+    X0 = np.empty((len(theta), 22, 3))
+    for code in np.unique(gender):
+        name = GENDER_NAMES[int(code)]
+        rows = gender == code
+        X0[rows] = mean_body_joints(theta[rows], (body_models or {}).get(name), body_source, name)
+    return X0
+
+
+def mean_body_per_view(arrays: Mapping[str, np.ndarray], body_model=None, body_source: str = "open",
+                       gauss_newton_steps: int = 5, max_samples: int | None = None, gendered: bool = False,
+                       body_models: Mapping | None = None) -> pd.DataFrame:
+    """Per-view MPE of a mean-body reference on a still-frame split.
 
     Args:
         arrays: ``StillFrameDataset.arrays``: ``theta (N, 21, 3)``, ``phi (N, V, 3, 3)``,
             ``tau (N, V, 3)``, ``j2d (N, V, 22, 2)`` (full-frame pixels), ``K (N, V, 3, 3)``;
-            ``index (N,)`` sample ids if present.
-        body_model, body_source: the body posed with beta = 0 (:func:`mean_body_joints`).
+            ``index (N,)`` sample ids if present; with ``gendered``, ``gender (N,)`` codes.
+        body_model, body_source: the neutral body posed with beta = 0 (:func:`mean_body_joints`).
         max_samples: only the first this many samples (the networks' ``eval_max_samples``).
+        gendered: pose the mean body of each subject's true gender (:data:`GENDERED_LABEL`)
+            instead of the neutral one (:data:`NEUTRAL_LABEL`).
+        body_models: gender name -> ``smplx.SMPLX`` for ``gendered`` (a missing one is loaded
+            from ``body_source``).
     Returns:
         columns ``method, sample, view, mpe_m, err_x_m, err_y_m, err_z_m, reproj_px`` (the RMS pixel
         residual of the fit), one row per (sample, view), like :func:`airpose_lib.eval.per_view_table`.
@@ -119,7 +151,10 @@ def oracle_per_view(arrays: Mapping[str, np.ndarray], body_model=None, body_sour
     arrays = {k: np.asarray(v)[:max_samples] for k, v in arrays.items()}
     phi = np.asarray(arrays["phi"], dtype=np.float64)
     N, V = phi.shape[:2]
-    X0 = mean_body_joints(arrays["theta"], body_model, body_source)  # (N, 22, 3)
+    if gendered:
+        X0 = _gendered_joints(arrays["theta"], np.asarray(arrays["gender"]), body_models, body_source)
+    else:
+        X0 = mean_body_joints(arrays["theta"], body_model, body_source)  # (N, 22, 3)
     X = np.einsum("nvij,nkj->nvki", phi, X0)  # phi X0, (N, V, 22, 3)
     uv = np.asarray(arrays["j2d"], dtype=np.float64)
     K = np.asarray(arrays["K"], dtype=np.float64)
@@ -128,16 +163,30 @@ def oracle_per_view(arrays: Mapping[str, np.ndarray], body_model=None, body_sour
     reproj = np.sqrt(((_project(X + tau[..., None, :], K) - uv) ** 2).sum(-1).mean(-1))
     ids = np.asarray(arrays["index"]) if "index" in arrays else np.arange(N)
     return pd.DataFrame({
-        "method": ORACLE_LABEL, "sample": np.repeat(ids, V), "view": np.tile(np.arange(V), N),
+        "method": GENDERED_LABEL if gendered else NEUTRAL_LABEL, "sample": np.repeat(ids, V),
+        "view": np.tile(np.arange(V), N),
         "mpe_m": np.linalg.norm(err, axis=-1).reshape(-1),
         "err_x_m": err[..., 0].reshape(-1), "err_y_m": err[..., 1].reshape(-1), "err_z_m": err[..., 2].reshape(-1),
         "reproj_px": reproj.reshape(-1),
     })
 
 
-def oracle_recording_estimate(ground_truth: Mapping[str, np.ndarray], body_model=None, body_source: str = "open",
-                              gauss_newton_steps: int = 5) -> dict[str, np.ndarray]:
-    """The mean-body oracle over a recording, as an estimate of :mod:`airpose_lib.eval.recordings`.
+def mean_body_references(arrays: Mapping[str, np.ndarray], body_source: str = "open", gauss_newton_steps: int = 5,
+                         max_samples: int | None = None, body_models: Mapping | None = None) -> pd.DataFrame:
+    """Both references of a still-frame split, neutral rows first (:func:`mean_body_per_view`).
+
+    Args:
+        body_models: gender name -> ``smplx.SMPLX`` (a missing one is loaded from ``body_source``).
+    """
+    models = dict(body_models or {})
+    return pd.concat([mean_body_per_view(arrays, models.get("neutral"), body_source, gauss_newton_steps, max_samples),
+                      mean_body_per_view(arrays, None, body_source, gauss_newton_steps, max_samples, gendered=True,
+                                         body_models=models)], ignore_index=True)
+
+
+def mean_body_recording_estimate(ground_truth: Mapping[str, np.ndarray], body_model=None, body_source: str = "open",
+                                 gauss_newton_steps: int = 5) -> dict[str, np.ndarray]:
+    """The neutral mean-body reference over a recording, as an estimate of :mod:`airpose_lib.eval.recordings`.
 
     Args:
         ground_truth: a recording's ``ground_truth.npz``: ``theta_view (F, V, 21, 3)`` axis-angle,

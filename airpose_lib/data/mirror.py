@@ -137,4 +137,3 @@ def mirror_sample(item: dict[str, Tensor], input_size: int) -> dict[str, Tensor]
     for k, v in new.items():
         out[k] = v.to(item[k].dtype)
     return out
-

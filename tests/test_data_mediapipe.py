@@ -129,12 +129,13 @@ def test_writer_writes_a_mediapipe_file_in_the_body25_format(tmp_path):
     np.testing.assert_allclose(load_sequence(tmp_path, detectors=("mediapipe",)).keypoints["mediapipe"], kp)
 
 
-_MP_PYTHON = os.environ.get("AIRPOSE_MEDIAPIPE_PYTHON", "/work/venv-mp/bin/python")
+_MP_PYTHON = os.environ.get("AIRPOSE_MEDIAPIPE_PYTHON",
+                            str(Path(__file__).resolve().parents[1] / ".venv-mediapipe" / "bin" / "python"))
 
 
 @pytest.mark.slow
 @pytest.mark.skipif(not Path(_MP_PYTHON).is_file(), reason="MediaPipe's environment is missing "
-                    "(environment.md: `detector` extra; AIRPOSE_MEDIAPIPE_PYTHON names its python)")
+                    "(scripts/setup_mediapipe.sh; AIRPOSE_MEDIAPIPE_PYTHON names its python)")
 def test_detector_script_runs_on_a_rendered_recording(tmp_path):
     """The script in MediaPipe's environment over a written recording: it runs, writes a file
     the kit reads, and finds nobody on black frames."""

@@ -41,7 +41,7 @@ def main(argv=None) -> int:
     write_report(rows, args.out)
     df = pd.DataFrame(rows)
     cols = ["recording", "view", "detector", "reference", "detection_rate", "keypoint_rate", "pairs",
-            "median_px", "p90_px", "pck_0.05", "pck_0.1"]
+            "median_px", "p90_px", "pck_0.05", "pck_0.1", "pck_0.2"]
     with pd.option_context("display.width", 200, "display.max_rows", 1000):
         print(df[df.group == "all"][cols].round(3).to_string(index=False))
     print(f"written {args.out}")

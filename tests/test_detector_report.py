@@ -53,7 +53,7 @@ def test_report_by_hand(tmp_path):
     assert at.keypoint_rate == pytest.approx(25 / 49) and at.pairs == 25
     assert at.median_px == pytest.approx(3.0) and at.p90_px == pytest.approx(3.0)
     # 3 px = 0.06 x the 50 px person: outside 0.05, inside 0.1
-    assert at["pck_0.05"] == 0.0 and at["pck_0.1"] == 1.0
+    assert at["pck_0.05"] == 0.0 and at["pck_0.1"] == 1.0 and at["pck_0.2"] == 1.0
     bt = r.loc[("b", "truth", "all")]
     assert bt.detection_rate == 1.0 and bt.pairs == 18 + 17 and bt.median_px == 0.0 and bt["pck_0.05"] == 1.0
     assert bt.keypoint_rate == pytest.approx(35 / 49)

@@ -94,7 +94,7 @@ def _rows_for(recording, v, name, ref_name, det, ref, truth, size, pck) -> list[
     return rows
 
 
-def detector_report(sequence, detectors: SequenceABC[str], *, pck: SequenceABC[float] = (0.05, 0.1),
+def detector_report(sequence, detectors: SequenceABC[str], *, pck: SequenceABC[float] = (0.05, 0.1, 0.2),
                     recording: str | None = None) -> list[dict]:
     """The report's rows (module doc) of a generated recording.
 
@@ -102,7 +102,8 @@ def detector_report(sequence, detectors: SequenceABC[str], *, pck: SequenceABC[f
         sequence: a :class:`~airpose_lib.data.official_layout.Sequence` with ground truth and the
             keypoints of every name in ``detectors``.
         detectors: the detectors to report; each is compared with the truth and with the others.
-        pck: thresholds as fractions of the person's size.
+        pck: thresholds as fractions of the person's size (``1 - pck_0.2``: the gross errors, a
+            limb on the wrong side or on the background).
         recording: the ``recording`` column (default: the sequence folder's name).
 
     Returns:

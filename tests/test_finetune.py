@@ -671,6 +671,39 @@ def test_finetune_on_true_keypoints_uses_the_ground_truth(tiny_ckpt, smoke_root,
         _cfg(targets="openpose")
 
 
+def test_finetune_on_mediapipe_puts_it_in_openposes_place(tiny_ckpt, smoke_root, tmp_path, body32, tiny_prior):
+    """targets="mediapipe": the agreement filter with MediaPipe's keypoints instead of OpenPose's.
+    MediaPipe here: OpenPose's keypoints 40 px to the right (a linked copy of the recording)."""
+    from airpose_lib.data.mediapipe_pose import write_body25
+    from airpose_lib.data.official_layout import load_sequence
+    from airpose_lib.finetune import resolution_scales
+    from airpose_lib.finetune.keypoints import agreement_masks, agreement_summary
+    from airpose_lib.finetune.predict import image_sizes
+
+    root = tmp_path / "rec"
+    root.mkdir()
+    for item in smoke_root.iterdir():
+        if not item.is_dir():
+            (root / item.name).symlink_to(item)
+    seq = load_sequence(smoke_root, detectors=("openpose", "alphapose"), ground_truth=False)
+    mp = np.where(seq.keypoints["openpose"][..., 2:] > 0, seq.keypoints["openpose"] + [40.0, 0.0, 0.0], 0.0)
+    for v in range(seq.num_views):
+        (root / f"machine_{v + 1}").mkdir()
+        for item in (smoke_root / f"machine_{v + 1}").iterdir():
+            (root / f"machine_{v + 1}" / item.name).symlink_to(item)
+        write_body25(root / f"machine_{v + 1}" / "mediapipe_res.pkl", seq.frames.tolist(), mp[:, v])
+    kw = dict(prior=tiny_prior, body_model=body32)
+    res = finetune(tiny_ckpt, root, tmp_path / "mp", _cfg(steps=0, targets="mediapipe", threshold_px=60.0), **kw)
+    thr = 60.0 * resolution_scales(image_sizes(seq), 1920.0)
+    ap = seq.keypoints["alphapose"][:6]
+    want = agreement_summary(agreement_masks(mp[:6], ap, threshold_px=thr, min_confidence=0.05))
+    assert res.keypoints == want and res.config["targets"] == "mediapipe"
+    # the shift (20 px in these 960 px views; the threshold is 30 px here) moves joints across it
+    openpose = agreement_summary(agreement_masks(seq.keypoints["openpose"][:6], ap, threshold_px=thr,
+                                                 min_confidence=0.05))
+    assert want["kept"] > 0 and want["disagree"] > openpose["disagree"]
+
+
 def test_a_run_saved_before_an_option_existed_resumes_with_its_default():
     from airpose_lib.engine import StaleRunError
     from airpose_lib.finetune.train import _check_resume

@@ -60,6 +60,9 @@ def test_fit_a_sequence_in_the_official_layout(tmp_path, capsys, open_model_file
         kps[name] = np.concatenate([p, np.full(p.shape[:-1] + (1,), 0.8)], -1)
     kps["openpose"][2] = 0.0  # frame 2: nobody detected by either detector -> skipped
     kps["alphapose"][2] = 0.0
+    kps["mediapipe"] = kps["openpose"].copy()
+    kps["mediapipe"][:, :, [20, 23]] = 0.0  # BODY_25 without the small toes, as MediaPipe's
+    kps["mediapipe"][3] = 0.0  # MediaPipe alone misses frame 3 too
     root = tmp_path / "seq"
     w = OfficialLayoutWriter(root, num_views=2)
     for i in range(F):
@@ -85,6 +88,11 @@ def test_fit_a_sequence_in_the_official_layout(tmp_path, capsys, open_model_file
     assert main(["fit", "--sequence", str(root), "--init", str(init), "--out", str(part), "--frames", "12:15",
                  "--prior-path", str(prior_file), "--iterations", "2", "--quiet"]) == 0
     np.testing.assert_array_equal(np.load(part)["frames"], [12, 13, 14])
+    # --detectors: AirPose+ on MediaPipe's keypoints alone skips the frames MediaPipe missed
+    alone = tmp_path / "mediapipe.npz"
+    assert main(["fit", "--sequence", str(root), "--init", str(init), "--out", str(alone), "--detectors", "mediapipe",
+                 "--prior-path", str(prior_file), "--iterations", "2", "--quiet"]) == 0
+    assert np.load(alone)["kept"].tolist() == [True, True, False, False, True, True]
     capsys.readouterr()
     assert main(["fit", "--sequence", str(root), "--init", str(init), "--frames", "0:5",
                  "--prior-path", str(prior_file)]) == 2

@@ -104,10 +104,12 @@ def add_finetune(sub) -> None:
 
 # -- predict --------------------------------------------------------------------------------------
 def _cmd_predict(args: argparse.Namespace) -> int:
-    from airpose_lib.data.official_layout import load_sequence
+    from airpose_lib.data.official_layout import DETECTOR_FILES, load_sequence
     from airpose_lib.finetune.network import load_sized_network
     from airpose_lib.finetune.predict import frames_in_range, predict_sequence, save_predictions
 
+    if args.detector not in DETECTOR_FILES:
+        raise CLIError(f"--detector {args.detector}: unknown; give one of {', '.join(DETECTOR_FILES)}")
     require_file(args.checkpoint, "--checkpoint", "a checkpoint of `airpose train` or `airpose finetune`")
     require_folder(args.sequence, "--sequence", SEQUENCE_FOLDER)
     model, cfg, size = load_sized_network(args.checkpoint, args.device, args.input_size)
@@ -144,8 +146,9 @@ def add_predict(sub) -> None:
     pr.add_argument("--out", type=Path, required=True, help="predictions file (.npz)")
     pr.add_argument("--frames", default=None, metavar="START:STOP",
                     help="only the images numbered START..STOP-1 (either end may be left out)")
-    pr.add_argument("--detector", choices=("openpose", "alphapose"), default="openpose",
-                    help="keypoints the person boxes come from (default: openpose)")
+    pr.add_argument("--detector", default="openpose",
+                    help="keypoints the person boxes come from: openpose, alphapose or mediapipe "
+                         "(scripts/mediapipe_detect.py) (default: openpose)")
     pr.add_argument("--batch-size", type=int, default=16, help="frames per backbone batch (default: 16)")
     pr.add_argument("--input-size", type=int, default=None,
                     help="crop size of the network, when its checkpoint does not record it")

@@ -4,7 +4,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from .common import PROFILES, SEQUENCE_FOLDER, parse_range, require_file, require_folder, require_path
+from .common import PROFILES, SEQUENCE_FOLDER, CLIError, parse_range, require_file, require_folder, require_path
 
 __all__ = ['add_fit']
 
@@ -14,7 +14,7 @@ __all__ = ['add_fit']
 
 
 def _cmd_fit(args: argparse.Namespace) -> int:
-    from airpose_lib.data.official_layout import load_sequence
+    from airpose_lib.data.official_layout import DETECTOR_FILES, load_sequence
     from airpose_lib.finetune.predict import frames_in_range
     from airpose_lib.fitting import fit_sequence
     from airpose_lib.fitting.recording import (
@@ -26,13 +26,18 @@ def _cmd_fit(args: argparse.Namespace) -> int:
     )
     from airpose_lib.prior import load_prior
 
+    detectors = tuple(d for d in args.detectors.split(",") if d)
+    unknown = [d for d in detectors if d not in DETECTOR_FILES]
+    if unknown or not detectors:
+        raise CLIError(f"--detectors {args.detectors}: give one or more of {', '.join(DETECTOR_FILES)}, "
+                       "comma-separated")
     require_folder(args.sequence, "--sequence", SEQUENCE_FOLDER)
     require_file(args.init, "--init", "the .npz of `airpose predict`")
     require_path(args.prior_path, "--prior-path", "a prior checkpoint file or folder")
     rng = parse_range(args.frames)
     pred = open_initialisation(args.init)
     frames = None if rng is None else frames_in_range(args.sequence, *rng)  # image numbers, as in `predict`
-    seq = load_sequence(args.sequence, frames=frames, ground_truth=False)
+    seq = load_sequence(args.sequence, frames=frames, detectors=detectors, ground_truth=False)
     init = initialisation_for(pred, args.init, seq.frames)
     cfg = fit_config(args.profile, official_temporal=args.official_temporal, iterations=args.iterations,
                      threads=args.threads, device=args.device)
@@ -62,6 +67,9 @@ def add_fit(sub) -> None:
     fit.add_argument("--frames", default=None, metavar="START:STOP",
                      help="only the images numbered START..STOP-1 (either end may be left out), "
                           "as in `predict` and `finetune`")
+    fit.add_argument("--detectors", default="openpose,alphapose",
+                     help="the keypoints AirPose+ fits, comma-separated: openpose, alphapose, mediapipe "
+                          "(scripts/mediapipe_detect.py) (default: openpose,alphapose, the paper's)")
     fit.add_argument("--prior", choices=("kit", "vposer"), default="kit",
                      help="kit: trained by `airpose prior train`; vposer: official V02_05 (default: kit)")
     fit.add_argument("--prior-path", type=Path, default=None, help="a prior checkpoint file or folder")

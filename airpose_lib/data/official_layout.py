@@ -11,6 +11,8 @@ sequence root (``machine_k`` = drone k, k = 1, 2, ...):
 ``machine_k/alphapose_res.json``    AlphaPose JSON list ``[{"image_id": "000123.jpg", "keypoints":
                                     [x, y, c] * 18, "score": s, "category_id": 1}, ...]`` (COCO-18);
                                     frames without a detection have no entry
+``machine_k/mediapipe_res.pkl``     optional, kit addition: MediaPipe Pose as BODY_25, in the
+                                    ``openpose_res.pkl`` format (``scripts/mediapipe_detect.py``)
 ``machine_k/camera_calib.yml``      OpenCV FileStorage with the 3x3 matrix ``K``
 ``machine_k/timestamps.csv``        kit addition: ``frame,timestamp`` (seconds) per frame
 ``ground_truth.npz``                kit addition: everything per frame (see
@@ -71,8 +73,11 @@ __all__ = [
 ]
 
 DETECTOR_FILES: dict[str, tuple[str, int]] = {"openpose": ("openpose_res.pkl", 25),
-                                              "alphapose": ("alphapose_res.json", 18)}
-"""Detector name -> (file name in ``machine_k/``, keypoints per person)."""
+                                              "alphapose": ("alphapose_res.json", 18),
+                                              "mediapipe": ("mediapipe_res.pkl", 25)}
+"""Detector name -> (file name in ``machine_k/``, keypoints per person). A 25-keypoint file is
+in the OpenPose pickle format; ``mediapipe`` is MediaPipe Pose mapped onto BODY_25
+(:mod:`airpose_lib.data.mediapipe_pose`, written by ``scripts/mediapipe_detect.py``)."""
 
 _FRAME_RE = re.compile(r"^(\d+)\.(jpg|jpeg|png)$", re.IGNORECASE)
 
@@ -199,7 +204,7 @@ class OfficialLayoutWriter:
             if kp.shape != (F, self.num_views, J, 3):
                 raise ValueError(f"{name} keypoints must be ({F}, {self.num_views}, {J}, 3), got {kp.shape}")
             for v in range(self.num_views):
-                if name == "openpose":
+                if J == 25:  # BODY_25 detectors share OpenPose's pickle
                     self._write_openpose(self.machine(v) / DETECTOR_FILES[name][0], frames, kp[:, v])
                 else:
                     self._write_alphapose(self.machine(v) / DETECTOR_FILES[name][0], frames, kp[:, v])
@@ -597,7 +602,7 @@ def load_sequence(root: str | Path, frames: Iterable[int] | slice | None = None,
         root: the sequence folder (holding ``machine_1``, ``machine_2``, ...).
         frames: frame indices to read (an iterable of image numbers), a slice over the sorted
             frame list, or None (all).
-        detectors: which keypoint files to read (``openpose``, ``alphapose``); each must exist.
+        detectors: which keypoint files to read (names of :data:`DETECTOR_FILES`); each must exist.
         missing_detections: ``"error"`` (default) or ``"zero"``: what to do with a detector file
             that is shorter than the image sequence (see the module doc).
         strict: the machines must hold the same frames; False keeps their common frames (warns).
@@ -653,9 +658,10 @@ def load_sequence(root: str | Path, frames: Iterable[int] | slice | None = None,
             if len(formats) > 1:
                 raise SequenceFormatError(f"{root}: the {DETECTOR_FILES[name][0]} files of the machines are in "
                                           "different formats (the release's and the kit's)")
+            body25 = DETECTOR_FILES[name][1] == 25  # BODY_25 detectors share OpenPose's formats
             if formats == {"official"}:
-                kp, st = (read_official_openpose if name == "openpose" else read_official_alphapose)(path, sel, data)
-            elif name == "openpose":
+                kp, st = (read_official_openpose if body25 else read_official_alphapose)(path, sel, data)
+            elif body25:
                 kp, st = _read_openpose(path, data, sel, missing_detections)
             else:
                 kp, st = _read_alphapose(path, data, sel, last_image, missing_detections, tail_tolerance)

@@ -7,6 +7,7 @@ r"""Fine-tuning a trained network on the 2D detections of a recording (paper Sec
 2. builds the 2D targets with the two-detector agreement filter
    (:func:`~airpose_lib.finetune.keypoints.agreement_targets`); ``targets="ground_truth"`` uses a
    generated recording's true keypoints instead (a control: same frames, crops and loss);
+   ``targets="mediapipe"`` puts MediaPipe's keypoints in OpenPose's place in the filter;
 3. runs the **frozen** backbone once over every frame and view, crops made from the detections as
    the drones make them, and caches the features (``<out>/feature_cache.pt``, reused while the
    backbone, crop settings and recording are unchanged). The backbone is never run again and
@@ -104,7 +105,7 @@ __all__ = ["TARGET_SOURCES", "FineTuneConfig", "FineTuneResult", "finetune_confi
            "evaluate_finetune_loss", "heldout_split"]
 
 #: Where the 2D targets come from (``FineTuneConfig.targets``).
-TARGET_SOURCES = ("detections", "ground_truth")
+TARGET_SOURCES = ("detections", "ground_truth", "mediapipe")
 
 
 @dataclass
@@ -124,7 +125,9 @@ class FineTuneConfig:
         targets: ``detections`` (the paper: OpenPose keypoints that AlphaPose confirms) or
             ``ground_truth``, a control on generated recordings: the true BODY_25 keypoints
             (:func:`~airpose_lib.finetune.keypoints.true_targets`) with the same frames and crops,
-            to tell what the detectors' errors cost from what fine-tuning on one person does.
+            to tell what the detectors' errors cost from what fine-tuning on one person does; or
+            ``mediapipe``: the same agreement filter with MediaPipe's BODY_25 keypoints (a real
+            detector, ``scripts/mediapipe_detect.py``) in OpenPose's place, confirmed by AlphaPose.
         reference_width: image width (px) the pixel quantities (``threshold_px``, the 2D loss
             weight) refer to: the paper's 1920; each view uses them at its own width.
         holdout_fraction: the last part of the selected frames held out for model selection
@@ -288,8 +291,13 @@ class FineTuneResult:
 
 
 # -- pieces ---------------------------------------------------------------------------------------
+def _primary(cfg: FineTuneConfig) -> str:
+    """The BODY_25 detector whose keypoints the agreement filter confirms with AlphaPose."""
+    return "mediapipe" if cfg.targets == "mediapipe" else "openpose"
+
+
 def _load_frames(root: Path, cfg: FineTuneConfig):
-    detectors = tuple(dict.fromkeys(("openpose", "alphapose", cfg.detector)))
+    detectors = tuple(dict.fromkeys(("openpose", "alphapose", cfg.detector, _primary(cfg))))
     frames = None if cfg.frames is None else frames_in_range(root, cfg.frames[0], cfg.frames[1])
     seq = load_sequence(root, frames=frames, detectors=detectors, missing_detections=cfg.missing_detections,
                         ground_truth=cfg.targets == "ground_truth")
@@ -619,9 +627,10 @@ def _read_inputs(checkpoint: Path, root: Path, cfg: FineTuneConfig) -> tuple:
         targets_np = true_targets(gt["kp2d_body25"], gt["kp_depth_body25"], np.asarray(image_sizes(seq)))
         keypoints = {"targets": "ground_truth", "kept": int((targets_np[..., 2] > 0).sum())}
     else:
-        masks = agreement_masks(seq.keypoints["openpose"], seq.keypoints["alphapose"], threshold_px=threshold,
+        primary = seq.keypoints[_primary(cfg)]
+        masks = agreement_masks(primary, seq.keypoints["alphapose"], threshold_px=threshold,
                                 min_confidence=cfg.min_confidence, unmatched=cfg.unmatched)
-        targets_np = kept_targets(seq.keypoints["openpose"], masks)
+        targets_np = kept_targets(primary, masks)
         keypoints = agreement_summary(masks)
     return device, model, train_cfg, input_size, seq, scales, targets_np, keypoints
 

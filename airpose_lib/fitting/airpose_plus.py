@@ -95,9 +95,12 @@ DETECTOR_JOINTS: dict[str, tuple[int, ...]] = {
     "openpose": BODY_25_FROM_SMPLX,
     "coco18": COCO18_FROM_SMPLX,
     "alphapose": COCO18_FROM_SMPLX,
+    "mediapipe": BODY_25_FROM_SMPLX,
 }
 """Detector name -> index of each keypoint into the 76 SMPL-X output joints (-1: no counterpart).
-``openpose`` / ``alphapose`` are the names the kit's sequences use for BODY_25 / COCO-18."""
+``openpose`` / ``alphapose`` are the names the kit's sequences use for BODY_25 / COCO-18;
+``mediapipe`` is MediaPipe Pose mapped onto BODY_25 (``data.mediapipe_pose``; the keypoints it
+lacks have confidence 0)."""
 
 
 @dataclass

@@ -195,7 +195,13 @@ def test_a_bad_inheritance_names_the_file(tmp_path):
 def test_the_paper_layout_profile_is_cpu_on_other_data():
     cpu, paper = read_profile("cpu"), read_profile("cpu_paper_layout")
     assert set(paper) == set(cpu)
-    for section in set(cpu) - {"data", "description", "train"}:
+    for section in set(cpu) - {"data", "description", "train", "notebooks"}:
         assert paper[section] == cpu[section], section
+    # notebook 02 with fewer seeds, every other notebook parameter cpu's
+    ablation = {k: v for k, v in paper["notebooks"]["02_ablation_table"].items() if k != "seeds"}
+    assert ablation == {k: v for k, v in cpu["notebooks"]["02_ablation_table"].items() if k != "seeds"}
+    assert set(paper["notebooks"]["02_ablation_table"]["seeds"]) <= set(cpu["notebooks"]["02_ablation_table"]["seeds"])
+    assert {k: v for k, v in paper["notebooks"].items() if k != "02_ablation_table"} == \
+        {k: v for k, v in cpu["notebooks"].items() if k != "02_ablation_table"}
     assert paper["train"] == {**cpu["train"], "pretrained": "profile:cpu"}  # cpu's backbone
     assert {k: v for k, v in paper["data"]["still"].items() if k != "scene"} == cpu["data"]["still"]

@@ -22,23 +22,23 @@ from airpose_lib._lazy import lazy_namespace
 
 _EXPORTS = {
     # scene
-    "SceneConfig": "scene", "sample_person": "scene", "sample_cameras": "scene",
-    "sample_environment": "scene",
+    "SceneConfig": "still.scene", "sample_person": "still.scene", "sample_cameras": "still.scene",
+    "sample_environment": "still.scene",
     # poses
-    "sample_body_pose": "poses",
+    "sample_body_pose": "still.poses",
     # appearance
-    "AppearanceConfig": "appearance", "sample_appearance": "appearance", "BodyPaint": "appearance",
+    "AppearanceConfig": "still.appearance", "sample_appearance": "still.appearance", "BodyPaint": "still.appearance",
     # rendering
-    "SceneRenderer": "render", "ground_textures": "render",
+    "SceneRenderer": "still.render", "ground_textures": "still.render",
     # files
-    "DatasetError": "manifest", "ShardIntegrityError": "manifest", "load_manifest": "manifest",
+    "DatasetError": "still.manifest", "ShardIntegrityError": "still.manifest", "load_manifest": "still.manifest",
     # generation
-    "GENERATOR_VERSION": "still_config", "GenerationConfig": "still_config",
-    "profile_config": "still_config", "default_root": "still_config",
-    "StillFrameGenerator": "still_frames", "generate_still_dataset": "generate",
-    "ensure_still_dataset": "generate",
+    "GENERATOR_VERSION": "still.config", "GenerationConfig": "still.config",
+    "profile_config": "still.config", "default_root": "still.config",
+    "StillFrameGenerator": "still.frames", "generate_still_dataset": "still.generate",
+    "ensure_still_dataset": "still.generate",
     # datasets
-    "StillFrameDataset": "dataset", "denormalize_images": "dataset",
+    "StillFrameDataset": "still.dataset", "denormalize_images": "still.dataset",
     # the network's input (person box, previous-box rule, crop, normalisation)
     "IMAGENET_MEAN": "network_input", "IMAGENET_STD": "network_input",
     "person_box": "network_input", "hold_boxes": "network_input", "crop_input": "network_input",
@@ -47,10 +47,10 @@ _EXPORTS = {
 
 # Other modules' public names (their ``__all__``) are found on first use, in this order; the
 # renderer comes last because importing it starts VTK.
-_SEARCHED = ("official_synthetic", "official_real", "official_layout", "sequences", "markers",
-             "motions", "detections", "poses", "scene", "appearance", "manifest", "shards", "still_config",
-             "still_frames", "generate",
-             "mirror", "dataset", "render")
+_SEARCHED = ("official.synthetic", "official.real", "sequences.layout", "sequences", "sequences.markers",
+             "sequences.motions", "sequences.detections", "still.poses", "still.scene", "still.appearance", "still.manifest", "still.shards", "still.config",
+             "still.frames", "still.generate",
+             "still.mirror", "still.dataset", "still.render")
 
 __all__ = sorted(_EXPORTS)
 __getattr__, __dir__ = lazy_namespace(__name__, globals(), _SEARCHED, _EXPORTS, skip_failing=True)

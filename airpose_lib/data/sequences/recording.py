@@ -13,9 +13,9 @@ import numpy as np
 
 from airpose_lib.progress import progress_bar
 
-from ..detections import DEFAULT_DETECTORS, DETECTOR_VERSION, detection_summary, simulate_detections
-from ..official_layout import DETECTOR_FILES, OfficialLayoutWriter, load_sequence
 from .config import SEQUENCE_GENERATOR_VERSION, SequenceConfig
+from .detections import DEFAULT_DETECTORS, DETECTOR_VERSION, detection_summary, simulate_detections
+from .layout import DETECTOR_FILES, OfficialLayoutWriter, load_sequence
 from .renderer import SequenceRenderer
 from .simulate import simulate_sequence
 
@@ -25,7 +25,7 @@ __all__ = ["generate_sequence", "recording_detections", "refresh_detections"]
 def generate_sequence(config: SequenceConfig, root: str | Path, *, progress: bool = False,
                       body_model=None) -> dict:
     """Simulate a recording, simulate both keypoint detectors, render the frames and store it in
-    the official real-data layout (:mod:`airpose_lib.data.official_layout`) under ``root``.
+    the official real-data layout (:mod:`airpose_lib.data.sequences.layout`) under ``root``.
 
     Returns:
         a summary dict: ``root``, ``num_frames``, ``render_seconds``, ``frames_per_second``
@@ -58,8 +58,8 @@ def generate_sequence(config: SequenceConfig, root: str | Path, *, progress: boo
 
 
 def recording_detections(gt: Mapping[str, np.ndarray], config: SequenceConfig) -> dict:
-    """Both simulated detectors on a recording's ground truth (``data.detections``): name ->
-    :class:`~airpose_lib.data.detections.Detections`, seeded by ``config.detector_seed`` (default
+    """Both simulated detectors on a recording's ground truth (``data.sequences.detections``): name ->
+    :class:`~airpose_lib.data.sequences.detections.Detections`, seeded by ``config.detector_seed`` (default
     ``seed + 1``) and the detector's position."""
     det_seed = config.detector_seed if config.detector_seed is not None else config.seed + 1
     return {name: simulate_detections(gt, det, seed=[det_seed, k])
@@ -69,7 +69,7 @@ def recording_detections(gt: Mapping[str, np.ndarray], config: SequenceConfig) -
 def refresh_detections(root: str | Path, config: SequenceConfig) -> dict:
     """Re-simulate the detector files of a rendered recording from its ``ground_truth.npz`` (the
     images stay): what :func:`ensure_sequences` does when only the detector model changed
-    (:data:`~airpose_lib.data.detections.DETECTOR_VERSION`). Returns the new summaries."""
+    (:data:`~airpose_lib.data.sequences.detections.DETECTOR_VERSION`). Returns the new summaries."""
     root = Path(root)
     with np.load(root / "ground_truth.npz") as z:
         gt = {k: z[k] for k in z.files}

@@ -26,7 +26,7 @@ Reading (:func:`load_sequence`) conventions:
 * AlphaPose: several entries for one image -> the one with the highest ``score``. OpenPose:
   person 0.
 * Detector files come in the kit's formats (above) or the real-data release's per-frame dicts
-  (:mod:`airpose_lib.data.official_real`); this module reads both (:func:`detections_format`).
+  (:mod:`airpose_lib.data.official.real`); this module reads both (:func:`detections_format`).
 * The machines must have the same frame indices (else :class:`SequenceFormatError`, naming both
   folders; ``strict=False`` keeps the common frames). An OpenPose file must have an entry for
   every frame read (it has one per processed frame); an AlphaPose file whose last entry is more

@@ -15,7 +15,7 @@ item's 2D joints say.
   (``cropped=True``) or as full frames; the list files hold absolute paths of a fictitious author
   machine, so path remapping is exercised.
 * :func:`write_official_real_fixture`: a short two-drone recording with the release's dict-format
-  detection files and ArUco marker poses (:class:`~airpose_lib.data.sequences.layout.OfficialLayoutWriter`
+  detection files and ArUco marker poses (:class:`~airpose_lib.data.sequences.writer.OfficialLayoutWriter`
   writes only the kit's formats).
 
 Every file is written atomically.
@@ -34,7 +34,8 @@ import numpy as np
 from airpose_lib.atomic import atomic_path
 from airpose_lib.body.forward import rest_body
 from airpose_lib.data.official.synthetic import OFFICIAL_CROP_MARGIN, VAL_SUBJECTS, stored_image_box, subject_of
-from airpose_lib.data.sequences.layout import OfficialLayoutWriter, write_camera_calib
+from airpose_lib.data.sequences.layout import write_camera_calib
+from airpose_lib.data.sequences.writer import OfficialLayoutWriter
 from airpose_lib.data.still.poses import sample_body_pose
 from airpose_lib.data.still.scene import PersonSample, SceneConfig, body_world_pose, sample_cameras, sample_person
 

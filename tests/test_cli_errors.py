@@ -28,7 +28,7 @@ def _truncate(path: Path) -> Path:
 def inputs(tmp_path_factory) -> dict[str, Path]:
     """A tiny recording, a truncated copy of it, a truncated checkpoint and .npz, and paths that
     do not exist or cannot be created."""
-    from airpose_lib.data.sequences.layout import OfficialLayoutWriter
+    from airpose_lib.data.sequences.writer import OfficialLayoutWriter
 
     tmp = tmp_path_factory.mktemp("inputs")
     seq = tmp / "seq"

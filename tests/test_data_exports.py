@@ -24,7 +24,7 @@ def test_every_exported_name_is_the_object_of_its_module(package):
 
 def test_packages_and_the_recording_reader_import_no_torch():
     code = ("import sys\nimport airpose_lib.data, airpose_lib.data.sequences, airpose_lib.data.still, "
-            "airpose_lib.data.official\nfrom airpose_lib.data.sequences.layout import load_sequence\n"
+            "airpose_lib.data.official\nfrom airpose_lib.data.sequences.reader import load_sequence\n"
             "print('HEAVY', [m for m in ('torch', 'smplx', 'pyvista', 'vtk', 'cv2') if m in sys.modules])")
     res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60,
                          cwd=Path(__file__).resolve().parents[1])

@@ -182,7 +182,7 @@ def test_rendered_recording_markers_give_the_cameras(tmp_path, open_model_files)
     detected in both drones' frames, each camera's pose and UAV 2 in UAV 1 recovered against the
     generated truth."""
     from airpose_lib.data.sequences import SequenceConfig, SequenceRenderer, generate_sequence, simulate_sequence
-    from airpose_lib.data.sequences.layout import load_sequence
+    from airpose_lib.data.sequences.reader import load_sequence
     from airpose_lib.errors import ConfigError
 
     cfg = SequenceConfig(person="person2", n_frames=2, seed=5, markers=LAYOUT, anti_aliasing=False)
@@ -216,7 +216,7 @@ def test_rendered_recording_markers_give_the_cameras(tmp_path, open_model_files)
 
 def test_sequence_marker_poses_over_a_recording(board):
     """Frames of a recording in the official layout's shape (synthetic board views)."""
-    from airpose_lib.data.sequences.layout import Sequence
+    from airpose_lib.data.sequences.reader import Sequence
 
     cams = [_camera(*VIEWS[0]), _camera(*VIEWS[1])]
     Ks = np.stack([c[0] for c in cams])

@@ -19,13 +19,10 @@ from airpose_lib.data.sequences import (
     scale_intrinsics,
     simulate_sequence,
 )
-from airpose_lib.data.sequences.layout import (
-    OfficialLayoutWriter,
-    SequenceFormatError,
-    load_sequence,
-    read_camera_calib,
-)
+from airpose_lib.data.sequences.layout import SequenceFormatError, read_camera_calib
 from airpose_lib.data.sequences.motions import MotionScript, Segment, evaluate_motion, sample_script
+from airpose_lib.data.sequences.reader import load_sequence
+from airpose_lib.data.sequences.writer import OfficialLayoutWriter
 
 N_FRAMES = 75  # 2.5 s at 30 fps
 

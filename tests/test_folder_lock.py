@@ -89,7 +89,7 @@ def _finetune_inputs(tmp_path):
     import numpy as np
     import torch
 
-    from airpose_lib.data.sequences.layout import OfficialLayoutWriter
+    from airpose_lib.data.sequences.writer import OfficialLayoutWriter
     from airpose_lib.engine.checkpoint import save_checkpoint
     from airpose_lib.model import build_model
     from airpose_lib.train import TrainConfig

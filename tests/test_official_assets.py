@@ -37,7 +37,8 @@ from airpose_lib.data.official.synthetic import (
     read_official_sample,
     remap_official_path,
 )
-from airpose_lib.data.sequences.layout import OfficialLayoutWriter, SequenceFormatError
+from airpose_lib.data.sequences.layout import SequenceFormatError
+from airpose_lib.data.sequences.writer import OfficialLayoutWriter
 from airpose_lib.data.still.dataset import PER_VIEW_KEYS, SAMPLE_KEYS, denormalize_images
 from airpose_lib.model import AirPoseNet
 from airpose_lib.model.official import (

@@ -62,7 +62,7 @@ def _assert_nothing_ran(marker: Path) -> None:
 
 def _crafted_recording(tmp_path: Path) -> tuple[Path, Path]:
     """A two-frame recording whose machine_1/openpose_res.pkl is crafted; (folder, marker file)."""
-    from airpose_lib.data.sequences.layout import OfficialLayoutWriter
+    from airpose_lib.data.sequences.writer import OfficialLayoutWriter
 
     seq = tmp_path / "seq"
     w = OfficialLayoutWriter(seq, num_views=2)
@@ -76,7 +76,8 @@ def _crafted_recording(tmp_path: Path) -> tuple[Path, Path]:
 
 
 def test_detector_file_of_a_recording_runs_nothing(tmp_path):
-    from airpose_lib.data.sequences.layout import SequenceFormatError, load_sequence
+    from airpose_lib.data.sequences.layout import SequenceFormatError
+    from airpose_lib.data.sequences.reader import load_sequence
 
     seq, marker = _crafted_recording(tmp_path)
     with pytest.raises(SequenceFormatError, match="openpose_res.pkl"):

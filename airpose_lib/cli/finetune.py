@@ -104,7 +104,7 @@ def add_finetune(sub) -> None:
 
 # -- predict --------------------------------------------------------------------------------------
 def _cmd_predict(args: argparse.Namespace) -> int:
-    from airpose_lib.data.sequences.layout import load_sequence
+    from airpose_lib.data.sequences.reader import load_sequence
     from airpose_lib.finetune.network import load_sized_network
     from airpose_lib.finetune.predict import frames_in_range, predict_sequence, save_predictions
 

@@ -5,7 +5,8 @@
   augmentation; ``airpose data generate``).
 * ``sequences/``: recordings, kit or real: the simulated ones (motions, drones, detectors,
   markers, frames; ``airpose data sequence``) and the one folder layout every recording is
-  written in and read from (``sequences.layout``: ``load_sequence``).
+  written in and read from (``sequences.layout``, ``sequences.writer``, ``sequences.reader``:
+  ``load_sequence``; the detector files' formats in ``sequences.detector_files``).
 * ``official/``: the authors' releases (``official.synthetic``, ``official.real``).
 
 ``network_input`` (person box, previous-box rule, crop, normalisation) is shared by the still
@@ -33,7 +34,9 @@ _EXPORTS = {
     # recordings
     **dict.fromkeys(("SequenceConfig", "profile_sequences"), "sequences.config"),
     **dict.fromkeys(("default_sequence_root", "ensure_sequences"), "sequences.cache"),
-    **dict.fromkeys(("Sequence", "SequenceFormatError", "OfficialLayoutWriter", "load_sequence"), "sequences.layout"),
+    "SequenceFormatError": "sequences.layout",
+    "OfficialLayoutWriter": "sequences.writer",
+    **dict.fromkeys(("Sequence", "load_sequence"), "sequences.reader"),
     # the authors' releases
     "OfficialSyntheticDataset": "official.synthetic",
     "load_official_real": "official.real",

@@ -571,7 +571,7 @@ def _optimise(cfg, prior, kbody, xy, w, gather, K, start, kept, progress) -> Air
 
 
 def fit_sequence(sequence, init: Mapping[str, object], **kwargs) -> AirPosePlusResult:
-    """AirPose+ on a kit sequence (:class:`airpose_lib.data.sequences.layout.Sequence` or anything
+    """AirPose+ on a kit sequence (:class:`airpose_lib.data.sequences.reader.Sequence` or anything
     with ``keypoints`` {detector: (F, V, J, 3)} and ``K`` (V, 3, 3)); kwargs as :func:`airpose_plus`."""
     if not hasattr(sequence, "keypoints") or not hasattr(sequence, "K"):
         raise TypeError("fit_sequence needs an object with .keypoints {detector: (F, V, J, 3)} and .K (V, 3, 3)")

@@ -45,13 +45,14 @@ Modules: ``config`` (cameras, persons, flights, :class:`SequenceConfig`, a profi
 ``motions`` (the person's motion scripts), ``flight`` (the drones' paths and camera poses),
 ``simulate`` (ground truth without pixels), ``detections`` (the simulated keypoint detectors),
 ``renderer`` (the frames), ``field`` (the opt-in field camera pipeline on them), ``markers``
-(ArUco markers on the ground: detection, camera poses, UAV 2 in UAV 1), ``layout`` (every
-recording's folder, kit or real: the writer and the one reader, ``load_sequence``),
-``recording`` (one recording on disk, detector files), ``cache`` (a profile's recordings, made
-only when missing or outdated).
+(ArUco markers on the ground: detection, camera poses, UAV 2 in UAV 1), ``recording`` (one
+recording on disk, detector files), ``cache`` (a profile's recordings, made only when missing or
+outdated). Every recording, kit or real, is in one folder layout: ``layout`` (its files and
+names, the calibration), ``writer`` (:class:`~.writer.OfficialLayoutWriter`), ``reader``
+(``load_sequence``), ``detector_files`` (the detector files' formats, one reader per format).
 
 The names below are imported from their module on first use (``import
-airpose_lib.data.sequences.layout`` stays light: no torch, no VTK).
+airpose_lib.data.sequences.reader`` stays light: no torch, no VTK).
 """
 from __future__ import annotations
 

@@ -61,7 +61,7 @@ def ensure_sequences(profile: str | None = None, root: str | Path | None = None,
         force: regenerate even if complete.
     Returns:
         name -> sequence folder (read it with
-        :func:`airpose_lib.data.sequences.layout.load_sequence`).
+        :func:`airpose_lib.data.sequences.reader.load_sequence`).
     """
     # A profile gives both the settings and the default folder, as for the still frames
     # (data.still.generate.ensure_still_dataset); explicit settings need an explicit folder.

@@ -261,7 +261,7 @@ def sequence_marker_poses(seq, layout: MarkerLayout | None = None, min_markers: 
     """Each drone's camera pose from the markers in every frame of a recording.
 
     Args:
-        seq: a recording (:class:`~airpose_lib.data.sequences.layout.Sequence`: ``frames``,
+        seq: a recording (:class:`~airpose_lib.data.sequences.reader.Sequence`: ``frames``,
             ``images[view][i]`` RGB, ``K`` (V, 3, 3) of the stored images).
         layout: the markers on its ground; default: a generated recording's own
             (``SequenceConfig.markers`` in its ``sequence.json``).

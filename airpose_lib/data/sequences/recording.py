@@ -15,9 +15,12 @@ from airpose_lib.progress import progress_bar
 
 from .config import SEQUENCE_GENERATOR_VERSION, SequenceConfig
 from .detections import DEFAULT_DETECTORS, DETECTOR_VERSION, detection_summary, simulate_detections
-from .layout import DETECTOR_FILES, OfficialLayoutWriter, load_sequence
+from .detector_files import write_detector_file
+from .layout import DETECTOR_FILES
+from .reader import load_sequence
 from .renderer import SequenceRenderer
 from .simulate import simulate_sequence
+from .writer import OfficialLayoutWriter
 
 __all__ = ["generate_sequence", "recording_detections", "refresh_detections"]
 
@@ -78,8 +81,7 @@ def refresh_detections(root: str | Path, config: SequenceConfig) -> dict:
     for name, det in detections.items():
         for v in range(config.num_views):
             path = root / f"machine_{v + 1}" / DETECTOR_FILES[name][0]
-            w = OfficialLayoutWriter
-            (w._write_openpose if name == "openpose" else w._write_alphapose)(path, frames, det.keypoints[:, v])
+            write_detector_file(name, path, frames, det.keypoints[:, v])
     meta_path = root / "sequence.json"
     meta = json.loads(meta_path.read_text())
     meta.update(detector_version=DETECTOR_VERSION,

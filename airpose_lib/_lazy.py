@@ -9,17 +9,16 @@ __all__ = ["lazy_namespace"]
 
 
 def lazy_namespace(package: str, namespace: dict, modules: Sequence[str],
-                   exports: Mapping[str, str] | None = None,
-                   skip_failing: bool = False) -> tuple[Callable, Callable]:
+                   exports: Mapping[str, str] | None = None) -> tuple[Callable, Callable]:
     """Module-level ``__getattr__`` and ``__dir__`` for ``package`` (PEP 562).
 
     Args:
         package: the package's ``__name__``.
         namespace: its ``globals()`` (a resolved name is cached there).
-        modules: submodules searched in order for a name in their ``__all__``.
-        exports: name -> submodule for names looked up directly, before the search.
-        skip_failing: a submodule that fails to import is passed over in the search (e.g. the
-            renderer without VTK) instead of raising its ImportError.
+        modules: submodules searched in order for a name in their ``__all__`` (``()``: no
+            search, only ``exports``).
+        exports: name -> submodule (dotted below ``package``) for names looked up directly,
+            before the search.
     """
     exports = dict(exports or {})
 
@@ -31,12 +30,7 @@ def lazy_namespace(package: str, namespace: dict, modules: Sequence[str],
         module = exports.get(name)
         if module is None and not name.startswith("_"):
             for candidate in modules:
-                try:
-                    mod = importlib.import_module(f"{package}.{candidate}")
-                except ImportError:
-                    if not skip_failing:
-                        raise
-                    continue
+                mod = importlib.import_module(f"{package}.{candidate}")
                 if name in getattr(mod, "__all__", ()):
                     module = candidate
                     break

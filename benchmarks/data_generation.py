@@ -23,8 +23,8 @@ import time
 
 def _worker(crop: int, samples: int, seed: int, ready, start, results) -> None:
     os.environ.setdefault("LP_NUM_THREADS", "1")
-    from airpose_lib.data.still_config import GenerationConfig
-    from airpose_lib.data.still_frames import StillFrameGenerator, _limit_threads
+    from airpose_lib.data.still.config import GenerationConfig
+    from airpose_lib.data.still.frames import StillFrameGenerator, _limit_threads
 
     _limit_threads()
     cfg = GenerationConfig(num_samples=samples + 4, shard_size=samples, crop_size=crop, seed=seed)
@@ -62,7 +62,7 @@ def measure(crop: int, workers: int, samples: int) -> dict:
 
 
 def end_to_end(crop: int, workers: int, samples: int) -> tuple[float, float]:
-    from airpose_lib.data.generate import GenerationConfig, generate_still_dataset
+    from airpose_lib.data.still.generate import GenerationConfig, generate_still_dataset
 
     cfg = GenerationConfig(num_samples=samples, shard_size=max(1, samples // (2 * workers)), crop_size=crop)
     with tempfile.TemporaryDirectory() as tmp:

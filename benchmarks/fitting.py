@@ -41,7 +41,7 @@ def synthetic_sequence(body, F: int, seed: int = 0, noise_px: float = 2.0):
     import roma
 
     from airpose_lib.body import BODY_25_FROM_SMPLX, COCO18_FROM_SMPLX
-    from airpose_lib.data.poses import sample_body_pose
+    from airpose_lib.data.still.poses import sample_body_pose
     from airpose_lib.geometry import project_points
 
     rng = np.random.default_rng(seed)

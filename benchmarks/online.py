@@ -108,7 +108,7 @@ class Accuracy:
         self.body = load_body_model("open", "neutral")
         self.gt = None
         if has_gt:
-            from airpose_lib.data.official_layout import load_sequence
+            from airpose_lib.data.sequences.reader import load_sequence
 
             self.gt = load_sequence(source, detectors=("openpose",), missing_detections="zero").ground_truth
 

@@ -65,7 +65,7 @@ def main() -> int:
 
     import pandas as pd
 
-    from airpose_lib.data.dataset import StillFrameDataset
+    from airpose_lib.data.still.dataset import StillFrameDataset
     from airpose_lib.eval import paper_table, per_view_table
     from airpose_lib.model.quantize import QuantSettings
     from airpose_lib.runtime.backends import BackendSpec

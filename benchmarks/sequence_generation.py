@@ -24,8 +24,8 @@ def main() -> None:
     args = parser.parse_args()
     torch.set_num_threads(args.threads)
 
-    from airpose_lib.data.detections import DEFAULT_DETECTORS, simulate_detections
     from airpose_lib.data.sequences import SequenceConfig, SequenceRenderer, simulate_sequence
+    from airpose_lib.data.sequences.detections import DEFAULT_DETECTORS, simulate_detections
 
     rows = []
     cfg = SequenceConfig(person="person2", n_frames=args.frames, seed=0)

@@ -19,7 +19,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # this checkout's 
 
 import pandas as pd  # noqa: E402
 
-from airpose_lib.data.official_layout import load_sequence  # noqa: E402
+from airpose_lib.data.sequences.reader import load_sequence  # noqa: E402
 from airpose_lib.errors import UserError  # noqa: E402
 from airpose_lib.experiments.detector_report import detector_report, write_report  # noqa: E402
 

@@ -3,11 +3,11 @@
 
 Runs in MediaPipe's own environment, not the kit's (MediaPipe pins ``protobuf<5``, onnx needs a
 newer one; ``environment.md``, "The MediaPipe detector"). It imports only the kit's torch-free
-modules (``data.official_layout``, ``data.network_input``, ``data.mediapipe_pose``: numpy and
+modules (``data.sequences.layout``, ``.reader``, ``.writer``, ``data.network_input``, ``data.sequences.mediapipe_pose``: numpy and
 OpenCV) from this checkout.
 
 Per frame and view: a square crop around a person box (``--crop``, see
-``airpose_lib.data.mediapipe_pose.CROP_SOURCES``), ``--crop-scale`` times the box's longer side,
+``airpose_lib.data.sequences.mediapipe_pose.CROP_SOURCES``), ``--crop-scale`` times the box's longer side,
 resized to ``--input-size`` px, goes through ``mediapipe.solutions.pose.Pose`` (static images:
 every frame on its own, so a frame's result never depends on the previous one's); its 33
 landmarks become BODY_25 keypoints in full-frame pixels.
@@ -32,7 +32,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # the kit's torch-
 
 import numpy as np  # noqa: E402
 
-from airpose_lib.data.mediapipe_pose import (  # noqa: E402
+from airpose_lib.data.sequences.layout import DETECTOR_FILES  # noqa: E402
+from airpose_lib.data.sequences.mediapipe_pose import (  # noqa: E402
     CROP_SOURCES,
     body25_from_landmarks,
     crop_boxes,
@@ -41,7 +42,7 @@ from airpose_lib.data.mediapipe_pose import (  # noqa: E402
     square_crop,
     write_body25,
 )
-from airpose_lib.data.official_layout import DETECTOR_FILES, load_sequence  # noqa: E402
+from airpose_lib.data.sequences.reader import load_sequence  # noqa: E402
 from airpose_lib.errors import UserError  # noqa: E402
 
 OUTPUT = DETECTOR_FILES["mediapipe"][0]

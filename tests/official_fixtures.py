@@ -1,21 +1,21 @@
 """Test helpers: tiny datasets in the official AirPose formats, made from the kit's own people and cameras.
 
-They let the loaders of :mod:`~airpose_lib.data.official_synthetic` and
-:mod:`~airpose_lib.data.official_real` be tested without the authors' data (the formats are
+They let the loaders of :mod:`~airpose_lib.data.official.synthetic` and
+:mod:`~airpose_lib.data.official.real` be tested without the authors' data (the formats are
 described there). Images are cheap: black frames with each of the 22 projected body joints drawn
 as a filled disc of its own colour, so a test can check that a crop puts every disc where the
 item's 2D joints say.
 
-* :func:`write_official_synthetic_fixture`: subjects from :func:`airpose_lib.data.scene.sample_person`
+* :func:`write_official_synthetic_fixture`: subjects from :func:`airpose_lib.data.still.scene.sample_person`
   (one pose and shape per subject, as each official subject is one posed scan) placed at several
   positions, each seen by independently drawn drone cameras
-  (:func:`~airpose_lib.data.scene.sample_cameras`, f = 1475 px, principal point at ``(W/2, H/2)``
+  (:func:`~airpose_lib.data.still.scene.sample_cameras`, f = 1475 px, principal point at ``(W/2, H/2)``
   like the authors' AirSim intrinsics). Per-sample pkls hold the keys and shapes the authors'
   ``create_aerial_people_new.py`` writes; images are stored pre-cropped like the release
   (``cropped=True``) or as full frames; the list files hold absolute paths of a fictitious author
   machine, so path remapping is exercised.
 * :func:`write_official_real_fixture`: a short two-drone recording with the release's dict-format
-  detection files and ArUco marker poses (:class:`~airpose_lib.data.official_layout.OfficialLayoutWriter`
+  detection files and ArUco marker poses (:class:`~airpose_lib.data.sequences.writer.OfficialLayoutWriter`
   writes only the kit's formats).
 
 Every file is written atomically.
@@ -33,10 +33,11 @@ import numpy as np
 
 from airpose_lib.atomic import atomic_path
 from airpose_lib.body.forward import rest_body
-from airpose_lib.data.official_layout import OfficialLayoutWriter, write_camera_calib
-from airpose_lib.data.official_synthetic import OFFICIAL_CROP_MARGIN, VAL_SUBJECTS, stored_image_box, subject_of
-from airpose_lib.data.poses import sample_body_pose
-from airpose_lib.data.scene import PersonSample, SceneConfig, body_world_pose, sample_cameras, sample_person
+from airpose_lib.data.official.synthetic import OFFICIAL_CROP_MARGIN, VAL_SUBJECTS, stored_image_box, subject_of
+from airpose_lib.data.sequences.layout import write_camera_calib
+from airpose_lib.data.sequences.writer import OfficialLayoutWriter
+from airpose_lib.data.still.poses import sample_body_pose
+from airpose_lib.data.still.scene import PersonSample, SceneConfig, body_world_pose, sample_cameras, sample_person
 
 __all__ = [
     "AUTHOR_ROOT",

@@ -28,7 +28,7 @@ def _truncate(path: Path) -> Path:
 def inputs(tmp_path_factory) -> dict[str, Path]:
     """A tiny recording, a truncated copy of it, a truncated checkpoint and .npz, and paths that
     do not exist or cannot be created."""
-    from airpose_lib.data.official_layout import OfficialLayoutWriter
+    from airpose_lib.data.sequences.writer import OfficialLayoutWriter
 
     tmp = tmp_path_factory.mktemp("inputs")
     seq = tmp / "seq"
@@ -297,7 +297,7 @@ def test_every_kit_error_is_a_user_error_or_listed_as_internal():
              if issubclass(cls, UserError) == (cls.__name__ in INTERNAL_ERRORS)]
     assert not wrong, f"decide: derive from airpose_lib.errors.UserError or add to INTERNAL_ERRORS: {wrong}"
     # the built-in bases stay, so that `except ValueError` / `except FileNotFoundError` callers keep working
-    assert issubclass(classes["airpose_lib.data.official_layout:SequenceFormatError"], ValueError)
+    assert issubclass(classes["airpose_lib.data.sequences.layout:SequenceFormatError"], ValueError)
     assert issubclass(classes["airpose_lib.prior.checkpoint:PriorError"], FileNotFoundError)
     assert issubclass(classes["airpose_lib.assets.fetch:ChecksumError"], RuntimeError)
 

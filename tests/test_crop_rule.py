@@ -2,7 +2,7 @@
 
 Training crops: the still-frame generator renders the crop and calls ``geometry.pad_outside_box``
 (here: the same crop made by ``cv2.warpAffine`` of a full image, then padded), and the official
-loader's ``data.official_synthetic.crop_image``. Inference: ``data.network_input.crop_input`` (the
+loader's ``data.official.synthetic.crop_image``. Inference: ``data.network_input.crop_input`` (the
 drones' and fine-tuning's). Reference for the edge: hand-computed columns.
 """
 from __future__ import annotations
@@ -13,7 +13,7 @@ import pytest
 import torch
 
 from airpose_lib.data.network_input import IMAGENET_MEAN, IMAGENET_STD, crop_input, network_camera
-from airpose_lib.data.official_synthetic import crop_image
+from airpose_lib.data.official.synthetic import crop_image
 from airpose_lib.geometry import box_in_crop, crop_affine_matrix, pad_outside_box
 
 S = 64

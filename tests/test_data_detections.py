@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from airpose_lib.body.joint_sets import BODY_25_NAMES, COCO18_NAMES
-from airpose_lib.data.detections import (
+from airpose_lib.data.sequences.detections import (
     ALPHAPOSE,
     OPENPOSE,
     DetectorModel,

@@ -14,12 +14,12 @@ import pytest
 import yaml
 
 from airpose_lib.assets.verify import verify
-from airpose_lib.data import manifest as manifest_mod
-from airpose_lib.data.dataset import StillFrameDataset
-from airpose_lib.data.generate import GenerationConfig, ensure_still_dataset, generate_still_dataset
-from airpose_lib.data.manifest import ShardIntegrityError, record_manifest
-from airpose_lib.data.scene import SceneConfig
-from airpose_lib.data.shards import shard_name
+from airpose_lib.data.still import manifest as manifest_mod
+from airpose_lib.data.still.dataset import StillFrameDataset
+from airpose_lib.data.still.generate import GenerationConfig, ensure_still_dataset, generate_still_dataset
+from airpose_lib.data.still.manifest import ShardIntegrityError, record_manifest
+from airpose_lib.data.still.scene import SceneConfig
+from airpose_lib.data.still.shards import shard_name
 from airpose_lib.folder_lock import FolderBusyError, folder_lock
 from airpose_lib.train.features import FeatureDataset
 
@@ -168,9 +168,9 @@ def test_ensure_waits_for_a_dataset_being_generated_and_does_not_make_it_again(t
     """Two commands that need the same dataset on a fresh cache: the second waits for the first."""
     root = tmp_path / "data"
     code = textwrap.dedent(f"""
-        from airpose_lib.data.generate import generate_still_dataset
-        from airpose_lib.data.scene import SceneConfig
-        from airpose_lib.data.generate import GenerationConfig
+        from airpose_lib.data.still.generate import generate_still_dataset
+        from airpose_lib.data.still.scene import SceneConfig
+        from airpose_lib.data.still.generate import GenerationConfig
         from airpose_lib.folder_lock import folder_lock
         import time
         cfg = GenerationConfig(num_samples=8, shard_size=4, crop_size=64, seed=11,

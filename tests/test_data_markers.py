@@ -1,4 +1,4 @@
-"""ArUco markers on the ground as the drones' ground truth (``data.markers``): synthetic views by
+"""ArUco markers on the ground as the drones' ground truth (``data.sequences.markers``): synthetic views by
 homography, detection with ``cv2.aruco``, camera poses against the known ones."""
 from __future__ import annotations
 
@@ -10,7 +10,9 @@ import numpy as np
 import pytest
 import torch
 
-from airpose_lib.data.markers import (
+from airpose_lib.data.sequences import PAPER_CAMERAS, look_at_rotation, scale_intrinsics
+from airpose_lib.data.sequences.field import FieldConfig, field_frame, field_rng
+from airpose_lib.data.sequences.markers import (
     R_WORLD_MARKER,
     MarkerLayout,
     camera_pose_from_markers,
@@ -24,8 +26,6 @@ from airpose_lib.data.markers import (
     relative_camera_from_markers,
     sequence_marker_poses,
 )
-from airpose_lib.data.sequences import PAPER_CAMERAS, look_at_rotation, scale_intrinsics
-from airpose_lib.data.sequences.field import FieldConfig, field_frame, field_rng
 from airpose_lib.geometry import geodesic_angle
 
 LAYOUT = MarkerLayout()
@@ -181,8 +181,8 @@ def test_rendered_recording_markers_give_the_cameras(tmp_path, open_model_files)
     """Markers pasted into a recording's ground, written and read back in the official layout:
     detected in both drones' frames, each camera's pose and UAV 2 in UAV 1 recovered against the
     generated truth."""
-    from airpose_lib.data.official_layout import load_sequence
     from airpose_lib.data.sequences import SequenceConfig, SequenceRenderer, generate_sequence, simulate_sequence
+    from airpose_lib.data.sequences.reader import load_sequence
     from airpose_lib.errors import ConfigError
 
     cfg = SequenceConfig(person="person2", n_frames=2, seed=5, markers=LAYOUT, anti_aliasing=False)
@@ -216,7 +216,7 @@ def test_rendered_recording_markers_give_the_cameras(tmp_path, open_model_files)
 
 def test_sequence_marker_poses_over_a_recording(board):
     """Frames of a recording in the official layout's shape (synthetic board views)."""
-    from airpose_lib.data.official_layout import Sequence
+    from airpose_lib.data.sequences.reader import Sequence
 
     cams = [_camera(*VIEWS[0]), _camera(*VIEWS[1])]
     Ks = np.stack([c[0] for c in cams])
@@ -242,7 +242,7 @@ def test_relative_cameras_from_the_official_marker_file(tmp_path):
     from marker 0's pose in both drones, against the poses written."""
     from official_fixtures import write_official_real_fixture
 
-    from airpose_lib.data.official_real import load_marker_poses
+    from airpose_lib.data.official.real import load_marker_poses
 
     truth = write_official_real_fixture(tmp_path, frames=[8000, 8001, 8002], missing={"marker": [(1, 8001)]})
     R12, t12, valid = marker_relative_cameras(load_marker_poses(tmp_path, [8000, 8001, 8002]))

@@ -11,7 +11,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from airpose_lib.data.mediapipe_pose import (
+from airpose_lib.data.sequences.mediapipe_pose import (
     body25_from_landmarks,
     crop_boxes,
     crop_image,
@@ -19,7 +19,8 @@ from airpose_lib.data.mediapipe_pose import (
     square_crop,
     write_body25,
 )
-from airpose_lib.data.official_layout import OfficialLayoutWriter, load_sequence
+from airpose_lib.data.sequences.reader import load_sequence
+from airpose_lib.data.sequences.writer import OfficialLayoutWriter
 
 
 def _landmarks():

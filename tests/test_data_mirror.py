@@ -7,10 +7,10 @@ import torch
 
 from airpose_lib.body import BODY22_NAMES, BODY_25_FROM_SMPLX, BODY_25_NAMES, GENDER_NAMES, load_body_model
 from airpose_lib.body.forward import axis_angle_rotations, cached_body
-from airpose_lib.data.dataset import SAMPLE_KEYS, StillFrameDataset, swap_views
-from airpose_lib.data.generate import GenerationConfig, generate_still_dataset
-from airpose_lib.data.mirror import BODY22_MIRROR, BODY_25_MIRROR, mirror_sample
-from airpose_lib.data.scene import SceneConfig
+from airpose_lib.data.still.dataset import SAMPLE_KEYS, StillFrameDataset, swap_views
+from airpose_lib.data.still.generate import GenerationConfig, generate_still_dataset
+from airpose_lib.data.still.mirror import BODY22_MIRROR, BODY_25_MIRROR, mirror_sample
+from airpose_lib.data.still.scene import SceneConfig
 from airpose_lib.geometry import body_in_camera, full_to_crop_pixels, project_points
 
 S = 48
@@ -71,7 +71,7 @@ def test_mirrored_sample_is_the_mirrored_scene(dataset, models):
         x = {k: v.double() if v.is_floating_point() else v for k, v in item.items()}
         body = cached_body(models[GENDER_NAMES[int(item["gender"])]], mesh=False)
         j, _ = body(axis_angle_rotations(m["theta"]), m["beta"], m["phi"], m["tau"], vertices=False)  # (V, 76, 3)
-        # the open body is left-right symmetric to < 0.3 mm at the joints (module docstring of data.mirror)
+        # the open body is left-right symmetric to < 0.3 mm at the joints (module docstring of data.still.mirror)
         assert torch.allclose(j[:, :22], m["j3d_cam"], atol=5e-4)
         assert torch.allclose(project_points(j[:, :22], m["K"]), m["j2d"], atol=0.1)
         kp = project_points(j[:, list(BODY_25_FROM_SMPLX)], m["K"])

@@ -8,8 +8,8 @@ import torch
 
 from airpose_lib.body import load_body_model, stature
 from airpose_lib.body.forward import rest_body
-from airpose_lib.data.scene import SceneConfig, sample_cameras, sample_person
-from airpose_lib.data.still_config import profile_config
+from airpose_lib.data.still.config import profile_config
+from airpose_lib.data.still.scene import SceneConfig, sample_cameras, sample_person
 from airpose_lib.errors import ConfigError
 
 

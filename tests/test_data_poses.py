@@ -6,7 +6,7 @@ import pytest
 
 from airpose_lib.body import joint_index
 from airpose_lib.body.forward import rest_body
-from airpose_lib.data.poses import (
+from airpose_lib.data.still.poses import (
     JOINT_LIMITS_DEG,
     POSE_JOINT_NAMES,
     PRIMITIVES,

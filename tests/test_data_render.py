@@ -7,8 +7,8 @@ import pytest
 import pyvista as pv
 import torch
 
-from airpose_lib.data.render import SceneRenderer, ground_textures
-from airpose_lib.data.scene import Distractor, EnvironmentSample, SceneConfig, look_at_extrinsics
+from airpose_lib.data.still.render import SceneRenderer, ground_textures
+from airpose_lib.data.still.scene import Distractor, EnvironmentSample, SceneConfig, look_at_extrinsics
 from airpose_lib.geometry import box_in_crop, crop_intrinsics, full_to_crop_pixels, pad_outside_box
 
 

@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 import torch
 
-from airpose_lib.data.appearance import REGIONS, BodyPaint, body_regions, sample_appearance
-from airpose_lib.data.generate import GenerationConfig, profile_config
-from airpose_lib.data.manifest import DatasetError
-from airpose_lib.data.scene import (
+from airpose_lib.data.still.appearance import REGIONS, BodyPaint, body_regions, sample_appearance
+from airpose_lib.data.still.generate import GenerationConfig, profile_config
+from airpose_lib.data.still.manifest import DatasetError
+from airpose_lib.data.still.scene import (
     PersonSample,
     SceneConfig,
     body_world_pose,

@@ -11,13 +11,6 @@ import cv2
 import numpy as np
 import pytest
 
-from airpose_lib.data.motions import MotionScript, Segment, evaluate_motion, sample_script
-from airpose_lib.data.official_layout import (
-    OfficialLayoutWriter,
-    SequenceFormatError,
-    load_sequence,
-    read_camera_calib,
-)
 from airpose_lib.data.sequences import (
     PAPER_CAMERAS,
     PERSONS,
@@ -26,6 +19,10 @@ from airpose_lib.data.sequences import (
     scale_intrinsics,
     simulate_sequence,
 )
+from airpose_lib.data.sequences.layout import SequenceFormatError, read_camera_calib
+from airpose_lib.data.sequences.motions import MotionScript, Segment, evaluate_motion, sample_script
+from airpose_lib.data.sequences.reader import load_sequence
+from airpose_lib.data.sequences.writer import OfficialLayoutWriter
 
 N_FRAMES = 75  # 2.5 s at 30 fps
 
@@ -264,8 +261,8 @@ def test_generate_and_load_end_to_end(tmp_path, open_model_files):
     # images stay (no re-rendering), and the detections equal a fresh simulation's
     import json
 
-    from airpose_lib.data.detections import DETECTOR_VERSION
     from airpose_lib.data.sequences import recording_detections, simulate_sequence
+    from airpose_lib.data.sequences.detections import DETECTOR_VERSION
 
     meta_path = paths["p1"] / "sequence.json"
     meta = json.loads(meta_path.read_text())

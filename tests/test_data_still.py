@@ -8,12 +8,18 @@ import pytest
 import torch
 
 from airpose_lib.body import BODY_25_FROM_SMPLX, GENDER_NAMES, load_body_model
-from airpose_lib.data.dataset import PER_VIEW_KEYS, SAMPLE_KEYS, StillFrameDataset, decode_image, denormalize_images
-from airpose_lib.data.generate import GenerationConfig, generate_still_dataset
-from airpose_lib.data.manifest import DatasetError, ShardIntegrityError, load_manifest
-from airpose_lib.data.render import SceneRenderer
-from airpose_lib.data.scene import SceneConfig
-from airpose_lib.data.shards import read_shard, shard_name
+from airpose_lib.data.still.dataset import (
+    PER_VIEW_KEYS,
+    SAMPLE_KEYS,
+    StillFrameDataset,
+    decode_image,
+    denormalize_images,
+)
+from airpose_lib.data.still.generate import GenerationConfig, generate_still_dataset
+from airpose_lib.data.still.manifest import DatasetError, ShardIntegrityError, load_manifest
+from airpose_lib.data.still.render import SceneRenderer
+from airpose_lib.data.still.scene import SceneConfig
+from airpose_lib.data.still.shards import read_shard, shard_name
 from airpose_lib.errors import ConfigError
 from airpose_lib.geometry import (
     body_in_camera,
@@ -95,7 +101,7 @@ def test_shard_splits():
 def test_validation_split(tmp_path):
     """The validation shards are made like the test shards (test-protocol and tight crops, their own
     seeds), recorded in the manifest, and read by StillFrameDataset("val")."""
-    from airpose_lib.data.dataset import StillFrameDataset
+    from airpose_lib.data.still.dataset import StillFrameDataset
 
     cfg = GenerationConfig(num_samples=6, shard_size=2, crop_size=32, seed=3, val_fraction=0.3)
     m = _generate(tmp_path / "d", cfg)

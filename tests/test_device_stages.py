@@ -146,7 +146,7 @@ def test_airpose_plus_on_cuda_matches_the_cpu(problem):
 # -- the prior ------------------------------------------------------------------------------------
 @pytest.fixture(scope="module")
 def corpus():
-    from airpose_lib.data.poses import sample_body_pose
+    from airpose_lib.data.still.poses import sample_body_pose
 
     return sample_body_pose(np.random.default_rng(0), 300).astype(np.float32)
 

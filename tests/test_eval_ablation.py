@@ -110,7 +110,7 @@ def test_a_finished_run_is_reused_only_with_the_same_config(tmp_path):
 
     import yaml
 
-    from airpose_lib.data.manifest import DATASET_KIND
+    from airpose_lib.data.still.manifest import DATASET_KIND
     from airpose_lib.train.ablation import _finished_run
     from airpose_lib.train.config import load_train_config
     from airpose_lib.train.pretrain import profile_backbone_key

@@ -295,7 +295,7 @@ def test_detection_boxes_reuse_and_flag():
 
 @pytest.mark.parametrize("variant", ["airpose", "baseline"])
 def test_predict_sequence_roundtrip_and_airpose_plus_init(variant, request, smoke_root, tmp_path):
-    from airpose_lib.data.official_layout import load_sequence
+    from airpose_lib.data.sequences.reader import load_sequence
     from airpose_lib.fitting import init_from_views
     from airpose_lib.model import to_smplx_params
     from airpose_lib.runtime.offline import offline_inputs
@@ -598,7 +598,7 @@ def test_model_selection_never_reads_the_test_person(tiny_ckpt, smoke_root, tmp_
     With the test recording replaced by NaN the choice, the weights and the held-out losses are the same."""
     import types
 
-    from airpose_lib.data.official_layout import load_sequence
+    from airpose_lib.data.sequences.reader import load_sequence
     from airpose_lib.experiments.recordings import ground_truth_diagnostic
     from airpose_lib.finetune.predict import sequence_features
     from airpose_lib.train import load_checkpoint
@@ -650,7 +650,7 @@ def test_true_targets_keep_what_a_perfect_detector_sees():
 
 
 def test_finetune_on_true_keypoints_uses_the_ground_truth(tiny_ckpt, smoke_root, tmp_path, body32, tiny_prior):
-    from airpose_lib.data.official_layout import load_sequence
+    from airpose_lib.data.sequences.reader import load_sequence
     from airpose_lib.finetune.keypoints import true_targets
     from airpose_lib.finetune.predict import image_sizes
     from airpose_lib.finetune.train import finetune_done
@@ -674,8 +674,8 @@ def test_finetune_on_true_keypoints_uses_the_ground_truth(tiny_ckpt, smoke_root,
 def test_finetune_on_mediapipe_puts_it_in_openposes_place(tiny_ckpt, smoke_root, tmp_path, body32, tiny_prior):
     """targets="mediapipe": the agreement filter with MediaPipe's keypoints instead of OpenPose's.
     MediaPipe here: OpenPose's keypoints 40 px to the right (a linked copy of the recording)."""
-    from airpose_lib.data.mediapipe_pose import write_body25
-    from airpose_lib.data.official_layout import load_sequence
+    from airpose_lib.data.sequences.mediapipe_pose import write_body25
+    from airpose_lib.data.sequences.reader import load_sequence
     from airpose_lib.finetune import resolution_scales
     from airpose_lib.finetune.keypoints import agreement_masks, agreement_summary
     from airpose_lib.finetune.predict import image_sizes

@@ -43,7 +43,7 @@ def body64(open_model_files):
 @pytest.fixture(scope="module")
 def prior():
     """A prior trained briefly on the kit's pose sampler (the fit needs a meaningful decoder)."""
-    from airpose_lib.data.poses import sample_body_pose
+    from airpose_lib.data.still.poses import sample_body_pose
 
     n = torch.get_num_threads()
     torch.set_num_threads(1)
@@ -79,7 +79,7 @@ def _project_cv(X, K):
 def _scene(body, F=F_SEQ, seed=0, noise_px=1.5):
     """Ground truth: sampler poses interpolated over F frames, a walking/turning root, two cameras
     ~10 m away (one high and behind), BODY_25 + COCO-18 keypoints projected with noise."""
-    from airpose_lib.data.poses import sample_body_pose
+    from airpose_lib.data.still.poses import sample_body_pose
 
     rng = np.random.default_rng(seed)
     keys = torch.as_tensor(sample_body_pose(rng, 2))

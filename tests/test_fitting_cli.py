@@ -40,7 +40,7 @@ def test_fit_a_sequence_in_the_official_layout(tmp_path, capsys, open_model_file
 
     from airpose_lib.body import BODY_25_FROM_SMPLX, COCO18_FROM_SMPLX, load_body_model
     from airpose_lib.body.forward import BodyForward
-    from airpose_lib.data.official_layout import OfficialLayoutWriter
+    from airpose_lib.data.sequences.writer import OfficialLayoutWriter
     from airpose_lib.geometry import project_points
     from airpose_lib.prior import VPoser, save_prior
 

@@ -89,7 +89,7 @@ def _finetune_inputs(tmp_path):
     import numpy as np
     import torch
 
-    from airpose_lib.data.official_layout import OfficialLayoutWriter
+    from airpose_lib.data.sequences.writer import OfficialLayoutWriter
     from airpose_lib.engine.checkpoint import save_checkpoint
     from airpose_lib.model import build_model
     from airpose_lib.train import TrainConfig
@@ -284,8 +284,8 @@ def test_die_with_parent_sets_the_kernel_signal():
 
 # -- tracked files -----------------------------------------------------------------------------------
 def test_generation_elsewhere_leaves_the_tracked_manifest_alone(tmp_path, monkeypatch):
-    from airpose_lib.data.generate import GenerationConfig, generate_still_dataset
-    from airpose_lib.data.scene import SceneConfig
+    from airpose_lib.data.still.generate import GenerationConfig, generate_still_dataset
+    from airpose_lib.data.still.scene import SceneConfig
 
     tracked = ROOT / "data_manifests" / "generated_smoke.yaml"
     before = tracked.read_bytes()
@@ -296,7 +296,7 @@ def test_generation_elsewhere_leaves_the_tracked_manifest_alone(tmp_path, monkey
     assert (tmp_path / "rec" / "generated_smoke.yaml").is_file() and tracked.read_bytes() == before
     # the CLI records only with --record-manifest
     seen = {}
-    import airpose_lib.data.generate as gen
+    import airpose_lib.data.still.generate as gen
 
     def fake(config, root, **kw):
         seen.update(kw)

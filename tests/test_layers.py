@@ -50,7 +50,7 @@ ACCEPTED_MODULE_CYCLES: dict[frozenset[str], str] = {}
 
 
 def _package_of(module: str) -> str | None:
-    """``airpose_lib.data.render`` -> ``data``; a BASE module or the kit's root -> None."""
+    """``airpose_lib.data.still.render`` -> ``data``; a BASE module or the kit's root -> None."""
     parts = module.split(".")
     if parts[0] != KIT or len(parts) < 2 or parts[1] in BASE:
         return None

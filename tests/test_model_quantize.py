@@ -34,7 +34,7 @@ OUTPUT_ATOL = 0.02
 
 @pytest.fixture(scope="module")
 def tiny_still(tmp_path_factory, open_model_files):
-    from airpose_lib.data.generate import GenerationConfig, generate_still_dataset
+    from airpose_lib.data.still.generate import GenerationConfig, generate_still_dataset
 
     root = tmp_path_factory.mktemp("tiny_still")
     generate_still_dataset(GenerationConfig(num_samples=8, shard_size=4, crop_size=32, seed=0), root,

@@ -4,7 +4,7 @@ import pytest
 import torch
 import yaml
 
-from airpose_lib.data.training_input import training_input
+from airpose_lib.data.still.training_input import training_input
 from airpose_lib.model.record import NETWORK_KEY, network_record, read_network
 from airpose_lib.runtime.backends import checkpoint_settings
 from airpose_lib.train import TrainConfig

@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 import torch
 
-from airpose_lib.data.dataset import normalize_images
 from airpose_lib.data.network_input import hold_boxes, keep_previous_box, normalize
+from airpose_lib.data.still.dataset import normalize_images
 
 A = np.array([10.0, 20.0, 110.0, 220.0])
 B = np.array([12.0, 22.0, 112.0, 222.0])

@@ -24,21 +24,22 @@ from official_fixtures import (
     write_official_synthetic_fixture,
 )
 
-from airpose_lib.data.dataset import PER_VIEW_KEYS, SAMPLE_KEYS, denormalize_images
-from airpose_lib.data.official_layout import OfficialLayoutWriter, SequenceFormatError
-from airpose_lib.data.official_real import (
+from airpose_lib.data.official.real import (
     REAL_DATA_SPLITS,
     load_marker_poses,
     load_official_real,
     real_split_frames,
 )
-from airpose_lib.data.official_synthetic import (
+from airpose_lib.data.official.synthetic import (
     OfficialDataError,
     OfficialSyntheticDataset,
     official_split_files,
     read_official_sample,
     remap_official_path,
 )
+from airpose_lib.data.sequences.layout import SequenceFormatError
+from airpose_lib.data.sequences.writer import OfficialLayoutWriter
+from airpose_lib.data.still.dataset import PER_VIEW_KEYS, SAMPLE_KEYS, denormalize_images
 from airpose_lib.model import AirPoseNet
 from airpose_lib.model.official import (
     OfficialCheckpointError,

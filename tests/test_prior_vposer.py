@@ -239,7 +239,7 @@ def test_kit_checkpoint_round_trip_and_missing_message(tmp_path, monkeypatch):
 # -- training -------------------------------------------------------------------------------------
 @pytest.fixture(scope="module")
 def corpus():
-    from airpose_lib.data.poses import sample_body_pose
+    from airpose_lib.data.still.poses import sample_body_pose
 
     return (sample_body_pose(np.random.default_rng(0), 6000).astype(np.float32),
             sample_body_pose(np.random.default_rng(1), 500).astype(np.float32))
@@ -270,7 +270,7 @@ def test_short_training_reconstructs_held_out_poses(corpus):
     assert len(ev["per_joint_rot_err_deg"]) == 21 and ev["n"] == len(val)
     assert not model.training
     # Decoded N(0, I) samples look like the corpus: inside the anatomical limits (+10 deg).
-    from airpose_lib.data.poses import within_limits
+    from airpose_lib.data.still.poses import within_limits
 
     s = model.sample(200, seed=0)["pose_body"].numpy()
     assert within_limits(s, tol=np.deg2rad(10)).mean() > 0.9

@@ -108,7 +108,7 @@ def _with_key(tmp_path, section: str, key: str, value) -> object:
 
 def _helpers():
     from airpose_lib.data.sequences.config import profile_sequences
-    from airpose_lib.data.still_config import profile_config
+    from airpose_lib.data.still.config import profile_config
     from airpose_lib.finetune.train import finetune_config
     from airpose_lib.fitting.airpose_plus import fitting_profile
     from airpose_lib.fitting.recording import fit_config

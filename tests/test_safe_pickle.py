@@ -62,7 +62,7 @@ def _assert_nothing_ran(marker: Path) -> None:
 
 def _crafted_recording(tmp_path: Path) -> tuple[Path, Path]:
     """A two-frame recording whose machine_1/openpose_res.pkl is crafted; (folder, marker file)."""
-    from airpose_lib.data.official_layout import OfficialLayoutWriter
+    from airpose_lib.data.sequences.writer import OfficialLayoutWriter
 
     seq = tmp_path / "seq"
     w = OfficialLayoutWriter(seq, num_views=2)
@@ -76,7 +76,8 @@ def _crafted_recording(tmp_path: Path) -> tuple[Path, Path]:
 
 
 def test_detector_file_of_a_recording_runs_nothing(tmp_path):
-    from airpose_lib.data.official_layout import SequenceFormatError, load_sequence
+    from airpose_lib.data.sequences.layout import SequenceFormatError
+    from airpose_lib.data.sequences.reader import load_sequence
 
     seq, marker = _crafted_recording(tmp_path)
     with pytest.raises(SequenceFormatError, match="openpose_res.pkl"):
@@ -99,7 +100,7 @@ def test_predict_on_a_crafted_recording_is_one_line_and_runs_nothing(tmp_path, c
 def test_official_synthetic_list_and_sample_files_run_nothing(tmp_path):
     from official_fixtures import write_official_synthetic_fixture
 
-    from airpose_lib.data.official_synthetic import OfficialDataError, official_split_files, read_official_sample
+    from airpose_lib.data.official.synthetic import OfficialDataError, official_split_files, read_official_sample
 
     fx = write_official_synthetic_fixture(tmp_path / "syn", n_subjects=2, n_positions=1)
     marker = tmp_path / "ran"
@@ -118,8 +119,8 @@ def test_official_synthetic_list_and_sample_files_run_nothing(tmp_path):
 def test_official_marker_poses_run_nothing(tmp_path):
     from official_fixtures import write_official_real_fixture
 
-    from airpose_lib.data.official_layout import SequenceFormatError
-    from airpose_lib.data.official_real import read_marker_poses
+    from airpose_lib.data.official.real import read_marker_poses
+    from airpose_lib.data.sequences.layout import SequenceFormatError
 
     write_official_real_fixture(tmp_path / "real", n_frames=2)
     marker = tmp_path / "ran"

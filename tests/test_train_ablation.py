@@ -9,7 +9,7 @@ import yaml
 
 @pytest.fixture(scope="module")
 def tiny_profile(tmp_path_factory, open_model_files):
-    from airpose_lib.data.generate import GenerationConfig, generate_still_dataset
+    from airpose_lib.data.still.generate import GenerationConfig, generate_still_dataset
 
     root = tmp_path_factory.mktemp("tiny_still")
     generate_still_dataset(GenerationConfig(num_samples=16, shard_size=4, crop_size=32, seed=0), root,

@@ -221,7 +221,7 @@ def test_checkpoint_contents_and_outputs(straight_run):
     group = state["optimizer"]["param_groups"][0]
     assert group["lr"] == 5e-5 and group["amsgrad"] is True  # paper: Adam (AMSGrad), lr 5e-5
     assert isinstance(state["kit_version"], str)
-    from airpose_lib.data.scene import SceneConfig
+    from airpose_lib.data.still.scene import SceneConfig
     from airpose_lib.model import read_network
 
     net = read_network(state)  # the record alone rebuilds the network and forms its input

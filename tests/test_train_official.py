@@ -25,7 +25,7 @@ def official_assets(tmp_path_factory, open_model_files):
 
 
 def test_official_ablation_evaluates_each_official_checkpoint_like_the_kit(official_assets):
-    from airpose_lib.data.official_synthetic import OfficialSyntheticDataset
+    from airpose_lib.data.official.synthetic import OfficialSyntheticDataset
     from airpose_lib.eval.ablation import ablation_table
     from airpose_lib.train.evaluate import evaluate
     from airpose_lib.train.official import official_ablation
@@ -80,7 +80,7 @@ def test_missing_checkpoint_names_the_folder_and_the_manifest(tmp_path):
 
 
 def test_training_config_switches_to_the_official_dataset(official_assets):
-    from airpose_lib.data.official_synthetic import OfficialSyntheticDataset
+    from airpose_lib.data.official.synthetic import OfficialSyntheticDataset
     from airpose_lib.train.config import load_train_config
     from airpose_lib.train.loop import default_dataset_factory
     from airpose_lib.train.run import prepare_data

@@ -22,7 +22,7 @@ def test_the_name_is_read_and_checked():
 
 def test_another_profiles_backbone_is_found_without_making_its_data(tmp_path, monkeypatch):
     import airpose_lib.train.pretrain as pretrain
-    from airpose_lib.data.generate import GenerationConfig, default_root
+    from airpose_lib.data.still.generate import GenerationConfig, default_root
     from airpose_lib.train.pretrain import other_profile_backbone, own_backbone_key, pretrain_stages, stage_keys
 
     monkeypatch.setenv("AIRPOSE_CACHE", str(tmp_path / "cache"))

@@ -198,7 +198,7 @@ def test_pretrain_root_terms_geodesic_and_camera_frame(bodies):
 def test_feature_key_changes_with_the_backbone_and_the_data(tmp_path):
     import yaml
 
-    from airpose_lib.data.manifest import DATASET_KIND
+    from airpose_lib.data.still.manifest import DATASET_KIND
 
     data = tmp_path / "data"
     data.mkdir()
@@ -222,8 +222,8 @@ def test_a_second_pretraining_stage_starts_from_the_first(tmp_path, monkeypatch,
     import yaml
 
     import airpose_lib.train.pretrain as pretrain
-    from airpose_lib.data.generate import GenerationConfig, generate_still_dataset
-    from airpose_lib.data.manifest import load_manifest
+    from airpose_lib.data.still.generate import GenerationConfig, generate_still_dataset
+    from airpose_lib.data.still.manifest import load_manifest
     from airpose_lib.train.features import load_backbone_file
     from airpose_lib.train.pretrain import ensure_backbone, pretrain_stages, stage_keys
 
@@ -269,8 +269,8 @@ def test_earlier_stages_keep_their_dataset_when_the_profile_data_grow(tmp_path, 
     cache when needed); the last stage trains on the dataset it is given."""
     import yaml
 
-    from airpose_lib.data.generate import GenerationConfig, default_root, generate_still_dataset
-    from airpose_lib.data.manifest import load_manifest
+    from airpose_lib.data.still.generate import GenerationConfig, default_root, generate_still_dataset
+    from airpose_lib.data.still.manifest import load_manifest
     from airpose_lib.train.pretrain import ensure_backbone, pretrain_stages, stage_keys
 
     monkeypatch.setenv("AIRPOSE_CACHE", str(tmp_path / "cache"))
@@ -312,7 +312,7 @@ def test_regressor_with_its_last_backbone_block_trainable(tmp_path, monkeypatch,
     """trainable_from: the features are the cut's input; the step on them equals the whole network
     on the crops; only the blocks from the cut and the regressor move, at their own rates."""
     import airpose_lib.train.loop as loop
-    from airpose_lib.data.generate import GenerationConfig, generate_still_dataset
+    from airpose_lib.data.still.generate import GenerationConfig, generate_still_dataset
     from airpose_lib.train.config import TrainConfig
     from airpose_lib.train.features import FeatureDataset, ensure_features
 
@@ -339,7 +339,7 @@ def test_regressor_with_its_last_backbone_block_trainable(tmp_path, monkeypatch,
     loss_fn = loop.default_loss_factory(cfg)
     assert isinstance(loop.default_dataset_factory(cfg, "train"), FeatureDataset)
     feats = FeatureDataset(root, "train", path, augment=False)  # no view swap: item for item as the crops
-    from airpose_lib.data.dataset import StillFrameDataset
+    from airpose_lib.data.still.dataset import StillFrameDataset
 
     crops = StillFrameDataset(root, "train", augment=False)
     fb = {k: torch.stack([feats[i][k] for i in range(2)]) for k in feats[0]}
@@ -384,9 +384,9 @@ def test_training_and_pretraining_never_read_the_test_split(tmp_path, monkeypatc
     training and pretraining settings name no test split, and a config that does is refused."""
     import yaml
 
-    from airpose_lib.data import dataset as dataset_module
-    from airpose_lib.data.generate import GenerationConfig, generate_still_dataset
-    from airpose_lib.data.manifest import load_manifest
+    from airpose_lib.data.still import dataset as dataset_module
+    from airpose_lib.data.still.generate import GenerationConfig, generate_still_dataset
+    from airpose_lib.data.still.manifest import load_manifest
     from airpose_lib.errors import ConfigError
     from airpose_lib.model.variants import VARIANTS
     from airpose_lib.profiles import profile_names

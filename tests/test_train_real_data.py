@@ -15,7 +15,7 @@ pytestmark = pytest.mark.slow
 
 @pytest.fixture(scope="module")
 def tiny_root(tmp_path_factory, open_model_files):
-    from airpose_lib.data.generate import GenerationConfig, generate_still_dataset
+    from airpose_lib.data.still.generate import GenerationConfig, generate_still_dataset
 
     root = tmp_path_factory.mktemp("still")
     cfg = GenerationConfig(num_samples=8, shard_size=4, crop_size=32, seed=0)
@@ -30,7 +30,7 @@ def test_ground_truth_matches_loss_convention(tiny_root):
     from airpose_lib.body import load_body_model
     from airpose_lib.body.forward import BodyForward
     from airpose_lib.body.genders import GENDER_NAMES
-    from airpose_lib.data.dataset import StillFrameDataset
+    from airpose_lib.data.still.dataset import StillFrameDataset
     from airpose_lib.geometry import axis_angle_to_matrix, project_points
 
     ds = StillFrameDataset(tiny_root, "all", augment=False)

@@ -6,7 +6,7 @@ Two kinds of file live there (schema: ``data_manifests/README.md``):
   checkpoints, SMPL-X, VPoser): where it comes from, its licence, the expected layout and, where
   a public direct link is known, the files :func:`airpose_lib.assets.fetch` may download.
 * ``generated_<profile>.yaml`` (``kind: airpose-still-frames``): the record of a dataset the kit
-  generated (:mod:`airpose_lib.data.manifest`). It is presented as an asset of kind
+  generated (:mod:`airpose_lib.data.still.manifest`). It is presented as an asset of kind
   ``generated-dataset`` whose layout is its shards (size + SHA-256 each).
 
 Every schema problem raises :class:`ManifestError` naming the YAML file and the field.
@@ -46,7 +46,7 @@ KINDS = ("dataset", "checkpoints", "body-model", "pose-prior")
 """Kinds an asset YAML may declare."""
 GENERATED_KIND = "generated-dataset"
 """Kind given to the generator's ``generated_<profile>.yaml`` records."""
-_STILL_FRAMES_KIND = "airpose-still-frames"  # airpose_lib.data.manifest.DATASET_KIND (not imported: it pulls the renderer)
+_STILL_FRAMES_KIND = "airpose-still-frames"  # airpose_lib.data.still.manifest.DATASET_KIND (not imported: it pulls the renderer)
 _SCHEMA_DOC = "data_manifests/README.md"
 
 _NAME_RE = re.compile(r"^[a-z][a-z0-9_]*$")

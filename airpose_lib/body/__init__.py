@@ -3,7 +3,7 @@ gender codes, and their evaluation in the paper's root convention (``forward``: 
 keypoint vertices). Models are loaded through the ``smplx`` API.
 
 Names are imported lazily from their modules, so the light ones (``genders``, ``joint_sets``)
-can be used without importing torch and smplx (``data.scene`` and a drone's start-up need that).
+can be used without importing torch and smplx (``data.still.scene`` and a drone's start-up need that).
 """
 from __future__ import annotations
 

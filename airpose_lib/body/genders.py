@@ -2,7 +2,7 @@
 
 One contract for the whole kit: the kit's data and sequence generators write the codes, the
 official loaders translate the release's names into them, the losses and evaluations turn them
-back into a model name. Imports nothing, so the light modules (``data.scene``) may use it.
+back into a model name. Imports nothing, so the light modules (``data.still.scene``) may use it.
 """
 from __future__ import annotations
 

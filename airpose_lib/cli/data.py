@@ -51,7 +51,7 @@ def _add_data_sequence(dsub) -> None:
 
 
 def _cmd_data_generate(args: argparse.Namespace) -> int:
-    from airpose_lib.data.generate import default_root, generate_still_dataset, profile_config
+    from airpose_lib.data.still.generate import default_root, generate_still_dataset, profile_config
     config = profile_config(args.profile)
     root = args.out if args.out is not None else default_root(args.profile)
     workers = args.workers if args.workers is not None else (os.cpu_count() or 1)

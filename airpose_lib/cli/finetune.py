@@ -104,7 +104,8 @@ def add_finetune(sub) -> None:
 
 # -- predict --------------------------------------------------------------------------------------
 def _cmd_predict(args: argparse.Namespace) -> int:
-    from airpose_lib.data.official_layout import DETECTOR_FILES, load_sequence
+    from airpose_lib.data.sequences.layout import DETECTOR_FILES
+    from airpose_lib.data.sequences.reader import load_sequence
     from airpose_lib.finetune.network import load_sized_network
     from airpose_lib.finetune.predict import frames_in_range, predict_sequence, save_predictions
 

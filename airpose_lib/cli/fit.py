@@ -14,7 +14,8 @@ __all__ = ['add_fit']
 
 
 def _cmd_fit(args: argparse.Namespace) -> int:
-    from airpose_lib.data.official_layout import DETECTOR_FILES, load_sequence
+    from airpose_lib.data.sequences.layout import DETECTOR_FILES
+    from airpose_lib.data.sequences.reader import load_sequence
     from airpose_lib.finetune.predict import frames_in_range
     from airpose_lib.fitting import fit_sequence
     from airpose_lib.fitting.recording import (

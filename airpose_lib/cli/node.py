@@ -80,7 +80,7 @@ def check_inputs(args: argparse.Namespace) -> None:
             raise CLIError(
                 f"--source {args.source}: no such folder; give a recording folder in the official layout "
                 "(machine_1/, machine_2/) or synthetic[:views=2,frames=300,...]")
-        from airpose_lib.data.official_layout import DETECTOR_FILES  # a recording's reader: loaded anyway
+        from airpose_lib.data.sequences.layout import DETECTOR_FILES  # the recordings' layout: light
 
         if args.detector not in DETECTOR_FILES:
             raise CLIError(f"--detector {args.detector}: unknown; give one of {', '.join(DETECTOR_FILES)}")

@@ -49,7 +49,7 @@ def add_prior(sub) -> None:
     psub = pr.add_subparsers(dest="prior_command", metavar="COMMAND", required=True)
     tr = psub.add_parser(
         "train", help="train the kit's prior with a profile's `prior:` sizes",
-        description="Train the prior on poses of airpose_lib.data.poses and data.motions, report the "
+        description="Train the prior on poses of airpose_lib.data.still.poses and data.sequences.motions, report the "
                     "held-out reconstruction error and the share of N(0, I) samples inside the joint "
                     "limits, and save <cache>/prior/<profile>/vposer.pt (atomic, with provenance).")
     tr.add_argument("--profile", choices=PROFILES, default="smoke",

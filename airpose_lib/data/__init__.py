@@ -1,56 +1,49 @@
-"""Synthetic data of the kit: scene and pose samplers, appearance, off-screen rendering, shards,
-manifests and the PyTorch datasets.
+"""The kit's data, in three wings by job:
 
-Modules: ``scene`` (people, drone cameras, crop boxes, environment), ``poses`` (plausible body
-poses), ``motions`` and ``sequences`` (simulated recordings), ``detections`` (simulated keypoint
-detectors), ``official_layout`` (the official real-data folder layout, ``load_sequence``), ``markers``
-(ArUco markers on the ground: detection, camera poses, UAV 2 in UAV 1),
-``appearance`` (skin / hair / clothing colours), ``render`` (textured scenes, pyvista),
-``shards`` and ``manifest`` (files on disk), ``still_config`` (still-frame dataset settings),
-``still_frames`` (sampling and rendering one shard's still frames), ``generate`` (shards on disk,
-resumption, workers: ``airpose data generate``), ``dataset`` (``StillFrameDataset``), ``mirror``
-(the left-right mirror augmentation),
-``network_input`` (how a frame becomes the network's input: person box, previous-box rule,
-crop, normalisation; shared by the drones and fine-tuning).
+* ``still/``: the synthetic two-drone still frames (scene and pose samplers, appearance,
+  off-screen rendering, checksummed shards and manifests, ``StillFrameDataset``, the mirror
+  augmentation; ``airpose data generate``).
+* ``sequences/``: recordings, kit or real: the simulated ones (motions, drones, detectors,
+  markers, frames; ``airpose data sequence``) and the one folder layout every recording is
+  written in and read from (``sequences.layout``, ``sequences.writer``, ``sequences.reader``:
+  ``load_sequence``; the detector files' formats in ``sequences.detector_files``).
+* ``official/``: the authors' releases (``official.synthetic``, ``official.real``).
 
-Names are imported lazily, so ``import airpose_lib.data`` stays cheap and pulls in neither VTK
-nor torch until they are used.
+``network_input`` (person box, previous-box rule, crop, normalisation) is shared by the still
+frames, the drones and fine-tuning, and sits beside the wings.
+
+The names below are the entry points, each written once with its module, and imported on first
+use, so ``import airpose_lib.data`` stays cheap and pulls in neither VTK nor torch. Anything else
+is imported from its module (``from airpose_lib.data.still.scene import look_at_extrinsics``).
 """
 from __future__ import annotations
 
 from airpose_lib._lazy import lazy_namespace
 
 _EXPORTS = {
-    # scene
-    "SceneConfig": "scene", "sample_person": "scene", "sample_cameras": "scene",
-    "sample_environment": "scene",
-    # poses
-    "sample_body_pose": "poses",
-    # appearance
-    "AppearanceConfig": "appearance", "sample_appearance": "appearance", "BodyPaint": "appearance",
-    # rendering
-    "SceneRenderer": "render", "ground_textures": "render",
-    # files
-    "DatasetError": "manifest", "ShardIntegrityError": "manifest", "load_manifest": "manifest",
-    # generation
-    "GENERATOR_VERSION": "still_config", "GenerationConfig": "still_config",
-    "profile_config": "still_config", "default_root": "still_config",
-    "StillFrameGenerator": "still_frames", "generate_still_dataset": "generate",
-    "ensure_still_dataset": "generate",
-    # datasets
-    "StillFrameDataset": "dataset", "denormalize_images": "dataset",
+    # still frames
+    **dict.fromkeys(("SceneConfig", "sample_person", "sample_cameras", "sample_environment"), "still.scene"),
+    "sample_body_pose": "still.poses",
+    **dict.fromkeys(("AppearanceConfig", "sample_appearance", "BodyPaint"), "still.appearance"),
+    **dict.fromkeys(("SceneRenderer", "ground_textures"), "still.render"),  # imports VTK
+    **dict.fromkeys(("DatasetError", "ShardIntegrityError", "load_manifest"), "still.manifest"),
+    **dict.fromkeys(("GENERATOR_VERSION", "GenerationConfig", "profile_config", "default_root"), "still.config"),
+    "StillFrameGenerator": "still.frames",
+    **dict.fromkeys(("generate_still_dataset", "ensure_still_dataset"), "still.generate"),
+    **dict.fromkeys(("StillFrameDataset", "denormalize_images"), "still.dataset"),
+    # recordings
+    **dict.fromkeys(("SequenceConfig", "profile_sequences"), "sequences.config"),
+    **dict.fromkeys(("default_sequence_root", "ensure_sequences"), "sequences.cache"),
+    "SequenceFormatError": "sequences.layout",
+    "OfficialLayoutWriter": "sequences.writer",
+    **dict.fromkeys(("Sequence", "load_sequence"), "sequences.reader"),
+    # the authors' releases
+    "OfficialSyntheticDataset": "official.synthetic",
+    "load_official_real": "official.real",
     # the network's input (person box, previous-box rule, crop, normalisation)
-    "IMAGENET_MEAN": "network_input", "IMAGENET_STD": "network_input",
-    "person_box": "network_input", "hold_boxes": "network_input", "crop_input": "network_input",
-    "network_camera": "network_input", "network_box_margin": "network_input",
+    **dict.fromkeys(("IMAGENET_MEAN", "IMAGENET_STD", "person_box", "hold_boxes", "crop_input", "network_camera",
+                     "network_box_margin"), "network_input"),
 }
 
-# Other modules' public names (their ``__all__``) are found on first use, in this order; the
-# renderer comes last because importing it starts VTK.
-_SEARCHED = ("official_synthetic", "official_real", "official_layout", "sequences", "markers",
-             "motions", "detections", "poses", "scene", "appearance", "manifest", "shards", "still_config",
-             "still_frames", "generate",
-             "mirror", "dataset", "render")
-
 __all__ = sorted(_EXPORTS)
-__getattr__, __dir__ = lazy_namespace(__name__, globals(), _SEARCHED, _EXPORTS, skip_failing=True)
+__getattr__, __dir__ = lazy_namespace(__name__, globals(), (), _EXPORTS)

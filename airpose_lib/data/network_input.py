@@ -16,7 +16,7 @@ crops:
   gives the input a training camera (:func:`network_camera`, f = 1475 px at 1920x1080) would
   give, and the predicted translation is in the real camera's frame.
 * :func:`normalize` is the ImageNet normalisation of both the crops and the training samples
-  (``data.dataset.normalize_images``).
+  (``data.still.dataset.normalize_images``).
 
 No torch at import: a drone's start-up imports this module (``crop_input`` imports it when
 called).
@@ -137,9 +137,9 @@ def hold_boxes(detected: Sequence[np.ndarray | None], leading: str = "first") ->
 # -- the network camera and the box margin ------------------------------------------------------
 def network_camera() -> np.ndarray:
     """``(3, 3)`` intrinsics of the camera every kit and official network is trained with: the
-    still-frame data's (``data.scene.SceneConfig``: f = 1475 px, 1920x1080, principal point at
+    still-frame data's (``data.still.scene.SceneConfig``: f = 1475 px, 1920x1080, principal point at
     the image centre). A checkpoint records its own (``model.record``, ``camera_K``)."""
-    from airpose_lib.data.scene import SceneConfig  # lazy: ~0.2 s of a drone's start-up
+    from airpose_lib.data.still.scene import SceneConfig  # lazy: ~0.2 s of a drone's start-up
 
     return SceneConfig().K
 
@@ -149,7 +149,7 @@ def network_box_margin(K: np.ndarray, K_net: np.ndarray | None = None) -> float:
     person as the training crops do on average.
 
     A training box is the joints +- ``bbox_margin_px`` with each side moved out by
-    ``U(0, bbox_jitter_px)`` (``data.scene.SceneConfig``: 20 + U(0, 200) px at f = 1475, as
+    ``U(0, bbox_jitter_px)`` (``data.still.scene.SceneConfig``: 20 + U(0, 200) px at f = 1475, as
     ``copenet/dsets/aerialpeople.py`` for both of its splits): 120 px on average in the network
     camera. A box much tighter than that puts the crop scale s of P outside the training range
     (Table I's tight-box column: AirPose MPJPE 0.143 vs 0.106 m on the same samples). The
@@ -164,7 +164,7 @@ def network_box_margin(K: np.ndarray, K_net: np.ndarray | None = None) -> float:
         the margin in the image's pixels: 120 px scaled by ``f / f_net`` (mean of fx and fy), the
         same margin in the virtual camera whatever the image's resolution.
     """
-    from airpose_lib.data.scene import SceneConfig  # lazy: see network_camera
+    from airpose_lib.data.still.scene import SceneConfig  # lazy: see network_camera
 
     sc = SceneConfig()
     K = np.asarray(K, np.float64)

@@ -29,8 +29,9 @@ import torch
 from airpose_lib.assets import DataSource
 from airpose_lib.body import load_body_model
 from airpose_lib.body.genders import GENDER_NAMES
-from airpose_lib.data import StillFrameDataset, default_root
-from airpose_lib.data.official_synthetic import OfficialSyntheticDataset
+from airpose_lib.data.official.synthetic import OfficialSyntheticDataset
+from airpose_lib.data.still.config import default_root
+from airpose_lib.data.still.dataset import StillFrameDataset
 from airpose_lib.eval.ablation import per_seed_table
 from airpose_lib.eval.mean_body import mean_body_references
 from airpose_lib.eval.reference import train_settings, train_wall_s, write_reference

@@ -99,7 +99,7 @@ def detector_report(sequence, detectors: SequenceABC[str], *, pck: SequenceABC[f
     """The report's rows (module doc) of a generated recording.
 
     Args:
-        sequence: a :class:`~airpose_lib.data.official_layout.Sequence` with ground truth and the
+        sequence: a :class:`~airpose_lib.data.sequences.reader.Sequence` with ground truth and the
             keypoints of every name in ``detectors``.
         detectors: the detectors to report; each is compared with the truth and with the others.
         pck: thresholds as fractions of the person's size (``1 - pck_0.2``: the gross errors, a

@@ -28,8 +28,8 @@ import torch
 
 from airpose_lib.assets import DataSource
 from airpose_lib.body import load_body_model
-from airpose_lib.data.official_layout import load_sequence
 from airpose_lib.data.sequences import ensure_sequences
+from airpose_lib.data.sequences.reader import load_sequence
 from airpose_lib.eval.metrics import mpjpe
 from airpose_lib.model import posed_joints_and_vertices, to_smplx_params
 from airpose_lib.model.onnx_export import export_onnx

@@ -46,9 +46,9 @@ from airpose_lib.assets import resolve_data_source
 from airpose_lib.atomic import atomic_path
 from airpose_lib.body import load_body_model
 from airpose_lib.body.joint_sets import BODY_25_FROM_SMPLX
-from airpose_lib.data.official_layout import load_sequence
-from airpose_lib.data.official_real import load_official_real
+from airpose_lib.data.official.real import load_official_real
 from airpose_lib.data.sequences import ensure_sequences
+from airpose_lib.data.sequences.reader import load_sequence
 from airpose_lib.engine.checkpoint import StaleRunError
 from airpose_lib.eval import metrics as M
 from airpose_lib.eval.mean_body import NEUTRAL_LABEL, mean_body_recording_estimate
@@ -104,7 +104,7 @@ class RecordingExperiment:
     Attributes:
         profile: the reproduction profile.
         out_dir: cache folder.
-        sequences: person -> :class:`airpose_lib.data.official_layout.Sequence`.
+        sequences: person -> :class:`airpose_lib.data.sequences.reader.Sequence`.
         estimates: person -> method -> per-view parameters ``phi (F, V, 3, 3)``, ``tau (F, V, 3)``,
             ``theta (F, V, 21, 3, 3)``, ``beta (F, V, 10)`` (numpy), plus ``valid (F, V)``.
         joints: person -> method -> ``(F, V, 22, 3)`` camera-frame joints.
@@ -444,7 +444,7 @@ def run_recording_experiment(profile: str = "smoke", out_dir: str | Path | None 
         profile: sizes of the recordings, networks, fine-tuning and AirPose+ (profile YAML).
         out_dir: cache folder (default :func:`default_experiment_dir`).
         sequences: person -> recording folder in the official layout, or a loaded
-            :class:`~airpose_lib.data.official_layout.Sequence` (default: the profile's generated
+            :class:`~airpose_lib.data.sequences.reader.Sequence` (default: the profile's generated
             recordings, made if missing).
         seed: training seed of the networks (default: the profile's).
         fine_tune_on: the person whose detections fine-tune the networks (paper: person 1).

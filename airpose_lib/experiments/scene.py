@@ -30,7 +30,7 @@ def recording_scene(sequence, estimate: Mapping | None = None, method: str | Non
     """The 3D scene of a recording with ground truth.
 
     Args:
-        sequence: a loaded :class:`~airpose_lib.data.official_layout.Sequence` whose
+        sequence: a loaded :class:`~airpose_lib.data.sequences.reader.Sequence` whose
             ``ground_truth`` is set (the kit's generated recordings).
         estimate: per-view parameters of one method over the sequence's F frames (``phi (F, V,
             3, 3)``, ``tau (F, V, 3)``, ``theta``, ``beta``; :class:`RecordingExperiment.estimates`

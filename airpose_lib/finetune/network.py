@@ -2,7 +2,7 @@
 (:func:`airpose_lib.train.evaluate.load_network`, with the crop size a caller may give).
 
 The checkpoint's network record (:mod:`airpose_lib.model.record`) says both; for checkpoints
-written before it, :func:`airpose_lib.data.training_input.training_input` reconstructs them from
+written before it, :func:`airpose_lib.data.still.training_input.training_input` reconstructs them from
 the training config's data (its settings, the dataset's manifest, the profile). Crops and P for
 any other camera are formed in the training camera ``K_net`` (``geometry.virtual_crop``).
 """

@@ -52,7 +52,8 @@ from torch import Tensor, nn
 from airpose_lib import __version__  # the package root holds only the version
 from airpose_lib.atomic import atomic_path
 from airpose_lib.data.network_input import box_margin, crop_input, hold_boxes, network_camera, person_box
-from airpose_lib.data.official_layout import SequenceFormatError, load_sequence
+from airpose_lib.data.sequences.layout import SequenceFormatError
+from airpose_lib.data.sequences.reader import load_sequence
 from airpose_lib.errors import ConfigError, UserError
 from airpose_lib.model import to_smplx_params
 from airpose_lib.progress import progress_bar
@@ -294,7 +295,7 @@ def predict_sequence(model: nn.Module, sequence, *, input_size: int | None = Non
     Args:
         model: an :class:`~airpose_lib.model.AirPoseNet` (any variant; run in eval mode, its
             training flag is restored afterwards).
-        sequence: a :class:`~airpose_lib.data.official_layout.Sequence` (``load_sequence``).
+        sequence: a :class:`~airpose_lib.data.sequences.reader.Sequence` (``load_sequence``).
         input_size: crop side S the network was trained with (default: ``model.input_size``).
         detector: keypoints the boxes come from (``openpose`` or ``alphapose``).
         frames: image numbers to run (a subset of ``sequence.frames``, increasing); None: all.

@@ -69,7 +69,7 @@ from torch import nn
 from airpose_lib.atomic import atomic_path
 from airpose_lib.body import load_body_model
 from airpose_lib.config_fields import ConfigError, check_fields, config_from, finite, require
-from airpose_lib.data.official_layout import load_sequence
+from airpose_lib.data.sequences.reader import load_sequence
 from airpose_lib.devices import is_device_name
 from airpose_lib.engine import (
     AFRESH_HINT,

@@ -99,7 +99,7 @@ DETECTOR_JOINTS: dict[str, tuple[int, ...]] = {
 }
 """Detector name -> index of each keypoint into the 76 SMPL-X output joints (-1: no counterpart).
 ``openpose`` / ``alphapose`` are the names the kit's sequences use for BODY_25 / COCO-18;
-``mediapipe`` is MediaPipe Pose mapped onto BODY_25 (``data.mediapipe_pose``; the keypoints it
+``mediapipe`` is MediaPipe Pose mapped onto BODY_25 (``data.sequences.mediapipe_pose``; the keypoints it
 lacks have confidence 0)."""
 
 
@@ -574,7 +574,7 @@ def _optimise(cfg, prior, kbody, xy, w, gather, K, start, kept, progress) -> Air
 
 
 def fit_sequence(sequence, init: Mapping[str, object], **kwargs) -> AirPosePlusResult:
-    """AirPose+ on a kit sequence (:class:`airpose_lib.data.official_layout.Sequence` or anything
+    """AirPose+ on a kit sequence (:class:`airpose_lib.data.sequences.reader.Sequence` or anything
     with ``keypoints`` {detector: (F, V, J, 3)} and ``K`` (V, 3, 3)); kwargs as :func:`airpose_plus`."""
     if not hasattr(sequence, "keypoints") or not hasattr(sequence, "K"):
         raise TypeError("fit_sequence needs an object with .keypoints {detector: (F, V, J, 3)} and .K (V, 3, 3)")

@@ -10,7 +10,7 @@ Every training and fine-tuning checkpoint holds ``state["network"]`` (plain type
 ``model``          the other keyword arguments of :func:`~airpose_lib.model.build_model`
 ``input_size``     crop side S in pixels
 ``normalisation``  ``"imagenet"``: RGB / 255, then the ImageNet mean and std per channel
-                   (``data.dataset.normalize_images``, ``data.network_input.crop_input``)
+                   (``data.still.dataset.normalize_images``, ``data.network_input.crop_input``)
 ``camera_rule``    ``"virtual_crop"``: the crop and P of a box seen by a camera K are formed in
                    the virtual camera ``camera_K`` (``geometry.virtual_crop``)
 ``camera_K``       ``(3, 3)`` intrinsics ``K_net`` of the training camera, nested lists
@@ -20,7 +20,7 @@ Every training and fine-tuning checkpoint holds ``state["network"]`` (plain type
 checkpoint (every loader: ``train.evaluate.load_network``, the drones' ``runtime.backends``). Checkpoints written before the record (the kit's earlier
 runs, tests' fixtures) hold only the training config and, from fine-tuning, ``input_size`` and
 ``camera_K``; for them the caller passes ``legacy``, which reconstructs the crop size and camera
-from the config's data (``data.training_input.training_input``: the data settings, the dataset's
+from the config's data (``data.still.training_input.training_input``: the data settings, the dataset's
 manifest, the profile). ``model`` may not import ``data``, hence the argument.
 """
 from __future__ import annotations
@@ -91,7 +91,7 @@ def read_network(state: Mapping[str, Any], legacy: LegacyInput | None = None) ->
     Args:
         state: a checkpoint of ``airpose train`` or ``airpose finetune`` (``torch.load``-ed).
         legacy: for a checkpoint without ``state["network"]``: reconstructs the crop size and
-            camera from its config (``data.training_input.training_input``); a fine-tuning
+            camera from its config (``data.still.training_input.training_input``); a fine-tuning
             checkpoint's own ``input_size`` / ``camera_K`` win over it.
 
     Raises:

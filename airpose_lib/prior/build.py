@@ -1,7 +1,7 @@
 """Train the kit's prior for a profile and save it where :func:`~.checkpoint.load_prior` looks.
 
-The corpus is the kit's own pose generators: still poses of :mod:`airpose_lib.data.poses` and
-poses along the scripted motions of :mod:`airpose_lib.data.motions` (the same generators that
+The corpus is the kit's own pose generators: still poses of :mod:`airpose_lib.data.still.poses` and
+poses along the scripted motions of :mod:`airpose_lib.data.sequences.motions` (the same generators that
 pose the people of the synthetic data).
 """
 from __future__ import annotations
@@ -12,8 +12,8 @@ import numpy as np
 import torch
 
 from airpose_lib.body import BodyForward, load_body_model
-from airpose_lib.data.motions import evaluate_motion, sample_script
-from airpose_lib.data.poses import sample_body_pose, within_limits
+from airpose_lib.data.sequences.motions import evaluate_motion, sample_script
+from airpose_lib.data.still.poses import sample_body_pose, within_limits
 from airpose_lib.devices import resolve_device
 from airpose_lib.folder_lock import file_lock_for
 

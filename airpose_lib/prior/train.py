@@ -13,7 +13,7 @@ learns to reconstruct before the posterior is pulled to the prior). Adam with we
 seeded generator, so the same corpus, config and seed give the same weights.
 
 The corpus is any ``(N, 21, 3)`` axis-angle array; the kit trains on
-:func:`airpose_lib.data.poses.sample_body_pose` and poses of :mod:`airpose_lib.data.motions`
+:func:`airpose_lib.data.still.poses.sample_body_pose` and poses of :mod:`airpose_lib.data.sequences.motions`
 (assembled by ``airpose prior train``; this package does not import ``data``).
 """
 from __future__ import annotations
@@ -69,9 +69,9 @@ class PriorTrainConfig:
 class CorpusConfig:
     """The training corpus drawn from the kit's pose generators (``airpose prior train``).
 
-    ``n_poses`` still poses of :func:`airpose_lib.data.poses.sample_body_pose` plus about
+    ``n_poses`` still poses of :func:`airpose_lib.data.still.poses.sample_body_pose` plus about
     ``n_motion_poses`` poses sampled at ``motion_fps`` from random scripts of
-    :mod:`airpose_lib.data.motions` (transitions and blends the still sampler does not make);
+    :mod:`airpose_lib.data.sequences.motions` (transitions and blends the still sampler does not make);
     ``n_val`` held-out poses from a separate stream with the same mixture.
     """
 

@@ -7,7 +7,7 @@ A profile is the one place where sizes live: every section configures one part o
 the only code that knows where the files are and how they are read; each package turns its own
 section into its config through :func:`section_config` (unknown keys with the closest known one,
 bad values, both named with the file and the section), behind its own public name
-(``train.load_train_config``, ``data.still_config.profile_config`` ...).
+(``train.load_train_config``, ``data.still.config.profile_config`` ...).
 
 A profile may start from another: ``inherits: cpu`` (a profile name: ``cpu.yaml`` beside the file,
 else the kit's; or a YAML path relative to the file) takes that profile's sections and lays its

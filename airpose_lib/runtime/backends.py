@@ -210,7 +210,7 @@ def _state_settings(state) -> dict:
     if not isinstance(state, dict) or not isinstance(state.get("config"), dict):
         return {}
     # lazy: only a drone with a checkpoint needs the data readers (a drone's start-up stays short)
-    from airpose_lib.data.training_input import training_input
+    from airpose_lib.data.still.training_input import training_input
     from airpose_lib.model.record import read_network
 
     record = read_network(state, legacy=training_input)  # old checkpoints: from their data
@@ -242,7 +242,7 @@ def build_torch_model(spec: BackendSpec):
     state = _read_checkpoint(spec.checkpoint)
     settings = _state_settings(state)
     if settings and isinstance(state.get("model"), dict):  # a kit checkpoint: the one loader
-        from airpose_lib.data.training_input import training_input
+        from airpose_lib.data.still.training_input import training_input
         from airpose_lib.model.record import network_from_checkpoint
 
         return network_from_checkpoint(state, legacy=training_input)[0]

@@ -23,8 +23,8 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from airpose_lib.data.dataset import StillFrameDataset
-from airpose_lib.data.generate import default_root
+from airpose_lib.data.still.dataset import StillFrameDataset
+from airpose_lib.data.still.generate import default_root
 from airpose_lib.folder_lock import file_lock
 from airpose_lib.model.onnx_export import OPSET, export_onnx
 from airpose_lib.model.quantize import QuantSettings, calibration_digest, quantize_stage1

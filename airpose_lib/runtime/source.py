@@ -182,7 +182,7 @@ def _parse_synthetic(spec: str) -> SyntheticSource:
 
 
 class _SequenceView:
-    """One view of an ``airpose_lib.data`` :class:`~airpose_lib.data.official_layout.Sequence`
+    """One view of an ``airpose_lib.data`` :class:`~airpose_lib.data.sequences.reader.Sequence`
     as a :class:`ViewSource` (frame i = position i of the loaded frames)."""
 
     def __init__(self, seq, v: int, detector: str, stamps: np.ndarray):
@@ -210,7 +210,7 @@ class _SequenceSource:
 
     def __init__(self, root: str | Path, detector: str):
         # lazy: ~0.2 s of a drone's start-up, which a synthetic source skips
-        from airpose_lib.data.official_layout import load_sequence
+        from airpose_lib.data.sequences.reader import load_sequence
 
         seq = load_sequence(root, detectors=(detector,), missing_detections="zero", ground_truth=False)
         self.sequence = seq
@@ -233,7 +233,7 @@ class _SequenceSource:
 
 def open_source(spec: str, detector: str = "openpose"):
     """``"synthetic[:views=2,frames=300,fps=30,size=960x540,seed=0,jitter_ms=1,missing=3+7]"`` or a
-    sequence folder in the official layout (``airpose_lib.data.official_layout.load_sequence``).
+    sequence folder in the official layout (``airpose_lib.data.sequences.reader.load_sequence``).
 
     Returns an object with ``num_views``, ``fps`` and ``view(v) -> ViewSource``.
     """

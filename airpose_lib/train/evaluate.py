@@ -22,7 +22,7 @@ from torch.utils.data import DataLoader
 
 from airpose_lib.body import load_body_model
 from airpose_lib.body.forward import BodyForward
-from airpose_lib.data.training_input import training_input
+from airpose_lib.data.still.training_input import training_input
 from airpose_lib.engine.checkpoint import load_checkpoint
 from airpose_lib.engine.launch import resolve_device
 from airpose_lib.eval import per_joint_table, per_view_table, relative_camera_table
@@ -121,7 +121,7 @@ def load_network(checkpoint: str | Path, device: str | torch.device = "cpu") -> 
         ``(model, record, state)``: the network in eval mode on ``device``
         (:func:`airpose_lib.model.record.network_from_checkpoint`), its
         :class:`~airpose_lib.model.record.NetworkRecord` (old checkpoints: crop size and camera
-        from their data, :func:`airpose_lib.data.training_input.training_input`) and the loaded
+        from their data, :func:`airpose_lib.data.still.training_input.training_input`) and the loaded
         checkpoint dict (``config``, ``step``, ...).
     """
     device = resolve_device(str(device))

@@ -20,9 +20,9 @@ import torch
 from torch.utils.data import DataLoader, Dataset
 
 from airpose_lib.atomic import atomic_path
-from airpose_lib.data.dataset import PER_VIEW_KEYS, StillFrameDataset, swap_views
-from airpose_lib.data.manifest import load_manifest
-from airpose_lib.data.shards import sha256_file
+from airpose_lib.data.still.dataset import PER_VIEW_KEYS, StillFrameDataset, swap_views
+from airpose_lib.data.still.manifest import load_manifest
+from airpose_lib.data.still.shards import sha256_file
 from airpose_lib.errors import ConfigError
 from airpose_lib.folder_lock import file_lock
 from airpose_lib.model.backbone import build_backbone
@@ -108,7 +108,7 @@ class FeatureDataset(Dataset):
     """A still-frame split whose items carry backbone ``features (V, C)`` (or ``(V, C, h, w)``, the
     input of a block: :func:`compute_features`) instead of ``images``.
 
-    Items hold every key of :class:`~airpose_lib.data.dataset.StillFrameDataset` but ``images``,
+    Items hold every key of :class:`~airpose_lib.data.still.dataset.StillFrameDataset` but ``images``,
     plus ``features``; the view-swap augmentation permutes the features with the other per-view
     entries.
 

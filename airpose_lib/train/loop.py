@@ -63,10 +63,10 @@ import torch.distributed as dist
 from torch import nn
 from torch.utils.data import DataLoader
 
-from airpose_lib.data.dataset import StillFrameDataset
-from airpose_lib.data.manifest import verify_dataset
-from airpose_lib.data.official_synthetic import OfficialSyntheticDataset
-from airpose_lib.data.training_input import training_input
+from airpose_lib.data.official.synthetic import OfficialSyntheticDataset
+from airpose_lib.data.still.dataset import StillFrameDataset
+from airpose_lib.data.still.manifest import verify_dataset
+from airpose_lib.data.still.training_input import training_input
 from airpose_lib.engine import EngineRun, Schedule, StaleRunError, TrainingTask, process_rank, run_engine, run_folder
 from airpose_lib.engine.launch import check_precision, launch_env, resolve_device
 from airpose_lib.errors import ConfigError
@@ -129,7 +129,7 @@ def check_data_root(cfg: TrainConfig) -> None:
     """A dataset folder the user named (``data.root``) must hold a finished, intact dataset: the kit
     makes and repairs data only in its own folders. Callers run it before they create anything; the
     shards' hashes are then known to this process and not computed again when the data are read.
-    Raises :class:`~airpose_lib.data.manifest.DatasetError` (a damaged shard: ``ShardIntegrityError``)."""
+    Raises :class:`~airpose_lib.data.still.manifest.DatasetError` (a damaged shard: ``ShardIntegrityError``)."""
     if cfg.data.get("root") is not None and cfg.data.get("source", "generated") == "generated":
         verify_dataset(Path(cfg.data["root"]))
 
@@ -239,7 +239,7 @@ def run_network_entry(config: Mapping[str, Any], dataset: Any) -> dict[str, Any]
         config: the run's ``TrainConfig.to_dict()``, its data resolved (``prepare_data``).
         dataset: the training split; its ``crop_size`` is the input size (the config's data,
             manifest or profile when it has none). The camera is the data's
-            (:func:`airpose_lib.data.training_input.training_input`).
+            (:func:`airpose_lib.data.still.training_input.training_input`).
     """
     if config.get("task") == "pretrain":
         return {}

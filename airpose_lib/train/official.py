@@ -11,7 +11,7 @@ import hashlib
 from pathlib import Path
 from typing import Any
 
-from airpose_lib.data.official_synthetic import OfficialSyntheticDataset
+from airpose_lib.data.official.synthetic import OfficialSyntheticDataset
 from airpose_lib.engine.checkpoint import write_checkpoint
 from airpose_lib.model import AirPoseNet
 from airpose_lib.model.official import backbone_name, load_official_checkpoint
@@ -67,7 +67,7 @@ def official_ablation(checkpoints_root: str | Path, data_root: str | Path, varia
     loader's test crops.
 
     The official loader grows every test box by 1-200 px per side at random, unseeded, as in
-    training (:func:`airpose_lib.data.official_synthetic.official_growth`); here each of ``draws``
+    training (:func:`airpose_lib.data.official.synthetic.official_growth`); here each of ``draws``
     seeded draws (``jitter_seed = seed + k``) is one run, so Table I reports their mean and spread
     over draws (its ``seeds`` column counts draws). With ``tight`` every run also carries the
     tight-box crops' table (``per_view_tight``: the "tight box" columns). The official printed MPE

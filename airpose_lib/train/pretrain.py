@@ -32,10 +32,10 @@ from torch.utils.data import DataLoader
 
 from airpose_lib.atomic import atomic_path
 from airpose_lib.config_fields import config_from
-from airpose_lib.data.dataset import StillFrameDataset
-from airpose_lib.data.generate import GenerationConfig, default_root, ensure_still_dataset, profile_config
-from airpose_lib.data.manifest import load_manifest
-from airpose_lib.data.shards import sha256_file
+from airpose_lib.data.still.dataset import StillFrameDataset
+from airpose_lib.data.still.generate import GenerationConfig, default_root, ensure_still_dataset, profile_config
+from airpose_lib.data.still.manifest import load_manifest
+from airpose_lib.data.still.shards import sha256_file
 from airpose_lib.engine.checkpoint import kit_version, load_checkpoint
 from airpose_lib.engine.launch import resolve_device, single_process
 from airpose_lib.errors import ConfigError, DamagedFileError, ProfileError, ProfileSettingError, reading
@@ -75,7 +75,7 @@ def pretrain_stages(profile: str, **overrides) -> list[TrainConfig]:
     trained on, when the profile's grew). Its ``cfg.data`` then holds that dataset's ``root``,
     ``fingerprint`` and ``generation`` settings; the other stages take the dataset that
     :func:`ensure_backbone` is given. A stage's ``data:`` may also set the training augmentation
-    (:data:`DATA_OPTIONS`, e.g. ``mirror: true``, :class:`~airpose_lib.data.dataset.StillFrameDataset`'s
+    (:data:`DATA_OPTIONS`, e.g. ``mirror: true``, :class:`~airpose_lib.data.still.dataset.StillFrameDataset`'s
     keywords); they are part of the stage's key.
     """
     settings = profile_section(profile, "pretrain")

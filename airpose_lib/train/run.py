@@ -21,8 +21,8 @@ from pathlib import Path
 import torch
 
 from airpose_lib.assets import locate
-from airpose_lib.data.generate import ensure_still_dataset
-from airpose_lib.data.manifest import load_manifest
+from airpose_lib.data.still.generate import ensure_still_dataset
+from airpose_lib.data.still.manifest import load_manifest
 from airpose_lib.engine.launch import check_precision, launch_env, resolve_device, single_process
 from airpose_lib.errors import ConfigError
 from airpose_lib.folder_lock import file_lock

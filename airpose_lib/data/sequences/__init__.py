@@ -13,7 +13,7 @@ Model of one recording (all numbers configurable in :class:`SequenceConfig`):
   offsets ``(0, 7 ms)``: a constant offset between the two devices, as the paper found when
   synchronising its recordings). Everything of a view, the person's pose included, is evaluated
   at that view's own time, so the two views of "frame i" see the person 7 ms apart.
-* **Person.** A :class:`~airpose_lib.data.motions.MotionScript` drawn for the person's style
+* **Person.** A :class:`~airpose_lib.data.sequences.motions.MotionScript` drawn for the person's style
   (``varied`` for person 1, ``twisting`` for person 2), feet on the ground ``y = 0``.
 * **UAV 1 hovers**: fixed position ``distance_m`` (camera to person) from the activity area,
   on a line of sight ``pitch_deg`` downwards, slow drift of a few centimetres, its gimbal partly follows the person
@@ -29,65 +29,49 @@ Model of one recording (all numbers configurable in :class:`SequenceConfig`):
   (OpenCV pixel centres at integers; exactly what resizing a full frame by ``s`` does). The
   stored ``K``, image sizes and all 2D ground truth refer to the stored images. The scene (ground
   texture, sky, sun, background objects beyond the orbit, per-vertex clothing colours) reuses the
-  still-frame renderer :class:`airpose_lib.data.render.SceneRenderer` and appearance model.
+  still-frame renderer :class:`airpose_lib.data.still.render.SceneRenderer` and appearance model.
 * **Options, off by default** (off, they change neither a byte of a frame nor the settings that
   key the cache): ``field``, a camera pipeline that makes the frames behave like field footage
   (exposure, white balance, tone curve, sensor noise, motion blur, lens distortion,
   compression; :mod:`.field`); ``markers``, printed ArUco markers on the ground as in the
   paper's scene, from which each drone's pose and UAV 2 in UAV 1 can be measured
-  (:mod:`airpose_lib.data.markers`).
+  (:mod:`airpose_lib.data.sequences.markers`).
 
 Ground-truth arrays (:data:`GROUND_TRUTH_KEYS`; F frames, V views; the paper's root convention
 ``V_world = R_wb V0 + t_wb`` about the model origin, cameras OpenCV ``x_cam = R_cw x_world +
 t_cw``) are documented in :func:`simulate_sequence`.
 
 Modules: ``config`` (cameras, persons, flights, :class:`SequenceConfig`, a profile's recordings),
-``flight`` (the drones' paths and camera poses), ``simulate`` (ground truth without pixels),
-``renderer`` (the frames), ``field`` (the opt-in field camera pipeline on them), ``recording`` (one recording on disk, detector files),
-``cache`` (a profile's recordings, made only when missing or outdated).
+``motions`` (the person's motion scripts), ``flight`` (the drones' paths and camera poses),
+``simulate`` (ground truth without pixels), ``detections`` (the simulated keypoint detectors),
+``renderer`` (the frames), ``field`` (the opt-in field camera pipeline on them), ``markers``
+(ArUco markers on the ground: detection, camera poses, UAV 2 in UAV 1), ``recording`` (one
+recording on disk, detector files), ``cache`` (a profile's recordings, made only when missing or
+outdated). Every recording, kit or real, is in one folder layout: ``layout`` (its files and
+names, the calibration), ``writer`` (:class:`~.writer.OfficialLayoutWriter`), ``reader``
+(``load_sequence``), ``detector_files`` (the detector files' formats, one reader per format), ``mediapipe_pose``
+(a real detector's landmarks as BODY_25 keypoints: MediaPipe Pose, run by
+``scripts/mediapipe_detect.py`` in its own environment).
+
+The names below are imported from their module on first use (``import
+airpose_lib.data.sequences.reader`` stays light: no torch, no VTK).
 """
 from __future__ import annotations
 
-from .cache import default_sequence_root, ensure_sequences
-from .config import (
-    PAPER_CAMERAS,
-    PERSONS,
-    SEQUENCE_GENERATOR_VERSION,
-    CameraSpec,
-    FlightConfig,
-    PersonSpec,
-    SequenceConfig,
-    profile_sequences,
-    scale_intrinsics,
-    sequence_configs_from_profile,
-)
-from .field import FieldConfig
-from .flight import look_at_rotation
-from .recording import generate_sequence, recording_detections, refresh_detections
-from .renderer import SequenceRenderer, render_sequence
-from .simulate import GROUND_TRUTH_KEYS, SimulatedSequence, simulate_sequence
+from airpose_lib._lazy import lazy_namespace
 
-__all__ = [
-    "CameraSpec",
-    "PAPER_CAMERAS",
-    "PersonSpec",
-    "PERSONS",
-    "FlightConfig",
-    "FieldConfig",
-    "SequenceConfig",
-    "SimulatedSequence",
-    "GROUND_TRUTH_KEYS",
-    "scale_intrinsics",
-    "simulate_sequence",
-    "SequenceRenderer",
-    "render_sequence",
-    "generate_sequence",
-    "recording_detections",
-    "refresh_detections",
-    "sequence_configs_from_profile",
-    "profile_sequences",
-    "default_sequence_root",
-    "ensure_sequences",
-    "SEQUENCE_GENERATOR_VERSION",
-    "look_at_rotation",
-]
+# name -> module, each name written once (a module's other names: import them from the module)
+_EXPORTS = {
+    **dict.fromkeys(("default_sequence_root", "ensure_sequences"), "cache"),
+    **dict.fromkeys(("PAPER_CAMERAS", "PERSONS", "SEQUENCE_GENERATOR_VERSION", "CameraSpec", "FlightConfig",
+                     "PersonSpec", "SequenceConfig", "profile_sequences", "scale_intrinsics",
+                     "sequence_configs_from_profile"), "config"),
+    "FieldConfig": "field",
+    "look_at_rotation": "flight",
+    **dict.fromkeys(("generate_sequence", "recording_detections", "refresh_detections"), "recording"),
+    **dict.fromkeys(("SequenceRenderer", "render_sequence"), "renderer"),
+    **dict.fromkeys(("GROUND_TRUTH_KEYS", "SimulatedSequence", "simulate_sequence"), "simulate"),
+}
+
+__all__ = sorted(_EXPORTS)
+__getattr__, __dir__ = lazy_namespace(__name__, globals(), (), _EXPORTS)

@@ -11,8 +11,8 @@ from airpose_lib.errors import ConfigError
 from airpose_lib.folder_lock import MAKER_WAIT_S, folder_lock
 from airpose_lib.paths import cache_dir
 
-from ..detections import DETECTOR_VERSION
 from .config import SEQUENCE_GENERATOR_VERSION, SequenceConfig, profile_sequences
+from .detections import DETECTOR_VERSION
 from .recording import generate_sequence, refresh_detections
 
 __all__ = ["default_sequence_root", "ensure_sequences"]
@@ -61,10 +61,10 @@ def ensure_sequences(profile: str | None = None, root: str | Path | None = None,
         force: regenerate even if complete.
     Returns:
         name -> sequence folder (read it with
-        :func:`airpose_lib.data.official_layout.load_sequence`).
+        :func:`airpose_lib.data.sequences.reader.load_sequence`).
     """
     # A profile gives both the settings and the default folder, as for the still frames
-    # (data.generate.ensure_still_dataset); explicit settings need an explicit folder.
+    # (data.still.generate.ensure_still_dataset); explicit settings need an explicit folder.
     if configs is None:
         if profile is None:
             raise ValueError("give a profile or configs")

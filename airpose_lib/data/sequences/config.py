@@ -14,8 +14,8 @@ from airpose_lib.config_fields import config_from
 from airpose_lib.errors import ConfigError, ProfileError, ProfileSettingError
 from airpose_lib.profiles import profile_section, section_where
 
-from ..markers import MarkerLayout
 from .field import FieldConfig
+from .markers import MarkerLayout
 
 __all__ = [
     "CameraSpec",
@@ -94,7 +94,7 @@ class PersonSpec:
         name: ``person1`` / ``person2``.
         gender: ``male``, ``female`` or ``neutral`` (the ground-truth model).
         betas: (10,) shape coefficients.
-        style: motion style (:data:`airpose_lib.data.motions.PERSON_STYLES`).
+        style: motion style (:data:`airpose_lib.data.sequences.motions.PERSON_STYLES`).
         appearance_seed: seed of the clothing colours.
     """
 
@@ -172,7 +172,7 @@ class SequenceConfig:
         field: the field camera pipeline on the rendered frames (:mod:`.field`); off by default,
             and then absent from :meth:`to_dict` (the recordings' cache key), so the clean
             recordings keep their key and every byte.
-        markers: ArUco markers printed on the ground (:class:`~airpose_lib.data.markers.MarkerLayout`,
+        markers: ArUco markers printed on the ground (:class:`~airpose_lib.data.sequences.markers.MarkerLayout`,
             world coordinates), as in the paper's scene; None (default) = none, and then absent
             from :meth:`to_dict` like ``field``. A profile turns the default layout on with
             ``markers: {}``.

@@ -13,11 +13,14 @@ import numpy as np
 
 from airpose_lib.progress import progress_bar
 
-from ..detections import DEFAULT_DETECTORS, DETECTOR_VERSION, detection_summary, simulate_detections
-from ..official_layout import DETECTOR_FILES, OfficialLayoutWriter, load_sequence
 from .config import SEQUENCE_GENERATOR_VERSION, SequenceConfig
+from .detections import DEFAULT_DETECTORS, DETECTOR_VERSION, detection_summary, simulate_detections
+from .detector_files import write_detector_file
+from .layout import DETECTOR_FILES
+from .reader import load_sequence
 from .renderer import SequenceRenderer
 from .simulate import simulate_sequence
+from .writer import OfficialLayoutWriter
 
 __all__ = ["generate_sequence", "recording_detections", "refresh_detections"]
 
@@ -25,7 +28,7 @@ __all__ = ["generate_sequence", "recording_detections", "refresh_detections"]
 def generate_sequence(config: SequenceConfig, root: str | Path, *, progress: bool = False,
                       body_model=None) -> dict:
     """Simulate a recording, simulate both keypoint detectors, render the frames and store it in
-    the official real-data layout (:mod:`airpose_lib.data.official_layout`) under ``root``.
+    the official real-data layout (:mod:`airpose_lib.data.sequences.layout`) under ``root``.
 
     Returns:
         a summary dict: ``root``, ``num_frames``, ``render_seconds``, ``frames_per_second``
@@ -58,8 +61,8 @@ def generate_sequence(config: SequenceConfig, root: str | Path, *, progress: boo
 
 
 def recording_detections(gt: Mapping[str, np.ndarray], config: SequenceConfig) -> dict:
-    """Both simulated detectors on a recording's ground truth (``data.detections``): name ->
-    :class:`~airpose_lib.data.detections.Detections`, seeded by ``config.detector_seed`` (default
+    """Both simulated detectors on a recording's ground truth (``data.sequences.detections``): name ->
+    :class:`~airpose_lib.data.sequences.detections.Detections`, seeded by ``config.detector_seed`` (default
     ``seed + 1``) and the detector's position."""
     det_seed = config.detector_seed if config.detector_seed is not None else config.seed + 1
     return {name: simulate_detections(gt, det, seed=[det_seed, k])
@@ -69,7 +72,7 @@ def recording_detections(gt: Mapping[str, np.ndarray], config: SequenceConfig) -
 def refresh_detections(root: str | Path, config: SequenceConfig) -> dict:
     """Re-simulate the detector files of a rendered recording from its ``ground_truth.npz`` (the
     images stay): what :func:`ensure_sequences` does when only the detector model changed
-    (:data:`~airpose_lib.data.detections.DETECTOR_VERSION`). Returns the new summaries."""
+    (:data:`~airpose_lib.data.sequences.detections.DETECTOR_VERSION`). Returns the new summaries."""
     root = Path(root)
     with np.load(root / "ground_truth.npz") as z:
         gt = {k: z[k] for k in z.files}
@@ -78,8 +81,7 @@ def refresh_detections(root: str | Path, config: SequenceConfig) -> dict:
     for name, det in detections.items():
         for v in range(config.num_views):
             path = root / f"machine_{v + 1}" / DETECTOR_FILES[name][0]
-            w = OfficialLayoutWriter
-            (w._write_openpose if name == "openpose" else w._write_alphapose)(path, frames, det.keypoints[:, v])
+            write_detector_file(name, path, frames, det.keypoints[:, v])
     meta_path = root / "sequence.json"
     meta = json.loads(meta_path.read_text())
     meta.update(detector_version=DETECTOR_VERSION,

@@ -10,10 +10,10 @@ import numpy as np
 
 from airpose_lib.body.forward import rest_body
 
-from ..appearance import BodyPaint, sample_appearance
-from ..markers import MarkerLayout, marker_tile, tile_corners_world
-from ..scene import Distractor, EnvironmentSample
+from ..still.appearance import BodyPaint, sample_appearance
+from ..still.scene import Distractor, EnvironmentSample
 from .field import field_frame, field_rng, person_image_velocity
+from .markers import MarkerLayout, marker_tile, tile_corners_world
 from .simulate import SimulatedSequence, person_body_model
 
 __all__ = ["SequenceRenderer", "render_sequence"]
@@ -21,7 +21,7 @@ __all__ = ["SequenceRenderer", "render_sequence"]
 
 def _scene_renderer_class():
     # Imported lazily: VTK/pyvista start-up is only paid when frames are rendered.
-    from ..render import SceneRenderer
+    from ..still.render import SceneRenderer
 
     class _Renderer(SceneRenderer):
         """SceneRenderer whose camera takes any pinhole K (fx != fy, off-centre principal point).

@@ -12,9 +12,9 @@ from airpose_lib.body.forward import rest_body
 from airpose_lib.body.genders import GENDER_CODES
 from airpose_lib.body.joint_sets import BODY_25_FROM_SMPLX, COCO18_FROM_SMPLX
 
-from ..motions import MotionScript, evaluate_motion, sample_script, world_root_pose
 from .config import SequenceConfig
 from .flight import Flights, look_at_rotation
+from .motions import MotionScript, evaluate_motion, sample_script, world_root_pose
 
 __all__ = ["GROUND_TRUTH_KEYS", "SimulatedSequence", "person_body_model", "simulate_sequence"]
 

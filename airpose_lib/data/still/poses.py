@@ -14,7 +14,7 @@ z = forward. With these axes
 Poses are built from a small set of interpretable *pose parameters* (spine bend, arm flexion /
 abduction, knee flexion, ...; see :data:`PARAM_NAMES` and :func:`compose_pose`) so that the same
 builder serves still frames (parameters drawn per motion primitive, :func:`sample_body_pose`) and
-continuous motions (parameters varied smoothly over time, :mod:`airpose_lib.data.motions`).
+continuous motions (parameters varied smoothly over time, :mod:`airpose_lib.data.sequences.motions`).
 Every pose is finally clipped to :data:`joint_limits`, a box on the axis-angle components per
 joint (:data:`JOINT_LIMITS_DEG`, degrees), so that no sample leaves the anatomical ranges.
 

@@ -5,7 +5,7 @@ walks, turns, twists and moves the arms). A motion is a :class:`MotionScript`: a
 :class:`Segment` activities (see :data:`ACTIVITIES`), each a closed-form function of its local
 time that gives
 
-* the pose parameters of :mod:`airpose_lib.data.poses` (composed to ``theta`` (21, 3)),
+* the pose parameters of :mod:`airpose_lib.data.still.poses` (composed to ``theta`` (21, 3)),
 * a walking speed (m/s, along the body's facing direction), a turning rate (rad/s, about the
   world Y axis) and a forward tilt of the pelvis (rad; e.g. when bending). The tilt rotates the
   root; the hips flex by the same angle, so it inclines pelvis and trunk but not the legs.
@@ -32,7 +32,7 @@ from scipy.spatial.transform import Rotation
 
 from airpose_lib.body.forward import rest_body
 
-from .poses import PARAM_NAMES, compose_pose, walking_params
+from ..still.poses import PARAM_NAMES, compose_pose, walking_params
 
 __all__ = [
     "ACTIVITIES",

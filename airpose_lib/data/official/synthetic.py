@@ -1,7 +1,7 @@
 """The official AirPose synthetic data (``copenet_synthetic``) as a kit dataset.
 
 ``OfficialSyntheticDataset(root, split)`` reads the authors' release and returns exactly the item
-dict of :class:`airpose_lib.data.dataset.StillFrameDataset` (same keys, shapes, dtypes and
+dict of :class:`airpose_lib.data.still.dataset.StillFrameDataset` (same keys, shapes, dtypes and
 conventions), so training, evaluation and figures take either.
 
 Layout (learned from the official repository robot-perception-group/AirPose:
@@ -100,9 +100,9 @@ from airpose_lib.body.forward import rest_body
 from airpose_lib.body.genders import GENDER_CODES
 from airpose_lib.geometry import body_in_camera, crop_affine_matrix, crop_from_image, crop_vector, project_points
 
-from .dataset import normalize_images, swap_views
-from .manifest import DatasetError
-from .scene import points_in_frame
+from ..still.dataset import normalize_images, swap_views
+from ..still.manifest import DatasetError
+from ..still.scene import points_in_frame
 
 __all__ = [
     "OfficialDataError",
@@ -356,7 +356,7 @@ def crop_image(image: np.ndarray, offset: tuple[float, float], bbox: np.ndarray,
 
 # -- the dataset --------------------------------------------------------------------------------
 class OfficialSyntheticDataset(Dataset):
-    """The official synthetic release, items as :class:`~airpose_lib.data.dataset.StillFrameDataset`.
+    """The official synthetic release, items as :class:`~airpose_lib.data.still.dataset.StillFrameDataset`.
 
     Args:
         root: the folder holding ``dataset/`` and ``data/``.

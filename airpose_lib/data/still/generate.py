@@ -4,7 +4,7 @@ here the open body model rendered off-screen).
 One sample = one subject (gender, betas, pose, place and heading on the ground) seen by
 ``num_views`` independently placed drone cameras; per view the person crop is rendered directly
 at the network input size with the crop's intrinsics, and the full-frame ground truth is stored
-(see :class:`airpose_lib.data.dataset.StillFrameDataset` for the sample dict).
+(see :class:`airpose_lib.data.still.dataset.StillFrameDataset` for the sample dict).
 
 Reproducibility: shard ``k`` draws its sample attempts from ``numpy`` generators seeded with
 ``(seed, k, attempt)`` and keeps the first ``shard_size`` attempts whose person stays inside every
@@ -13,7 +13,7 @@ and its index: the same seed gives byte-identical shards whatever the number of 
 interrupted run resumes by skipping the shards the manifest lists (after re-checking their
 SHA-256) and rebuilding the rest.
 
-Modules: ``still_config`` (:class:`GenerationConfig`, profile settings), ``still_frames`` (one
+Modules: ``config`` (:class:`GenerationConfig`, profile settings), ``frames`` (one
 process's :class:`StillFrameGenerator`: sampling and rendering), this one (shards on disk, the
 manifest, resumption and the worker pool).
 
@@ -33,6 +33,7 @@ from airpose_lib.folder_lock import MAKER_WAIT_S, folder_lock, locks_folder
 from airpose_lib.process_guard import die_with_parent
 from airpose_lib.progress import progress_bar
 
+from .config import GENERATOR_VERSION, SPLITS, GenerationConfig, default_root, profile_config
 from .manifest import (
     DATASET_KIND,
     DatasetError,
@@ -43,10 +44,9 @@ from .manifest import (
     write_manifest,
 )
 from .shards import sha256_file
-from .still_config import GENERATOR_VERSION, SPLITS, GenerationConfig, default_root, profile_config
 
 __all__ = [
-    # the settings live in still_config; re-exported here because callers (CLI, training,
+    # the settings live in .config; re-exported here because callers (CLI, training,
     # runtime, tests) import them from this entry point
     "GENERATOR_VERSION",
     "GenerationConfig",
@@ -63,7 +63,7 @@ _WORKER: dict = {}
 
 def _worker_init(config_dict: dict, progress_queue, parent: int | None = None) -> None:
     die_with_parent(parent)  # no orphaned renderers if the parent is killed (even before this runs)
-    from .still_frames import StillFrameGenerator, _limit_threads  # heavy: see _run_inprocess
+    from .frames import StillFrameGenerator, _limit_threads  # heavy: see _run_inprocess
 
     os.environ.setdefault("LP_NUM_THREADS", "1")  # Mesa llvmpipe: one raster thread per worker
     os.environ.setdefault("OMP_NUM_THREADS", "1")
@@ -217,11 +217,11 @@ def generate_still_dataset(
 
 
 def _run_inprocess(config, root, todo, bar, finished) -> None:
-    # still_frames pulls in torch and smplx: imported here, not at the top, because a drone's
+    # .frames pulls in torch and smplx: imported here, not at the top, because a drone's
     # start-up imports this module (default_root) and must stay light
     import torch
 
-    from .still_frames import StillFrameGenerator, _limit_threads
+    from .frames import StillFrameGenerator, _limit_threads
 
     threads = torch.get_num_threads()
     _limit_threads()

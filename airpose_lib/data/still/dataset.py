@@ -42,11 +42,11 @@ from torch.utils.data import Dataset
 
 from airpose_lib.errors import ConfigError
 
+from ..network_input import IMAGENET_MEAN, IMAGENET_STD, normalize
+from .config import SPLITS
 from .manifest import check_complete, verify_shard
 from .mirror import mirror_sample
-from .network_input import IMAGENET_MEAN, IMAGENET_STD, normalize
 from .shards import ShardImages, read_shard
-from .still_config import SPLITS
 
 __all__ = ["StillFrameDataset", "PER_VIEW_KEYS", "SAMPLE_KEYS", "EXTRA_KEYS",
            "normalize_images", "denormalize_images", "decode_image", "swap_views"]

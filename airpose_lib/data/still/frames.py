@@ -2,7 +2,7 @@
 render the person crops and collect one shard's arrays (:class:`StillFrameGenerator`).
 
 Shard ``k`` draws its sample attempts from generators seeded with ``(seed, k, attempt)``, so a
-shard depends only on the configuration and its index (see :mod:`airpose_lib.data.generate`).
+shard depends only on the configuration and its index (see :mod:`airpose_lib.data.still.generate`).
 """
 from __future__ import annotations
 
@@ -15,6 +15,7 @@ from airpose_lib.body.genders import GENDER_CODES
 from airpose_lib.geometry import body_in_camera, crop_intrinsics, crop_vector, pad_outside_box, project_points
 
 from .appearance import sample_appearance
+from .config import GENERATOR_VERSION, GenerationConfig
 from .manifest import DATASET_KIND
 from .scene import (
     body_world_pose,
@@ -26,7 +27,6 @@ from .scene import (
     tight_bbox,
 )
 from .shards import shard_name, write_shard
-from .still_config import GENERATOR_VERSION, GenerationConfig
 
 __all__ = ["StillFrameGenerator"]
 
@@ -60,7 +60,7 @@ class StillFrameGenerator:
     Args:
         config: the dataset configuration.
         pose_sampler: ``f(rng, n) -> (n, 21, 3)``; default
-            :func:`airpose_lib.data.poses.sample_body_pose`.
+            :func:`airpose_lib.data.still.poses.sample_body_pose`.
     """
 
     def __init__(self, config: GenerationConfig, pose_sampler=None) -> None:

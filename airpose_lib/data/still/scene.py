@@ -158,7 +158,7 @@ def sample_person(rng: np.random.Generator, cfg: SceneConfig, pose_sampler) -> P
         rng: the attempt's generator.
         cfg: scene settings.
         pose_sampler: ``f(rng, n) -> (n, 21, 3)`` axis-angle poses
-            (:func:`airpose_lib.data.poses.sample_body_pose`).
+            (:func:`airpose_lib.data.still.poses.sample_body_pose`).
     """
     gender = cfg.genders[int(rng.integers(len(cfg.genders)))]
     betas = np.clip(rng.standard_normal(NUM_BETAS) * np.asarray(cfg.beta_std), -cfg.beta_clip, cfg.beta_clip)

@@ -16,8 +16,9 @@ on frames 8000-14999 of that folder. The paper fine-tunes on person 1 and tests 
 person 1 is frames 0-6999 and person 2 frames 8000-14999 (:data:`REAL_DATA_SPLITS`,
 :data:`PERSON_SPLITS`); frames 7000-7999 belong to neither.
 
-Detection files in the release differ from the ones the kit's generator writes; the one reader
-of detection files, :mod:`airpose_lib.data.official_layout` (``load_sequence``), reads both:
+Detection files in the release differ from the ones the kit's generator writes; the recording
+reader (``load_sequence``) reads both, one reader per format in
+:mod:`airpose_lib.data.sequences.detector_files`:
 
 * ``openpose_res.pkl``: a dict ``"%06d" -> {"pose": (persons, 25, 3)}`` (BODY_25 ``[x, y, c]``;
   person 0 is the subject). The kit's files map the frame to the array directly.
@@ -48,7 +49,8 @@ import numpy as np
 
 from airpose_lib import safe_pickle
 
-from .official_layout import Sequence, SequenceFormatError, _frame_name, _image_index, _lookup, _machines, load_sequence
+from ..sequences.layout import SequenceFormatError, _frame_name, _image_index, _lookup, _machines
+from ..sequences.reader import Sequence, load_sequence
 
 __all__ = [
     "REAL_DATA_SPLITS",
@@ -173,11 +175,11 @@ def load_official_real(root: Path | str, person: int | None = None, split: str |
                        frames: Iterable[int] | None = None,
                        detectors: SequenceABC[str] = ("openpose", "alphapose"),
                        missing_detections: str = "zero", strict: bool = True) -> Sequence:
-    """A split of the real-data release as a :class:`~airpose_lib.data.official_layout.Sequence`.
+    """A split of the real-data release as a :class:`~airpose_lib.data.sequences.reader.Sequence`.
 
     Images, calibration, time stamps and detections come from
-    :func:`~airpose_lib.data.official_layout.load_sequence`, which reads the release's detection
-    formats (:func:`read_official_openpose`, :func:`read_official_alphapose`) and the kit's.
+    :func:`~airpose_lib.data.sequences.reader.load_sequence`, which reads the release's detection
+    formats (``detector_files.read_official_openpose``, ``read_official_alphapose``) and the kit's.
 
     Args:
         root: the release folder (``machine_1``, ``machine_2``).

@@ -72,6 +72,8 @@ def write_manifest(root: Path, manifest: dict) -> Path:
 
 
 def _dump(manifest: dict, tracked: bool = False) -> str:
+    # The header names the generator's module as it was (``airpose_lib.data.generate``, now
+    # ``data.still.generate``) so that a manifest stays byte for byte what the committed ones are.
     header = ("# Written by `airpose data generate` (airpose_lib.data.generate); do not edit.\n"
               + ("# The settings and splits of a profile's dataset, the same on every machine; each shard's size\n"
                  "# and SHA-256 are in the dataset's own manifest.yaml (`airpose data verify` checks them).\n"
@@ -82,7 +84,7 @@ def _dump(manifest: dict, tracked: bool = False) -> str:
 
 def repo_manifest_dir() -> Path | None:
     """The checkout's ``data_manifests/`` folder, or None when the kit is installed elsewhere."""
-    folder = Path(__file__).resolve().parents[2] / "data_manifests"
+    folder = Path(__file__).resolve().parents[3] / "data_manifests"  # <repo>/airpose_lib/data/still/
     return folder if folder.is_dir() else None
 
 

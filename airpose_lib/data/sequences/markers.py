@@ -1,7 +1,7 @@
 """ArUco markers on the ground as ground truth for the drones' cameras (issue 31, item 5).
 
 The paper's scene had ArUco markers on the ground, "never used for any of our methods" (Fig. 1);
-the official real data ships per-frame marker poses (``data.official_real``). This module is
+the official real data ships per-frame marker poses (``data.official.real``). This module is
 the geometry without a renderer: a layout of square markers lying on the ground plane ``y = 0``
 (world Y up, as the recordings), their images (``cv2.aruco``), a top-down image of the ground
 with the markers (:func:`ground_board`) and its homography into a camera (for synthetic views),
@@ -28,7 +28,7 @@ import torch
 from airpose_lib.errors import ConfigError
 from airpose_lib.geometry import relative_camera_pose
 
-from .official_real import MarkerPoses
+from ..official.real import MarkerPoses
 
 __all__ = [
     "MarkerLayout",
@@ -248,7 +248,7 @@ def relative_camera_from_markers(R1: np.ndarray, t1: np.ndarray, R2: np.ndarray,
 
     Args:
         R1, t1, R2, t2: (..., 3, 3), (..., 3) marker/world -> camera poses of UAV 1 and UAV 2
-            (:func:`camera_pose_from_markers`, or ``data.official_real.MarkerPoses``).
+            (:func:`camera_pose_from_markers`, or ``data.official.real.MarkerPoses``).
     Returns:
         ``R_12 (..., 3, 3)``, ``t_12 (..., 3)``, float64.
     """
@@ -261,14 +261,14 @@ def sequence_marker_poses(seq, layout: MarkerLayout | None = None, min_markers: 
     """Each drone's camera pose from the markers in every frame of a recording.
 
     Args:
-        seq: a recording (:class:`~airpose_lib.data.official_layout.Sequence`: ``frames``,
+        seq: a recording (:class:`~airpose_lib.data.sequences.reader.Sequence`: ``frames``,
             ``images[view][i]`` RGB, ``K`` (V, 3, 3) of the stored images).
         layout: the markers on its ground; default: a generated recording's own
             (``SequenceConfig.markers`` in its ``sequence.json``).
         min_markers: fewer detected markers than this leave the view invalid (two markers from
             12 m can be tens of centimetres off along the line of sight; three or four are not).
     Returns:
-        :class:`~airpose_lib.data.official_real.MarkerPoses` in the layout's (world) frame
+        :class:`~airpose_lib.data.official.real.MarkerPoses` in the layout's (world) frame
         (``R_cm``, ``t_cm`` = ``R_cw``, ``t_cw``; identity / zero where invalid), the number of
         markers detected ``(F, V)`` and the RMS reprojection error ``(F, V)`` pixels (NaN where
         no pose).
@@ -296,7 +296,7 @@ def sequence_marker_poses(seq, layout: MarkerLayout | None = None, min_markers: 
 
 def marker_relative_cameras(poses: MarkerPoses) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """UAV 2 in UAV 1 per frame from marker poses (the official release's
-    ``markerposes_corrected_all.pkl`` through ``data.official_real.load_marker_poses``, or
+    ``markerposes_corrected_all.pkl`` through ``data.official.real.load_marker_poses``, or
     :func:`sequence_marker_poses`): ``R_12 (F, 3, 3)``, ``t_12 (F, 3)`` and ``valid (F,)`` (both
     views posed; elsewhere the values are meaningless)."""
     R_12, t_12 = relative_camera_from_markers(poses.R_cm[:, 0], poses.t_cm[:, 0], poses.R_cm[:, 1], poses.t_cm[:, 1])

@@ -41,7 +41,7 @@ from torch import Tensor
 from airpose_lib.body.joint_sets import BODY22_NAMES, BODY_25_NAMES
 from airpose_lib.geometry import crop_vector, split_intrinsics
 
-from .detections import left_right_permutation
+from ..sequences.detections import left_right_permutation
 
 __all__ = ["BODY22_MIRROR", "BODY_25_MIRROR", "mirror_matrix", "mirror_rotation", "mirror_body_pose",
            "mirror_pixels", "mirror_box", "mirror_sample"]
@@ -96,7 +96,7 @@ def mirror_box(bbox: Tensor, K: Tensor, input_size: float) -> Tensor:
 
 
 def mirror_sample(item: dict[str, Tensor], input_size: int) -> dict[str, Tensor]:
-    """The mirrored sample of a :class:`~airpose_lib.data.dataset.StillFrameDataset` item (a new
+    """The mirrored sample of a :class:`~airpose_lib.data.still.dataset.StillFrameDataset` item (a new
     dict; keys it does not hold are skipped, keys it does not know are kept). Computed in float64,
     returned in each key's dtype.
 

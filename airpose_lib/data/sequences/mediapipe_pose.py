@@ -42,8 +42,9 @@ import numpy as np
 from airpose_lib.body.joint_sets import BODY_25_NAMES
 from airpose_lib.errors import ConfigError
 
-from .network_input import hold_boxes, person_box
-from .official_layout import DETECTOR_FILES, OfficialLayoutWriter
+from ..network_input import hold_boxes, person_box
+from .detector_files import write_detector_file
+from .layout import DETECTOR_FILES
 
 __all__ = [
     "MEDIAPIPE_NAMES",
@@ -117,7 +118,7 @@ def crop_boxes(sequence, source: str, *, margin_px: float = 20.0, min_confidence
     """The person box each frame's crop is built around.
 
     Args:
-        sequence: a :class:`~airpose_lib.data.official_layout.Sequence` holding the ``source``
+        sequence: a :class:`~airpose_lib.data.sequences.reader.Sequence` holding the ``source``
             detector's keypoints, or its ground truth for ``truth``.
         source: one of :data:`CROP_SOURCES`.
         margin_px, min_confidence: :func:`~airpose_lib.data.network_input.person_box`'s.
@@ -176,8 +177,8 @@ def from_crop(xy: np.ndarray, crop: tuple[float, float, float], size: int) -> np
 def write_body25(path: str | Path, frames, keypoints: np.ndarray) -> None:
     """Write one view's ``(F, 25, 3)`` keypoints as the kit's BODY_25 pickle
     (``machine_k/mediapipe_res.pkl``, the ``openpose_res.pkl`` format that
-    :func:`~airpose_lib.data.official_layout.load_sequence` reads as detector ``mediapipe``)."""
+    :func:`~airpose_lib.data.sequences.reader.load_sequence` reads as detector ``mediapipe``)."""
     kp = np.asarray(keypoints, np.float64)
     if kp.shape != (len(frames), DETECTOR_FILES["mediapipe"][1], 3):
         raise ValueError(f"keypoints must be ({len(frames)}, 25, 3), got {kp.shape}")
-    OfficialLayoutWriter._write_openpose(Path(path), list(frames), kp)  # the one BODY_25 pickle writer
+    write_detector_file("mediapipe", Path(path), list(frames), kp)  # the one BODY_25 pickle writer

@@ -43,7 +43,9 @@ t_cw``) are documented in :func:`simulate_sequence`.
 
 Modules: ``config`` (cameras, persons, flights, :class:`SequenceConfig`, a profile's recordings),
 ``flight`` (the drones' paths and camera poses), ``simulate`` (ground truth without pixels),
-``renderer`` (the frames), ``field`` (the opt-in field camera pipeline on them), ``recording`` (one recording on disk, detector files),
+``renderer`` (the frames), ``field`` (the opt-in field camera pipeline on them), ``held_out``
+(opt-in appearance the networks never saw: clothing colours, ground photograph, body shape),
+``recording`` (one recording on disk, detector files),
 ``cache`` (a profile's recordings, made only when missing or outdated).
 """
 from __future__ import annotations
@@ -63,6 +65,7 @@ from .config import (
 )
 from .field import FieldConfig
 from .flight import look_at_rotation
+from .held_out import HeldOutConfig
 from .recording import generate_sequence, recording_detections, refresh_detections
 from .renderer import SequenceRenderer, render_sequence
 from .simulate import GROUND_TRUTH_KEYS, SimulatedSequence, simulate_sequence
@@ -74,6 +77,7 @@ __all__ = [
     "PERSONS",
     "FlightConfig",
     "FieldConfig",
+    "HeldOutConfig",
     "SequenceConfig",
     "SimulatedSequence",
     "GROUND_TRUTH_KEYS",

@@ -15,6 +15,7 @@ from airpose_lib.body.joint_sets import BODY_25_FROM_SMPLX, COCO18_FROM_SMPLX
 from ..motions import MotionScript, evaluate_motion, sample_script, world_root_pose
 from .config import SequenceConfig
 from .flight import Flights, look_at_rotation
+from .held_out import held_out_betas
 
 __all__ = ["GROUND_TRUTH_KEYS", "SimulatedSequence", "person_body_model", "recording_script", "simulate_sequence"]
 
@@ -125,7 +126,7 @@ def simulate_sequence(config: SequenceConfig, body_model=None) -> SimulatedSeque
     times = _frame_times(config)
     script = recording_script(config)
     state = evaluate_motion(script, times.reshape(-1))
-    betas = np.asarray(person.betas, dtype=np.float64)
+    betas = held_out_betas(person.betas, config.held_out)  # the person's own unless held_out says
     R_wb, t_wb, pelvis = world_root_pose(state, model, betas)
 
     _, J0 = rest_body(model, np.broadcast_to(betas, (F * V, 10)), state.theta, mesh=False)

@@ -1,6 +1,6 @@
 """Appearance the networks never saw (``data.sequences.held_out``, issue 31 item 1): each part
-lies outside what the still-frame generator draws, by its sampling code and over many draws; off,
-the recordings are the clean ones."""
+lies outside what the still-frame generator draws, by its sampling code and over many draws;
+off, the recordings are the clean ones; the field preset and a profile's field recordings."""
 from __future__ import annotations
 
 import dataclasses
@@ -22,8 +22,12 @@ from airpose_lib.data.appearance import (
 )
 from airpose_lib.data.scene import SceneConfig
 from airpose_lib.data.sequences import (
+    FIELD_PRESETS,
     HeldOutConfig,
     SequenceConfig,
+    field_variant,
+    profile_field_sequences,
+    profile_sequences,
     sequence_configs_from_profile,
 )
 from airpose_lib.data.sequences.held_out import (
@@ -32,8 +36,9 @@ from airpose_lib.data.sequences.held_out import (
     held_out_betas,
     held_out_ground_photo,
 )
+from airpose_lib.data.sequences.presets import field_sequence_configs_from_profile
 from airpose_lib.data.still_config import profile_config
-from airpose_lib.errors import ProfileSettingError
+from airpose_lib.errors import ConfigError, ProfileSettingError
 
 
 def _saturation(rgb: np.ndarray) -> np.ndarray:
@@ -151,6 +156,29 @@ def test_off_keeps_the_recordings_keys_and_on_round_trips():
         sequence_configs_from_profile({"held_out": {"clotting": True}, "recordings": {"person1": {}}})
 
 
+@pytest.mark.parametrize("profile", ["smoke", "cpu"])
+def test_profile_field_recordings_are_the_clean_ones_through_the_preset(profile):
+    clean, field = profile_sequences(profile), profile_field_sequences(profile)
+    assert list(field) == list(clean) == ["person1", "person2"]
+    cam, held = FIELD_PRESETS["dji"]
+    for name, c in clean.items():
+        f = field[name]
+        assert f.field == cam and f.held_out == held and cam.enabled and held.enabled
+        assert dataclasses.replace(f, field=c.field, held_out=c.held_out) == c  # nothing else differs
+        assert _key(f) != _key(c)
+    assert held.clothing and held.ground == "moon" and held.betas_max is None
+
+
+def test_field_recordings_setting():
+    section = {"recordings": {"person1": {"n_frames": 5}}}
+    assert field_sequence_configs_from_profile(section) == {}
+    assert profile_field_sequences("paper") == {}
+    with pytest.raises(ProfileSettingError, match="unknown preset 'gopro'"):
+        field_sequence_configs_from_profile({**section, "field_recordings": "gopro"})
+    with pytest.raises(ConfigError, match="unknown field preset"):
+        field_variant(SequenceConfig(), "gopro")
+
+
 def test_renderer_applies_the_option_only_when_on(open_model_files):
     from airpose_lib.data.sequences import SequenceRenderer, simulate_sequence
 
@@ -172,3 +200,22 @@ def test_renderer_applies_the_option_only_when_on(open_model_files):
     assert env1.ground_tile == pytest.approx(5.12) and env1.distractors[0].position.tolist() == \
         env0.distractors[0].position.tolist()
     assert np.abs(sim1.gt["betas"]).max() == pytest.approx(3.5)
+
+
+def test_ensure_sequences_makes_the_field_recordings_in_their_own_folder(tmp_path, monkeypatch):
+    from airpose_lib.data.sequences import cache
+
+    monkeypatch.setenv("AIRPOSE_CACHE", str(tmp_path))
+    made = {}
+
+    def fake_generate(config, root, progress=False):
+        made[root.name] = config
+        root.mkdir(parents=True)
+
+    monkeypatch.setattr(cache, "generate_sequence", fake_generate)
+    out = cache.ensure_sequences("smoke", field=True)
+    assert out == {n: tmp_path / "data" / "sequences_smoke_field" / n for n in ("person1", "person2")}
+    assert made == {f"{n}.partial": c for n, c in profile_field_sequences("smoke").items()}
+    assert cache.default_sequence_root("smoke") == tmp_path / "data" / "sequences_smoke"
+    with pytest.raises(ConfigError, match="no field recordings"):
+        cache.ensure_sequences("paper", field=True)

@@ -45,7 +45,7 @@ Modules: ``config`` (cameras, persons, flights, :class:`SequenceConfig`, a profi
 ``flight`` (the drones' paths and camera poses), ``simulate`` (ground truth without pixels),
 ``renderer`` (the frames), ``field`` (the opt-in field camera pipeline on them), ``held_out``
 (opt-in appearance the networks never saw: clothing colours, ground photograph, body shape),
-``recording`` (one recording on disk, detector files),
+``presets`` (named field presets and a profile's field recordings), ``recording`` (one recording on disk, detector files),
 ``cache`` (a profile's recordings, made only when missing or outdated).
 """
 from __future__ import annotations
@@ -66,6 +66,7 @@ from .config import (
 from .field import FieldConfig
 from .flight import look_at_rotation
 from .held_out import HeldOutConfig
+from .presets import FIELD_PRESETS, field_variant, profile_field_sequences
 from .recording import generate_sequence, recording_detections, refresh_detections
 from .renderer import SequenceRenderer, render_sequence
 from .simulate import GROUND_TRUTH_KEYS, SimulatedSequence, simulate_sequence
@@ -78,6 +79,9 @@ __all__ = [
     "FlightConfig",
     "FieldConfig",
     "HeldOutConfig",
+    "FIELD_PRESETS",
+    "field_variant",
+    "profile_field_sequences",
     "SequenceConfig",
     "SimulatedSequence",
     "GROUND_TRUTH_KEYS",

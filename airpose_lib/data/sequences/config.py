@@ -278,6 +278,7 @@ def sequence_configs_from_profile(profile_section: Mapping,
     """
     section = dict(profile_section)
     recordings = section.pop("recordings", None)
+    section.pop("field_recordings", None)  # the field twins' preset (.presets.profile_field_sequences)
     if not recordings:
         raise ProfileError(f"{where} needs a `recordings:` mapping")
     out = {}

@@ -219,3 +219,18 @@ def test_ensure_sequences_makes_the_field_recordings_in_their_own_folder(tmp_pat
     assert cache.default_sequence_root("smoke") == tmp_path / "data" / "sequences_smoke"
     with pytest.raises(ConfigError, match="no field recordings"):
         cache.ensure_sequences("paper", field=True)
+
+
+def test_cli_makes_the_field_recordings_or_says_there_are_none(tmp_path, monkeypatch, capsys):
+    from airpose_lib import cli
+    from airpose_lib.data.sequences import cache
+
+    made = []
+    monkeypatch.setattr(cache, "generate_sequence", lambda config, root, progress=False: (made.append(config),
+                                                                                         root.mkdir(parents=True)))
+    assert cli.main(["data", "sequence", "--profile", "smoke", "--field", "--quiet", "--out", str(tmp_path)]) == 0
+    assert made == list(profile_field_sequences("smoke").values())
+    capsys.readouterr()
+    assert cli.main(["data", "sequence", "--profile", "paper", "--field", "--out", str(tmp_path / "p")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("airpose: error:") and "paper.yaml, section `sequences:` has no field recordings" in err[0]

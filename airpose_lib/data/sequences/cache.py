@@ -10,10 +10,11 @@ from pathlib import Path
 from airpose_lib.errors import ConfigError
 from airpose_lib.folder_lock import MAKER_WAIT_S, folder_lock
 from airpose_lib.paths import cache_dir
+from airpose_lib.profiles import section_where
 
 from ..detections import DETECTOR_VERSION
 from .config import SEQUENCE_GENERATOR_VERSION, SequenceConfig, profile_sequences
-from .presets import profile_field_sequences
+from .presets import FIELD_PRESETS, profile_field_sequences
 from .recording import generate_sequence, refresh_detections
 
 __all__ = ["default_sequence_root", "ensure_sequences"]
@@ -74,7 +75,8 @@ def ensure_sequences(profile: str | None = None, root: str | Path | None = None,
             raise ValueError("give a profile or configs")
         configs = profile_field_sequences(profile) if field else profile_sequences(profile)
         if field and not configs:
-            raise ConfigError(f"profile {profile!r} has no field recordings (`sequences: field_recordings:`)")
+            raise ConfigError(f"{section_where(profile, 'sequences')} has no field recordings; add "
+                              f"`field_recordings: <preset>` (presets: {', '.join(FIELD_PRESETS)})")
     if root is None:
         if profile is None:
             raise ValueError("give root when no profile is given")

@@ -104,3 +104,27 @@ def test_transfer_table_reads_the_selection_logs():
     assert (a["tuning_heldout_j2d_before"], a["tuning_heldout_j2d_best_later"]) == (173.0, 117.0)
     assert c["targets"] == "ground_truth" and c["test_mpjpe_kept_m"] == 0.070 and c["helps_test"]
     assert (c["test_j2d_px_before"], c["test_j2d_px_later_min"]) == (16.0, 15.0)
+
+
+def test_field_experiment_reads_the_field_recordings_into_its_own_folder(tmp_path, monkeypatch):
+    # Plumbing only (the experiment itself is the notebooks'): field=True asks ensure_sequences
+    # for the profile's field recordings and caches under <runs>/recordings/<profile>_field.
+    from airpose_lib.experiments import recordings as rec
+
+    monkeypatch.setenv("AIRPOSE_RUNS", str(tmp_path))
+    asked = []
+
+    class Stop(Exception):
+        pass
+
+    def fake_ensure(profile, **kw):
+        asked.append((profile, kw.get("field", False)))
+        raise Stop
+
+    monkeypatch.setattr(rec, "ensure_sequences", fake_ensure)
+    assert rec.default_experiment_dir("smoke", field=True) == rec.default_experiment_dir("smoke").with_name("smoke_field")
+    for field in (False, True):
+        with pytest.raises(Stop):
+            rec.run_recording_experiment("smoke", field=field)
+    assert asked == [("smoke", False), ("smoke", True)]
+    assert (tmp_path / "recordings" / "smoke_field").is_dir()

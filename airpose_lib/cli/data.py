@@ -20,13 +20,12 @@ __all__ = ['add_data']
 
 
 def _cmd_data_sequence(args: argparse.Namespace) -> int:
-    from airpose_lib.data.sequences import default_sequence_root, ensure_sequences, profile_sequences
+    from airpose_lib.data.sequences import default_sequence_root, ensure_sequences
 
-    configs = profile_sequences(args.profile)
-    root = args.out if args.out is not None else default_sequence_root(args.profile)
+    root = args.out if args.out is not None else default_sequence_root(args.profile, args.field)
     with folder_lock(root, "recordings folder"):  # one writer; a killed one's temp files go
-        paths = ensure_sequences(args.profile, root, configs=configs, only=args.only, force=args.force,
-                                 progress=not args.quiet)
+        paths = ensure_sequences(args.profile, root, only=args.only, force=args.force, progress=not args.quiet,
+                                 field=args.field)
     for name, path in paths.items():
         print(f"{name:<10} {path}")
     return 0
@@ -46,6 +45,9 @@ def _add_data_sequence(dsub) -> None:
                      help="parent folder of the recordings (default: <cache>/data/sequences_<profile>)")
     seq.add_argument("--only", nargs="+", metavar="NAME", help="only these recordings (e.g. person1)")
     seq.add_argument("--force", action="store_true", help="regenerate even if a complete copy exists")
+    seq.add_argument("--field", action="store_true",
+                     help="the profile's field recordings instead (`sequences: field_recordings:`; default "
+                          "folder <cache>/data/sequences_<profile>_field)")
     seq.add_argument("--quiet", action="store_true", help="no progress bar")
     seq.set_defaults(func=_cmd_data_sequence)
 

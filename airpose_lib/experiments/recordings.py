@@ -92,9 +92,10 @@ OFFICIAL_INPUT_SIZE = 224
 OFFICIAL_REAL_CHECKPOINTS = {"Baseline": "hmr_real_ckpt", "AirPose": "copenet_twoview_real_ckpt"}
 
 
-def default_experiment_dir(profile: str) -> Path:
-    """``<runs>/recordings/<profile>`` (:func:`airpose_lib.paths.runs_root`, like training runs)."""
-    return run_path("recordings", profile)
+def default_experiment_dir(profile: str, field: bool = False) -> Path:
+    """``<runs>/recordings/<profile>`` (:func:`airpose_lib.paths.runs_root`, like training runs);
+    on the profile's field recordings ``<runs>/recordings/<profile>_field``."""
+    return run_path("recordings", f"{profile}_field" if field else profile)
 
 
 @dataclass
@@ -437,7 +438,7 @@ def _kit_networks(profile: str, seed: int, tuning, tests: dict, prior, prior_inf
 def run_recording_experiment(profile: str = "smoke", out_dir: str | Path | None = None, *,
                              sequences: dict | None = None, seed: int | None = None,
                              fine_tune_on: str = "person1", networks: dict[str, str | Path] | None = None,
-                             progress: bool = False) -> RecordingExperiment:
+                             progress: bool = False, field: bool = False) -> RecordingExperiment:
     """Run (or load the cached steps of) the real-data experiment.
 
     Args:
@@ -451,10 +452,13 @@ def run_recording_experiment(profile: str = "smoke", out_dir: str | Path | None 
         networks: method -> checkpoint for every network method (``Baseline (pre-trained)``,
             ``AirPose (pre-trained)``, ``Baseline``, ``AirPose``), kit ``.pt`` or official
             ``.ckpt`` (:func:`official_networks`); then nothing is trained or fine-tuned.
+        field: on the profile's field recordings (``sequences: field_recordings:``, issue 31)
+            instead of the clean ones, cached in :func:`default_experiment_dir` ``(profile,
+            field=True)``: the same pre-trained networks, fine-tuned again on the field person 1.
     """
-    out = Path(out_dir) if out_dir is not None else default_experiment_dir(profile)
+    out = Path(out_dir) if out_dir is not None else default_experiment_dir(profile, field)
     with folder_lock(out, stale=(".*.tmp", "estimates/*/.*.tmp")):  # one writer of the cached steps
-        return _run_recording_experiment(profile, out, sequences, seed, fine_tune_on, networks, progress)
+        return _run_recording_experiment(profile, out, sequences, seed, fine_tune_on, networks, progress, field)
 
 
 def scored_frames(estimates: dict) -> np.ndarray:
@@ -464,11 +468,12 @@ def scored_frames(estimates: dict) -> np.ndarray:
 
 
 def _run_recording_experiment(profile: str, out: Path, sequences: dict | None, seed: int | None,
-                              fine_tune_on: str, networks: dict | None, progress: bool) -> RecordingExperiment:
+                              fine_tune_on: str, networks: dict | None, progress: bool,
+                              field: bool = False) -> RecordingExperiment:
     import torch
 
     if sequences is None:
-        sequences = ensure_sequences(profile, progress=progress)
+        sequences = ensure_sequences(profile, progress=progress, field=field)
     seqs = {name: s if hasattr(s, "keypoints") else load_sequence(s) for name, s in sequences.items()}
     if fine_tune_on not in seqs:
         raise ValueError(f"fine_tune_on={fine_tune_on!r} is not one of the recordings {list(seqs)}")

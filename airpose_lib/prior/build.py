@@ -2,42 +2,82 @@
 
 The corpus is the kit's own pose generators: still poses of :mod:`airpose_lib.data.still.poses` and
 poses along the scripted motions of :mod:`airpose_lib.data.sequences.motions` (the same generators that
-pose the people of the synthetic data).
+pose the people of the synthetic data), less the motion activities a profile holds out
+(``prior: held_out_motions:``, the activities of its recordings: a prior that has not seen the
+test motions, as the paper's VPoser had not).
 """
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
 import torch
 
 from airpose_lib.body import BodyForward, load_body_model
-from airpose_lib.data.sequences.motions import evaluate_motion, sample_script
+from airpose_lib.data.sequences.motions import ACTIVITIES, evaluate_motion, sample_script
 from airpose_lib.data.still.poses import sample_body_pose, within_limits
 from airpose_lib.devices import resolve_device
+from airpose_lib.errors import ConfigError
 from airpose_lib.folder_lock import file_lock_for
+from airpose_lib.profiles import section_where
 
-from .checkpoint import kit_prior_path, save_prior
+from .checkpoint import kit_prior_path, load_prior, save_prior
 from .train import CorpusConfig, evaluate_prior, prior_profile, train_prior
 
-__all__ = ["prior_corpus", "train_and_save_prior", "ensure_prior"]
+__all__ = ["check_held_out_motions", "motion_poses", "prior_corpus", "prior_is_current", "train_and_save_prior",
+           "ensure_prior"]
+
+
+def check_held_out_motions(corpus: CorpusConfig, where: str = "the prior's corpus") -> None:
+    """A :class:`ConfigError` (naming ``where``) when ``corpus.held_out_motions`` names an
+    activity not in :data:`~airpose_lib.data.sequences.motions.ACTIVITIES` or holds out all of them while
+    motion poses are asked for."""
+    unknown = sorted(set(corpus.held_out_motions) - set(ACTIVITIES))
+    if unknown:
+        raise ConfigError(f"{where}: held_out_motions: unknown activities {unknown}; choose from {list(ACTIVITIES)}")
+    if corpus.n_motion_poses and set(corpus.held_out_motions) >= set(ACTIVITIES):
+        raise ConfigError(f"{where}: held_out_motions holds out every activity; set n_motion_poses: 0 "
+                          "for a prior of still poses only")
+
+
+def motion_poses(rng: np.random.Generator, n: int, fps: float,
+                 exclude=()) -> tuple[np.ndarray, np.ndarray]:
+    """``n`` poses sampled at ``fps`` along random 60 s scripts of :mod:`airpose_lib.data.sequences.motions`
+    that never contain the activities ``exclude``, and how much of each activity every pose is.
+
+    Returns:
+        ``theta (n, 21, 3)`` axis-angle body poses and ``share (n, len(ACTIVITIES))``: the
+        cross-fade weight of each activity in the pose (rows sum to 1; columns in the order of
+        :data:`~airpose_lib.data.sequences.motions.ACTIVITIES`).
+    """
+    thetas, shares = [], []
+    got = 0
+    while got < n:
+        script = sample_script(rng, 60.0, exclude=exclude)
+        times = np.arange(0.0, script.duration, 1.0 / fps)
+        state = evaluate_motion(script, times)
+        onehot = np.array([[a == s.activity for a in ACTIVITIES] for s in script.segments], dtype=np.float64)
+        thetas.append(state.theta[: n - got])
+        shares.append((state.weights @ onehot)[: n - got])
+        got += len(thetas[-1])
+    if not thetas:
+        return np.zeros((0, 21, 3)), np.zeros((0, len(ACTIVITIES)))
+    return np.concatenate(thetas), np.concatenate(shares)
 
 
 def prior_corpus(corpus: CorpusConfig, stream: int, n_still: int, n_motion: int) -> np.ndarray:
-    """Poses of the kit's generators: ``n_still`` still poses and ``n_motion`` motion poses.
+    """Poses of the kit's generators: ``n_still`` still poses and ``n_motion`` motion poses, the
+    latter without the activities ``corpus.held_out_motions`` (:func:`motion_poses`).
 
     Returns:
         ``(n_still + n_motion, 21, 3)`` float32 axis-angle body poses.
     """
+    check_held_out_motions(corpus)
     rng = np.random.default_rng([corpus.seed, stream])
     parts = [sample_body_pose(rng, n_still)] if n_still else []
-    got = 0
-    while got < n_motion:
-        script = sample_script(rng, 60.0)
-        times = np.arange(0.0, script.duration, 1.0 / corpus.motion_fps)
-        theta = evaluate_motion(script, times).theta[: n_motion - got]
-        parts.append(theta)
-        got += len(theta)
+    if n_motion:
+        parts.append(motion_poses(rng, n_motion, corpus.motion_fps, corpus.held_out_motions)[0])
     return np.concatenate(parts).astype(np.float32)
 
 
@@ -67,6 +107,7 @@ def _train_and_save_prior(profile: str, path: Path, steps: int | None, seed: int
     if device is not None:
         cfg.device = device
     dev = resolve_device(cfg.device)  # a bad device fails before the corpus is drawn
+    check_held_out_motions(corpus, section_where(profile, "prior"))
     if seed is not None:
         cfg.seed = corpus.seed = seed
     share = corpus.n_poses / max(corpus.n_poses + corpus.n_motion_poses, 1)
@@ -94,9 +135,21 @@ def _train_and_save_prior(profile: str, path: Path, steps: int | None, seed: int
     return path, report
 
 
-def ensure_prior(profile: str, progress: bool = False) -> Path:
-    """The profile's kit prior, trained first if it is not cached yet."""
-    path = kit_prior_path(profile)
+def prior_is_current(path: str | Path, profile: str) -> bool:
+    """The kit prior at ``path`` exists and was trained on the corpus the profile's ``prior:``
+    section asks for (its record's ``corpus``; e.g. the same ``held_out_motions``)."""
+    path = Path(path)
     if not path.is_file():
+        return False
+    _, corpus = prior_profile(profile)
+    _, prov = load_prior("kit", path, return_provenance=True)
+    return json.loads(json.dumps(prov.get("corpus"))) == json.loads(json.dumps(corpus.to_dict()))
+
+
+def ensure_prior(profile: str, progress: bool = False) -> Path:
+    """The profile's kit prior, trained first if it is not cached yet or was trained on another
+    corpus than the profile's (:func:`prior_is_current`)."""
+    path = kit_prior_path(profile)
+    if not prior_is_current(path, profile):
         path, _ = train_and_save_prior(profile, progress=progress)
     return path

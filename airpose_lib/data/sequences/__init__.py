@@ -45,7 +45,9 @@ Modules: ``config`` (cameras, persons, flights, :class:`SequenceConfig`, a profi
 ``motions`` (the person's motion scripts), ``flight`` (the drones' paths and camera poses),
 ``simulate`` (ground truth without pixels), ``detections`` (the simulated keypoint detectors),
 ``renderer`` (the frames), ``field`` (the opt-in field camera pipeline on them), ``markers``
-(ArUco markers on the ground: detection, camera poses, UAV 2 in UAV 1), ``recording`` (one
+(ArUco markers on the ground: detection, camera poses, UAV 2 in UAV 1), ``held_out``
+(opt-in appearance the networks never saw: clothing colours, ground photograph, body shape),
+``presets`` (named field presets and a profile's field recordings), ``recording`` (one
 recording on disk, detector files), ``cache`` (a profile's recordings, made only when missing or
 outdated). Every recording, kit or real, is in one folder layout: ``layout`` (its files and
 names, the calibration), ``writer`` (:class:`~.writer.OfficialLayoutWriter`), ``reader``
@@ -67,6 +69,8 @@ _EXPORTS = {
                      "PersonSpec", "SequenceConfig", "profile_sequences", "scale_intrinsics",
                      "sequence_configs_from_profile"), "config"),
     "FieldConfig": "field",
+    "HeldOutConfig": "held_out",
+    **dict.fromkeys(("FIELD_PRESETS", "field_variant", "profile_field_sequences"), "presets"),
     "look_at_rotation": "flight",
     **dict.fromkeys(("generate_sequence", "recording_detections", "refresh_detections"), "recording"),
     **dict.fromkeys(("SequenceRenderer", "render_sequence"), "renderer"),

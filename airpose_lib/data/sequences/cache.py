@@ -10,17 +10,20 @@ from pathlib import Path
 from airpose_lib.errors import ConfigError
 from airpose_lib.folder_lock import MAKER_WAIT_S, folder_lock
 from airpose_lib.paths import cache_dir
+from airpose_lib.profiles import section_where
 
 from .config import SEQUENCE_GENERATOR_VERSION, SequenceConfig, profile_sequences
 from .detections import DETECTOR_VERSION
+from .presets import FIELD_PRESETS, profile_field_sequences
 from .recording import generate_sequence, refresh_detections
 
 __all__ = ["default_sequence_root", "ensure_sequences"]
 
 
-def default_sequence_root(profile: str) -> Path:
-    """Where a profile's recordings live by default: ``<kit cache>/data/sequences_<profile>``."""
-    return cache_dir() / "data" / f"sequences_{profile}"
+def default_sequence_root(profile: str, field: bool = False) -> Path:
+    """Where a profile's recordings live by default: ``<kit cache>/data/sequences_<profile>``,
+    its field recordings (``sequences: field_recordings:``) in ``sequences_<profile>_field``."""
+    return cache_dir() / "data" / (f"sequences_{profile}_field" if field else f"sequences_{profile}")
 
 
 def _detections_current(root: Path) -> bool:
@@ -49,7 +52,7 @@ def _is_complete(root: Path, config: SequenceConfig) -> bool:
 
 def ensure_sequences(profile: str | None = None, root: str | Path | None = None, *,
                      configs: Mapping[str, SequenceConfig] | None = None, only=None,
-                     force: bool = False, progress: bool = False) -> dict[str, Path]:
+                     force: bool = False, progress: bool = False, field: bool = False) -> dict[str, Path]:
     """Generate a profile's recordings unless an identical complete copy exists.
 
     Args:
@@ -59,6 +62,8 @@ def ensure_sequences(profile: str | None = None, root: str | Path | None = None,
         configs: recordings to make instead of a profile's.
         only: names to make (default: all).
         force: regenerate even if complete.
+        field: the profile's field recordings instead (``sequences: field_recordings:``,
+            :func:`~.presets.profile_field_sequences`), by default in their own folder.
     Returns:
         name -> sequence folder (read it with
         :func:`airpose_lib.data.sequences.reader.load_sequence`).
@@ -68,11 +73,14 @@ def ensure_sequences(profile: str | None = None, root: str | Path | None = None,
     if configs is None:
         if profile is None:
             raise ValueError("give a profile or configs")
-        configs = profile_sequences(profile)
+        configs = profile_field_sequences(profile) if field else profile_sequences(profile)
+        if field and not configs:
+            raise ConfigError(f"{section_where(profile, 'sequences')} has no field recordings; add "
+                              f"`field_recordings: <preset>` (presets: {', '.join(FIELD_PRESETS)})")
     if root is None:
         if profile is None:
             raise ValueError("give root when no profile is given")
-        root = default_sequence_root(profile)
+        root = default_sequence_root(profile, field)
     root = Path(root)
     names = list(configs) if only is None else list(only)
     unknown = [n for n in names if n not in configs]

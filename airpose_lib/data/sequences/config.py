@@ -15,6 +15,7 @@ from airpose_lib.errors import ConfigError, ProfileError, ProfileSettingError
 from airpose_lib.profiles import profile_section, section_where
 
 from .field import FieldConfig
+from .held_out import HeldOutConfig
 from .markers import MarkerLayout
 
 __all__ = [
@@ -176,6 +177,9 @@ class SequenceConfig:
             world coordinates), as in the paper's scene; None (default) = none, and then absent
             from :meth:`to_dict` like ``field``. A profile turns the default layout on with
             ``markers: {}``.
+        held_out: appearance the networks never saw (:mod:`.held_out`: clothing colours, a
+            ground photograph, a body shape outside the still frames' draw); off by default,
+            and then absent from :meth:`to_dict` like ``field``.
     """
 
     person: str | PersonSpec = "person1"
@@ -192,6 +196,7 @@ class SequenceConfig:
     anti_aliasing: bool = True
     field: FieldConfig = FieldConfig()
     markers: MarkerLayout | None = None
+    held_out: HeldOutConfig = HeldOutConfig()
 
     def __post_init__(self) -> None:
         if self.n_frames < 1:
@@ -226,6 +231,8 @@ class SequenceConfig:
             del d["field"]
         if self.markers is None:
             del d["markers"]
+        if not self.held_out.enabled:
+            del d["held_out"]
         return d
 
     @classmethod
@@ -251,6 +258,8 @@ class SequenceConfig:
             d["field"] = config_from(FieldConfig, d["field"], "field")
         if isinstance(d.get("markers"), Mapping):
             d["markers"] = config_from(MarkerLayout, d["markers"], "markers")
+        if isinstance(d.get("held_out"), Mapping):
+            d["held_out"] = config_from(HeldOutConfig, d["held_out"], "held_out")
         return cls(**d)
 
 
@@ -269,6 +278,7 @@ def sequence_configs_from_profile(profile_section: Mapping,
     """
     section = dict(profile_section)
     recordings = section.pop("recordings", None)
+    section.pop("field_recordings", None)  # the field twins' preset (.presets.profile_field_sequences)
     if not recordings:
         raise ProfileError(f"{where} needs a `recordings:` mapping")
     out = {}

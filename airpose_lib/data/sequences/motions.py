@@ -24,7 +24,7 @@ sliding), and the arms do not react to contact with the ground or the body.
 """
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Collection, Mapping, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -312,28 +312,42 @@ def _sample_options(activity: str, rng: np.random.Generator) -> dict[str, float]
 
 
 def sample_script(rng: np.random.Generator, duration_s: float, style: str = "varied",
-                  segment_s: tuple[float, float] = (3.0, 7.0)) -> MotionScript:
+                  segment_s: tuple[float, float] = (3.0, 7.0),
+                  exclude: Collection[str] = ()) -> MotionScript:
     """A random script of at least ``duration_s`` seconds.
 
     Activities are drawn with the weights of ``PERSON_STYLES[style]`` (never the same one twice
     in a row, and the script starts with a short walk so that the root moves from the first
     frame); each lasts ``segment_s`` seconds (uniform; the first walk half of that). Periodic activities (squat, bend, arms) get a
     whole number of cycles so they end where they started.
+
+    ``exclude`` names activities (:data:`ACTIVITIES`) the script never contains: their weight is
+    zero, and when ``walk`` is one of them the first segment is drawn like the others (a
+    corpus that must not see some families, e.g. the pose prior's held-out motions,
+    :mod:`airpose_lib.prior.build`). Empty (default): the draws, and the script, are exactly
+    those of a call without it.
     """
     if style not in PERSON_STYLES:
         raise ValueError(f"unknown style {style!r}; choose from {tuple(PERSON_STYLES)}")
+    unknown = sorted(set(exclude) - set(ACTIVITIES))
+    if unknown:
+        raise ValueError(f"unknown activities {unknown} to exclude; choose from {ACTIVITIES}")
     names = tuple(PERSON_STYLES[style])
-    w = np.array([PERSON_STYLES[style][k] for k in names])
+    w = np.array([0.0 if k in exclude else PERSON_STYLES[style][k] for k in names])
+    if not w.sum() > 0:
+        raise ValueError(f"excluding {sorted(exclude)} leaves no activity of style {style!r}")
     segments: list[Segment] = []
     total, last = 0.0, None
     while total < duration_s:
-        if last is None:
+        if last is None and "walk" not in exclude:
             act = "walk"
         else:
             ww = np.where(np.array(names) == last, 0.0, w)
+            if not ww.sum() > 0:  # one activity left: it repeats (one long segment)
+                ww = w
             act = names[rng.choice(len(names), p=ww / ww.sum())]
         dur = float(rng.uniform(*segment_s))
-        if last is None:
+        if last is None and act == "walk":
             dur = 0.5 * dur  # a short first walk: short recordings show more than walking
         opts = _sample_options(act, rng)
         if act in ("squat", "bend", "arms"):

@@ -1,7 +1,8 @@
 """Rendering of a simulated recording, frame by frame: the person's posed mesh in a fixed outdoor
 scene (with ArUco markers on the ground when the recording's ``markers`` option is on), seen by
 each drone's calibrated camera (non-square pixels, off-centre principal point), then, when the
-recording's ``field`` option is on, the field camera pipeline (:mod:`.field`)."""
+recording's ``field`` option is on, the field camera pipeline (:mod:`.field`); the
+``held_out`` option changes the clothing colours and the ground (:mod:`.held_out`)."""
 from __future__ import annotations
 
 from collections.abc import Iterator
@@ -13,6 +14,7 @@ from airpose_lib.body.forward import rest_body
 from ..still.appearance import BodyPaint, sample_appearance
 from ..still.scene import Distractor, EnvironmentSample
 from .field import field_frame, field_rng, person_image_velocity
+from .held_out import HELD_OUT_GROUND_PHOTOS, held_out_appearance, held_out_ground_photo
 from .markers import MarkerLayout, marker_tile, tile_corners_world
 from .simulate import SimulatedSequence, person_body_model
 
@@ -107,13 +109,18 @@ class SequenceRenderer:
         person = sim.config.person_spec
         self.model = body_model if body_model is not None else person_body_model(person.gender)
         self.faces = np.asarray(self.model.faces, dtype=np.int64)
+        held = sim.config.held_out
+        look = sample_appearance(np.random.default_rng(person.appearance_seed))
         self.colors = BodyPaint.from_model(self.model).colors(
-            sample_appearance(np.random.default_rng(person.appearance_seed)))
+            held_out_appearance(look, held, person.appearance_seed))
         cls = _scene_renderer_class()
         if anti_aliasing is None:
             anti_aliasing = sim.config.anti_aliasing
         sizes = [tuple(int(x) for x in s) for s in sim.gt["image_size"]]
-        self._renderers = {s: cls(s, anti_aliasing=anti_aliasing) for s in dict.fromkeys(sizes)}
+        # The held-out ground is the renderers' one texture; off, the default bank as before.
+        ground = held.enabled and held.ground is not None
+        textures = [(held.ground, held_out_ground_photo(held.ground))] if ground else None
+        self._renderers = {s: cls(s, anti_aliasing=anti_aliasing, textures=textures) for s in dict.fromkeys(sizes)}
         self._size_of_view = sizes
         # One fixed environment for the whole recording: a grass field, a clear sky, the sun,
         # and a few objects beyond the orbit (they never come between a drone and the person).
@@ -137,6 +144,10 @@ class SequenceRenderer:
             sky_color=np.array([0.68, 0.80, 0.92]),
             light_dir=-np.array([np.cos(elev) * np.sin(az), np.sin(elev), np.cos(elev) * np.cos(az)]),
             light_intensity=0.9, ambient=0.35, distractors=dist)
+        if ground:  # after every draw above: the rest of the scene stays the clean one's
+            self.environment.ground_texture = 0
+            self.environment.ground_tile = HELD_OUT_GROUND_PHOTOS[held.ground] * textures[0][1].shape[0]
+            self.environment.ground_tint = np.asarray(held.ground_tint, dtype=np.float64)
         for r in self._renderers.values():
             r.set_environment(self.environment)
             if sim.config.markers is not None:  # off: no actor added, the scene as before

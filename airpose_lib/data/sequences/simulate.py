@@ -14,9 +14,10 @@ from airpose_lib.body.joint_sets import BODY_25_FROM_SMPLX, COCO18_FROM_SMPLX
 
 from .config import SequenceConfig
 from .flight import Flights, look_at_rotation
+from .held_out import held_out_betas
 from .motions import MotionScript, evaluate_motion, sample_script, world_root_pose
 
-__all__ = ["GROUND_TRUTH_KEYS", "SimulatedSequence", "person_body_model", "simulate_sequence"]
+__all__ = ["GROUND_TRUTH_KEYS", "SimulatedSequence", "person_body_model", "recording_script", "simulate_sequence"]
 
 
 GROUND_TRUTH_KEYS: tuple[str, ...] = (
@@ -62,6 +63,25 @@ def person_body_model(gender: str):
     return _MODELS[gender]
 
 
+def _streams(config: SequenceConfig) -> tuple[np.random.Generator, np.random.Generator]:
+    """The recording's motion and flight random streams (independent children of its seed)."""
+    ss = np.random.SeedSequence([config.seed, 7919])
+    rng_motion, rng_flight = (np.random.default_rng(s) for s in ss.spawn(2))
+    return rng_motion, rng_flight
+
+
+def _frame_times(config: SequenceConfig) -> np.ndarray:
+    """(F, V) capture time of every frame of every camera, seconds."""
+    return np.arange(config.n_frames)[:, None] / config.fps + np.asarray(config.time_offsets)[None, :]
+
+
+def recording_script(config: SequenceConfig) -> MotionScript:
+    """The motion script of a recording, as :func:`simulate_sequence` draws it (no body model,
+    no rendering): e.g. which activities a recording shows (``prior: held_out_motions:``)."""
+    return sample_script(_streams(config)[0], float(_frame_times(config).max()) + 1.0,
+                         config.person_spec.style)
+
+
 def simulate_sequence(config: SequenceConfig, body_model=None) -> SimulatedSequence:
     """Simulate the motion, the flights and the cameras; compute all ground truth.
 
@@ -101,14 +121,12 @@ def simulate_sequence(config: SequenceConfig, body_model=None) -> SimulatedSeque
     """
     person = config.person_spec
     model = body_model if body_model is not None else person_body_model(person.gender)
-    ss = np.random.SeedSequence([config.seed, 7919])
-    rng_motion, rng_flight = (np.random.default_rng(s) for s in ss.spawn(2))
+    _, rng_flight = _streams(config)
     F, V = config.n_frames, config.num_views
-    times = np.arange(F)[:, None] / config.fps + np.asarray(config.time_offsets)[None, :]  # (F, V)
-    duration = float(times.max()) + 1.0
-    script = sample_script(rng_motion, duration, person.style)
+    times = _frame_times(config)
+    script = recording_script(config)
     state = evaluate_motion(script, times.reshape(-1))
-    betas = np.asarray(person.betas, dtype=np.float64)
+    betas = held_out_betas(person.betas, config.held_out)  # the person's own unless held_out says
     R_wb, t_wb, pelvis = world_root_pose(state, model, betas)
 
     _, J0 = rest_body(model, np.broadcast_to(betas, (F * V, 10)), state.theta, mesh=False)

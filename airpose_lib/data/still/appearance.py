@@ -10,6 +10,7 @@ one constant look (the paper's AGORA scans are real, clothed people).
 from __future__ import annotations
 
 import colorsys
+import dataclasses
 import math
 from dataclasses import dataclass
 
@@ -25,6 +26,11 @@ __all__ = [
     "BodyPaint",
     "sample_appearance",
     "vertex_colors",
+    "training_saturation_bound",
+    "HELD_OUT_SATURATION",
+    "HELD_OUT_VALUE",
+    "held_out_clothing_color",
+    "held_out_clothing",
 ]
 
 #: Body regions, in the order of :func:`body_regions`'s ids.
@@ -169,6 +175,61 @@ def _clothing_color(rng: np.random.Generator, saturation_max: float) -> np.ndarr
     return np.array(colorsys.hsv_to_rgb(h, s, v))
 
 
+def _garment_regions(long_sleeves: bool, long_trousers: bool) -> tuple[list[int], list[int]]:
+    """Region ids the shirt and the trousers cover, given the garment lengths."""
+    shirt = [_R["torso"], _R["upper_arm"]] + ([_R["forearm"]] if long_sleeves else [])
+    trousers = [_R["thigh"]] + ([_R["shin"]] if long_trousers else [])
+    return shirt, trousers
+
+
+def training_saturation_bound(cfg: AppearanceConfig = AppearanceConfig()) -> float:
+    """Supremum of the HSV saturation ``(max - min) / max`` of every colour
+    :func:`sample_appearance` gives a person, for the settings ``cfg``.
+
+    Clothing: ``s = U(0, saturation_max) ** 1.3`` (shoes: ``U(0, 0.4) ** 1.3``) and
+    ``colorsys.hsv_to_rgb`` keeps ``s`` as the colour's saturation; skin tones reach 0.55 and
+    hair colours 0.79 (their gains scale all channels alike, a clip at 1 only lowers it).
+    """
+    skin_hair = np.concatenate([_SKIN_TONES, _HAIR_COLORS])
+    sat = (skin_hair.max(1) - skin_hair.min(1)) / skin_hair.max(1)
+    return float(max(cfg.saturation_max ** 1.3, 0.4 ** 1.3, sat.max()))
+
+
+#: HSV saturation range of the held-out clothing colours (:func:`held_out_clothing`).
+HELD_OUT_SATURATION: tuple[float, float] = (0.92, 1.0)
+#: HSV value range of the held-out clothing colours (dark colours lose their hue).
+HELD_OUT_VALUE: tuple[float, float] = (0.35, 1.0)
+
+
+def held_out_clothing_color(rng: np.random.Generator) -> np.ndarray:
+    """``(3,)`` RGB of a clothing colour from the part of colour space the still frames never
+    draw: HSV saturation in :data:`HELD_OUT_SATURATION`, above :func:`training_saturation_bound`
+    (0.81 with the kit's settings), any hue, value in :data:`HELD_OUT_VALUE`: vivid, fully
+    saturated garments (high-visibility vests, sports kit).
+
+    Why: networks trained on synthetic people meet clothing at test time that their training
+    renders never showed; the paper trains on AGORA's scanned people and tests on its own
+    footage. Holding out part of the appearance space at test time measures that shift, as
+    SURREAL's split does (Varol et al. 2017, "Learning from synthetic humans", CVPR: its test
+    people wear clothing textures that no training person wears). Here the held-out part is
+    one the still-frame draw provably never reaches, so the still data keep every byte.
+    """
+    h = rng.uniform()
+    s = rng.uniform(*HELD_OUT_SATURATION)
+    v = rng.uniform(*HELD_OUT_VALUE)
+    return np.array(colorsys.hsv_to_rgb(h, s, v))
+
+
+def held_out_clothing(appearance: Appearance, rng: np.random.Generator) -> Appearance:
+    """The same person (skin, hair, garment lengths, shading) in a shirt and trousers of
+    held-out colours (:func:`held_out_clothing_color`); the shoes keep theirs."""
+    colors = appearance.region_colors.copy()
+    shirt, trousers = _garment_regions(appearance.long_sleeves, appearance.long_trousers)
+    colors[shirt] = held_out_clothing_color(rng)
+    colors[trousers] = held_out_clothing_color(rng)
+    return dataclasses.replace(appearance, region_colors=colors)
+
+
 def sample_appearance(rng: np.random.Generator, cfg: AppearanceConfig = AppearanceConfig()) -> Appearance:
     """Draw a skin tone, hair colour, clothing colours and garment lengths."""
     t = rng.uniform(0.0, len(_SKIN_TONES) - 1)
@@ -184,14 +245,11 @@ def sample_appearance(rng: np.random.Generator, cfg: AppearanceConfig = Appearan
     bald = bool(rng.uniform() < cfg.bald_prob)
     hairline = float(rng.uniform(-0.02, 0.03))
     colors = np.empty((len(REGIONS), 3))
-    colors[_R["skin"]] = skin
+    colors[:] = skin  # skin, hands, and forearms / shins the garments leave bare
     colors[_R["hair"]] = skin if bald else hair
-    colors[_R["torso"]] = shirt
-    colors[_R["upper_arm"]] = shirt
-    colors[_R["forearm"]] = shirt if long_sleeves else skin
-    colors[_R["hand"]] = skin
-    colors[_R["thigh"]] = trousers
-    colors[_R["shin"]] = trousers if long_trousers else skin
+    shirt_regions, trouser_regions = _garment_regions(long_sleeves, long_trousers)
+    colors[shirt_regions] = shirt
+    colors[trouser_regions] = trousers
     colors[_R["shoe"]] = shoes
     phase = np.concatenate([rng.normal(0.0, 6.0, size=(4, 3)), rng.uniform(0, 2 * math.pi, size=(4, 1))], 1)
     return Appearance(colors, long_sleeves, long_trousers, bald, hairline, phase)

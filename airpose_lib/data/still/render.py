@@ -30,7 +30,7 @@ import airpose_lib.viz.render  # noqa: F401  (side effects)
 
 from .scene import EnvironmentSample  # noqa: E402
 
-__all__ = ["ground_textures", "SceneRenderer"]
+__all__ = ["ground_textures", "TRAINING_GROUND_PHOTOS", "photo_texture", "SceneRenderer"]
 
 _GROUND_HALF_SIZE = 150.0  # metres; far enough that the horizon is ground, not void
 _MAX_DISTRACTORS = 8
@@ -68,6 +68,24 @@ def _procedural_textures(size: int) -> list[tuple[str, np.ndarray]]:
     return [(name, np.clip(img * 255.0, 0, 255).astype(np.uint8)) for name, img in out]
 
 
+def photo_texture(img: np.ndarray, size: int | None) -> np.ndarray:
+    """A photograph as a grey ground texture ``(size, size) uint8`` (``size`` None: its own
+    size), stretched to a common brightness so the scene's tint alone sets the colour."""
+    img = np.asarray(img, dtype=np.float64)
+    if img.ndim == 3:
+        img = img[..., :3].mean(-1)
+    if size is not None and (img.shape[0] != size or img.shape[1] != size):
+        import cv2
+
+        img = cv2.resize(img, (size, size), interpolation=cv2.INTER_AREA)
+    img = (img - img.mean()) / (img.std() + 1e-6) * 0.18 + 0.55
+    return np.clip(img * 255.0, 0, 255).astype(np.uint8)
+
+
+#: The photographs of :func:`ground_textures` (the still frames' texture bank).
+TRAINING_GROUND_PHOTOS: tuple[str, ...] = ("grass", "gravel", "brick")
+
+
 def ground_textures(size: int = 256) -> list[tuple[str, np.ndarray]]:
     """Grey ground textures ``(name, (size, size) uint8)``: three photographs shipped with
     scikit-image (grass, gravel, brick) and four seamless procedural ones (dirt, asphalt, paving,
@@ -76,17 +94,8 @@ def ground_textures(size: int = 256) -> list[tuple[str, np.ndarray]]:
     try:
         from skimage import data as skdata
 
-        for name in ("grass", "gravel", "brick"):
-            img = np.asarray(getattr(skdata, name)(), dtype=np.float64)
-            if img.ndim == 3:
-                img = img[..., :3].mean(-1)
-            if img.shape[0] != size or img.shape[1] != size:
-                import cv2
-
-                img = cv2.resize(img, (size, size), interpolation=cv2.INTER_AREA)
-            # Stretch to a common brightness so the tint alone sets the colour.
-            img = (img - img.mean()) / (img.std() + 1e-6) * 0.18 + 0.55
-            out.append((name, np.clip(img * 255.0, 0, 255).astype(np.uint8)))
+        for name in TRAINING_GROUND_PHOTOS:
+            out.append((name, photo_texture(getattr(skdata, name)(), size)))
     except ImportError:  # scikit-image is optional: the procedural ones still vary the ground
         pass
     return out + _procedural_textures(size)

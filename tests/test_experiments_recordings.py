@@ -128,3 +128,63 @@ def test_field_experiment_reads_the_field_recordings_into_its_own_folder(tmp_pat
             rec.run_recording_experiment("smoke", field=field)
     assert asked == [("smoke", False), ("smoke", True)]
     assert (tmp_path / "recordings" / "smoke_field").is_dir()
+
+
+def _estimate(tau, joints):
+    F, V = tau.shape[:2]
+    eye = np.broadcast_to(np.eye(3), (F, V, 3, 3)).copy()
+    return {"phi": eye, "tau": tau, "theta": np.broadcast_to(np.eye(3), (F, V, 21, 3, 3)).copy(),
+            "beta": np.zeros((F, V, 10)), "valid": np.ones((F, V), bool)}, joints
+
+
+def test_field_gap_table_compares_each_method_with_itself_on_the_clean_frames():
+    # Hand case: every field estimate sits 0.3 m deeper than the truth, every clean one 0.1 m, so
+    # the field costs exactly 0.2 m of MPE in every frame (interval [0.2, 0.2]); the joints are the
+    # truth scaled about the pelvis by 1.1 (field) and 1.05 (clean), so the field's MPJPE is twice
+    # the clean one's.
+    from types import SimpleNamespace
+
+    from airpose_lib.experiments.recording_tables import field_gap_table
+    from airpose_lib.experiments.recordings import RecordingExperiment
+
+    rng = np.random.default_rng(0)
+    F, V = 60, 2
+    tau = rng.normal(0.0, 1.0, (F, V, 3)) + np.array([0.0, 0.0, 10.0])
+    j3d = rng.normal(0.0, 0.3, (F, V, 22, 3))
+    j3d -= j3d[:, :, :1]
+    gt = {"tau": tau, "phi": np.broadcast_to(np.eye(3), (F, V, 3, 3)).copy(), "j3d_cam": j3d, "fps": 30.0}
+    seq = SimpleNamespace(ground_truth=gt)
+
+    def experiment(depth, scale):
+        est, joints = {}, {}
+        for m in ("Baseline (pre-trained)", "AirPose (pre-trained)", "Baseline", "AirPose"):
+            est[m], joints[m] = _estimate(tau + np.array([0.0, 0.0, depth]), j3d * scale)
+        return RecordingExperiment("smoke", None, {"person2": seq}, {"person2": est}, {"person2": joints}, None, {})
+
+    clean, field = experiment(0.1, 1.05), experiment(0.3, 1.1)
+    t = field_gap_table(clean, field).set_index(["method", "metric"])
+    assert set(t.index.get_level_values("method")) == {f"{m} [field]" for m in
+                                                      ("Baseline (pre-trained)", "AirPose (pre-trained)",
+                                                       "Baseline", "AirPose")}
+    row = t.loc[("AirPose [field]", "mpe_m")]
+    assert row["reference"] == "AirPose [clean]" and row["frames"] == F
+    assert np.isclose(row["difference"], 0.2) and np.isclose(row["low"], 0.2) and np.isclose(row["high"], 0.2)
+    assert row["verdict"] == "higher"
+    mp = t.loc[("Baseline [field]", "mpjpe_m")]
+    assert np.isclose(mp["value"], 2 * mp["reference_value"])
+
+
+def test_runs_field_follows_the_profile_and_the_data_source():
+    from types import SimpleNamespace
+
+    from airpose_lib.errors import ConfigError
+    from airpose_lib.experiments.recordings import runs_field
+
+    generated, official = SimpleNamespace(source="generated"), SimpleNamespace(source="official")
+    assert runs_field(generated, "smoke") and runs_field(generated, "cpu")
+    assert not runs_field(official, "smoke") and not runs_field(generated, "smoke", False)
+    assert not runs_field(generated, "paper")  # no field recordings
+    with pytest.raises(ConfigError, match="field footage"):
+        runs_field(official, "smoke", True)
+    with pytest.raises(ConfigError, match="paper has none"):
+        runs_field(generated, "paper", True)

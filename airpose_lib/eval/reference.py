@@ -46,7 +46,7 @@ __all__ = ["REFERENCE_FILES", "RESULTS_ROOT", "ProvenanceError", "reference_dir"
            "require_clean_checkout", "reference_outputs", "provenance_problems", "provenance_record",
            "train_settings", "train_wall_s", "mean_body_summary", "write_reference", "read_reference_table", "side_by_side",
            "compare_to_reference", "check_against_reference", "install_reference", "reference_report",
-           "RECORDING_FILES", "install_recordings_reference", "recordings_report"]
+           "RECORDING_FILES", "FIELD_RECORDING_FILES", "install_recordings_reference", "recordings_report"]
 
 #: The files of a results bundle.
 REFERENCE_FILES = ("table1.csv", "table1.md", "per_seed.csv", "claims.csv", "claims.md", "mean_body.csv",
@@ -472,6 +472,10 @@ def reference_report(bundle: str | Path, profile: str, write: bool = False, comm
 #: The files notebook 05 writes into its output folder that make the recordings' reference.
 RECORDING_FILES = ("recording_errors.csv", "recording_errors.md", "comparisons.csv", "comparisons.md",
                    "paper_claims.csv", "paper_claims.md", "finetune_transfer.csv", "finetune_transfer.md")
+#: Notebook 05's tables of the field recordings (issue 31), installed beside them when it made them
+#: (a profile with ``sequences: field_recordings:``), removed from the reference when it did not.
+FIELD_RECORDING_FILES = ("field_gap.csv", "field_gap.md", "field_finetune_transfer.csv", "field_finetune_transfer.md",
+                         "field_paper_claims.csv", "field_paper_claims.md")
 
 
 def install_recordings_reference(notebook_dir: str | Path, profile: str, command: str,
@@ -490,9 +494,12 @@ def install_recordings_reference(notebook_dir: str | Path, profile: str, command
     if missing:
         raise FileNotFoundError(f"{src}: no {', '.join(missing)}; run notebook 05_airpose_plus first")
     require_clean_checkout(_checkout_of(root), reference_outputs(profile))
-    for name in RECORDING_FILES:
+    for name in RECORDING_FILES + tuple(n for n in FIELD_RECORDING_FILES if (src / n).is_file()):
         with atomic_path(dst / name) as tmp:
             shutil.copyfile(src / name, tmp)
+    for name in FIELD_RECORDING_FILES:
+        if not (src / name).is_file():
+            (dst / name).unlink(missing_ok=True)  # a reference never mixes two runs' tables
     _write_text(dst / "provenance.json", json.dumps(provenance_record(profile, command), indent=2, default=str) + "\n")
     return dst
 

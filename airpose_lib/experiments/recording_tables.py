@@ -15,7 +15,8 @@ from airpose_lib.eval.recordings import compare_methods, paper_claims, recording
 from .recordings import RecordingExperiment, body_vertices, scored_frames
 
 __all__ = ["depth_summary", "overlay_inputs", "airpose_plus_checks", "finetune_table", "selection_table",
-           "transfer_table", "COMPARISONS", "comparisons_table", "claims_table", "markdown_table"]
+           "transfer_table", "COMPARISONS", "comparisons_table", "GAP_METHODS", "field_gap_table", "claims_table",
+           "markdown_table"]
 
 
 def depth_summary(exp: RecordingExperiment, methods: dict[str, str]) -> pd.DataFrame:
@@ -196,6 +197,47 @@ def comparisons_table(exp: RecordingExperiment, pairs=COMPARISONS, block_s: floa
         fps = float(seq.ground_truth.get("fps", 30.0))
         usable = [(a, b) for a, b in pairs if a in frames and b in frames]
         part = compare_methods(frames, usable, block=max(1, round(block_s * fps)))
+        parts.append(part.assign(sequence=person)[["sequence", *part.columns]])
+    return pd.concat(parts, ignore_index=True) if parts else pd.DataFrame()
+
+
+#: The networks whose field-against-clean gap :func:`field_gap_table` measures: before any
+#: fine-tuning (the domain gap itself), after fine-tuning on the tuning person, and AirPose+.
+GAP_METHODS = ("Baseline (pre-trained)", "AirPose (pre-trained)", "Baseline", "AirPose", "AirPose+")
+
+
+def field_gap_table(clean: RecordingExperiment, field: RecordingExperiment, methods=GAP_METHODS,
+                    block_s: float = 1.0) -> pd.DataFrame:
+    """Each method's error on the field recordings against the clean ones, frame by frame.
+
+    A field recording is its clean one with other pixels (the same motion, flights, seeds and
+    ground truth: ``sequences: field_recordings:``), so the two are compared like two methods on
+    one recording: :func:`airpose_lib.eval.recordings.compare_methods` with A = the method on the
+    field frames, B = the same method on the clean frames, over the frames both experiments
+    scored, blocks of ``block_s`` seconds. A positive ``difference`` is what the field's pixels
+    cost; for the fine-tuned rows each experiment fine-tuned on its own tuning recording.
+
+    Returns:
+        ``sequence``, then :func:`compare_methods`'s columns (``method`` "AirPose [field]",
+        ``reference`` "AirPose [clean]", ...); empty when no recording has ground truth.
+    """
+    parts = []
+    for person in field.persons:
+        if person not in clean.persons or field.sequences[person].ground_truth is None:
+            continue
+        keep = np.intersect1d(np.flatnonzero(scored_frames(clean.estimates[person])),
+                              np.flatnonzero(scored_frames(field.estimates[person])))
+        frames, pairs = {}, []
+        for m in methods:
+            if m not in clean.estimates[person] or m not in field.estimates[person]:
+                continue
+            for tag, exp in (("field", field), ("clean", clean)):
+                t = recording_frame_table(exp.estimates[person][m], exp.sequences[person].ground_truth,
+                                          exp.joints[person][m], m)
+                frames[f"{m} [{tag}]"] = t[t["frame"].isin(keep)]
+            pairs.append((f"{m} [field]", f"{m} [clean]"))
+        fps = float(field.sequences[person].ground_truth.get("fps", 30.0))
+        part = compare_methods(frames, pairs, block=max(1, round(block_s * fps)))
         parts.append(part.assign(sequence=person)[["sequence", *part.columns]])
     return pd.concat(parts, ignore_index=True) if parts else pd.DataFrame()
 

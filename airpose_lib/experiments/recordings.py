@@ -47,9 +47,10 @@ from airpose_lib.atomic import atomic_path
 from airpose_lib.body import load_body_model
 from airpose_lib.body.joint_sets import BODY_25_FROM_SMPLX
 from airpose_lib.data.official.real import load_official_real
-from airpose_lib.data.sequences import ensure_sequences
+from airpose_lib.data.sequences import ensure_sequences, profile_field_sequences
 from airpose_lib.data.sequences.reader import load_sequence
 from airpose_lib.engine.checkpoint import StaleRunError
+from airpose_lib.errors import ConfigError
 from airpose_lib.eval import metrics as M
 from airpose_lib.eval.mean_body import NEUTRAL_LABEL, mean_body_recording_estimate
 from airpose_lib.eval.recordings import (
@@ -78,7 +79,7 @@ from airpose_lib.train.ablation import trained_checkpoint
 from airpose_lib.train.config import load_train_config
 from airpose_lib.train.official import find_official_checkpoint
 
-__all__ = ["METHODS", "RecordingExperiment", "default_experiment_dir", "run_recording_experiment",
+__all__ = ["METHODS", "RecordingExperiment", "default_experiment_dir", "run_recording_experiment", "runs_field",
            "body_vertices", "recording_prior", "ground_truth_diagnostic", "scored_frames",
            "CONTROL_LABEL", "official_recordings", "official_networks", "networks_for", "recordings_for"]
 
@@ -369,6 +370,28 @@ def recordings_for(source, profile: str) -> dict | None:
     if getattr(source, "source", "generated") != "official":
         return None
     return official_recordings(source.roots["official_real"])
+
+
+def runs_field(source, profile: str, field: bool | None = None) -> bool:
+    """Whether the real-data notebooks also run the profile's field recordings (issue 31).
+
+    Args:
+        source: the resolved data source (:func:`recordings_for`'s).
+        field: the notebook's parameter; None: when the recordings are generated and the profile
+            has field recordings (``sequences: field_recordings:``).
+    Raises:
+        ConfigError: ``field`` is true with the official recordings (they are field footage) or
+            with a profile without field recordings.
+    """
+    generated = getattr(source, "source", "generated") != "official"
+    has = bool(profile_field_sequences(profile))
+    if field is None:
+        return generated and has
+    if field and not (generated and has):
+        raise ConfigError(f"field=True needs the generated recordings of a profile with `sequences: field_recordings:` "
+                          f"({'the official recordings are field footage' if not generated else profile + ' has none'}); "
+                          "set field to None or False")
+    return bool(field)
 
 
 #: The control fine-tuning of :func:`_kit_networks` (generated recordings only): AirPose tuned on

@@ -1,0 +1,105 @@
+"""The README's result block: a committed reference bundle (``results/<profile>/``) as the short
+Markdown the README opens with, so that no number in the README is typed by hand.
+
+The block sits between two HTML comments, ``<!-- results:<profile> -->`` and
+``<!-- /results:<profile> -->``; ``scripts/readme_results.py`` rewrites it from the bundle and
+``tests/test_eval_reference.py`` fails when the README's block and the bundle disagree.
+"""
+from __future__ import annotations
+
+import json
+import re
+from pathlib import Path
+
+import pandas as pd
+
+from .reference import reference_dir
+
+__all__ = ["block_markers", "results_block", "replace_block", "readme_block"]
+
+#: Table I's columns shown in the README: the kit's mean (± its seed spread) next to the paper's.
+_TABLE_COLUMNS = (("MPE", "MPE [m]", "MPE std [m]", "MPE paper [m]"),
+                  ("MPJPE", "MPJPE [m]", "MPJPE std [m]", "MPJPE paper [m]"))
+
+
+def block_markers(profile: str) -> tuple[str, str]:
+    """The opening and closing comment of ``profile``'s block."""
+    return f"<!-- results:{profile} -->", f"<!-- /results:{profile} -->"
+
+
+def _fmt(x, digits: int = 3) -> str:
+    return "-" if pd.isna(x) else f"{x:.{digits}f}"
+
+
+def _table_lines(table: pd.DataFrame) -> list[str]:
+    root = "root orient. median [deg]"
+    head = ["method"] + [f"{name} {who} [m]" for name, *_ in _TABLE_COLUMNS for who in ("kit", "paper")] + \
+        (["root median [deg]"] if root in table else [])
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for method, row in table.iterrows():
+        cells = [str(method)]
+        for _, mean, std, paper in _TABLE_COLUMNS:
+            spread = row.get(std)
+            cells += [_fmt(row.get(mean)) + ("" if pd.isna(spread) else f" ± {spread:.3f}"), _fmt(row.get(paper))]
+        cells += [_fmt(row.get(root), 1)] if root in table else []
+        lines.append("| " + " | ".join(cells) + " |")
+    return lines
+
+
+def _claim_lines(claims: pd.DataFrame) -> list[str]:
+    has_gain = "gain [%]" in claims
+    head = ["claim", "difference [m] (95 % CI)"] + (["gain [%] (95 % CI)", "paper gain [%]"] if has_gain else []) + \
+        ["verdict"]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for _, c in claims.iterrows():
+        cells = [str(c["claim"]), f"{c['difference [m]']:+.4f} ({c['CI low [m]']:+.4f}, {c['CI high [m]']:+.4f})"]
+        if has_gain:
+            cells += [f"{c['gain [%]']:+.1f} ({c['gain CI low [%]']:+.1f}, {c['gain CI high [%]']:+.1f})",
+                      _fmt(c["paper gain [%]"], 1)]
+        lines.append("| " + " | ".join(cells + [str(c["verdict"])]) + " |")
+    return lines
+
+
+def results_block(profile: str, root: str | Path | None = None) -> str:
+    """The block's Markdown (markers included) made from ``results/<profile>/``: Table I (kit mean
+    ± seed spread, the paper's), the claims with their intervals and gains, and the provenance
+    (commit, date, command).
+
+    Raises:
+        FileNotFoundError: the bundle lacks ``table1.csv``, ``claims.csv`` or ``provenance.json``.
+    """
+    ref = reference_dir(profile, root)
+    table = pd.read_csv(ref / "table1.csv", index_col=0)
+    claims = pd.read_csv(ref / "claims.csv")
+    prov = json.loads((ref / "provenance.json").read_text())
+    commit = (prov.get("git") or {}).get("commit") or "unknown"
+    seeds = prov.get("seeds") or []
+    opening, closing = block_markers(profile)
+    lines = [opening,
+             f"Table I on the `{profile}` profile (`results/{profile}/`: {len(seeds)} seed{'s' * (len(seeds) != 1)}, "
+             f"commit {commit[:7]}, {str(prov.get('created_at', ''))[:10]}; `{prov.get('command', '')}`). "
+             "Kit: mean ± standard deviation over seeds; paper: its Table I.", "",
+             *_table_lines(table), "",
+             "The paper's orderings (\"A > B\": A's error is larger), paired over the test samples:", "",
+             *_claim_lines(claims), closing]
+    return "\n".join(lines)
+
+
+def replace_block(text: str, block: str, profile: str) -> str:
+    """``text`` with ``profile``'s block replaced by ``block``.
+
+    Raises:
+        ValueError: ``text`` lacks the block's markers.
+    """
+    opening, closing = block_markers(profile)
+    pattern = re.compile(re.escape(opening) + r".*?" + re.escape(closing), re.S)
+    if not pattern.search(text):
+        raise ValueError(f"no {opening} ... {closing} block")
+    return pattern.sub(lambda _: block, text, count=1)
+
+
+def readme_block(text: str, profile: str) -> str | None:
+    """The block of ``profile`` in ``text`` (markers included), or None."""
+    opening, closing = block_markers(profile)
+    m = re.search(re.escape(opening) + r".*?" + re.escape(closing), text, re.S)
+    return m.group(0) if m else None

@@ -1,0 +1,49 @@
+"""The README's result block (airpose_lib.eval.readme_block): made from a bundle, never typed."""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pandas as pd
+import pytest
+
+from airpose_lib.eval.readme_block import readme_block, replace_block, results_block
+
+README = Path(__file__).resolve().parents[1] / "README.md"
+
+
+def _bundle(root: Path) -> None:
+    ref = root / "toy"
+    ref.mkdir(parents=True)
+    pd.DataFrame({"MPE [m]": [1.0, 0.5], "MPE std [m]": [0.01, float("nan")], "MPE paper [m]": [0.5, float("nan")],
+                  "MPJPE [m]": [0.1234, float("nan")], "MPJPE std [m]": [0.0, float("nan")],
+                  "MPJPE paper [m]": [0.091, float("nan")], "root orient. median [deg]": [14.56, float("nan")]},
+                 index=pd.Index(["Baseline", "Reference: neutral mean body (GT pose)"], name="method")
+                 ).to_csv(ref / "table1.csv")
+    pd.DataFrame([{"claim": "MPE: A > B", "difference [m]": 0.25, "CI low [m]": 0.2, "CI high [m]": 0.3,
+                   "gain [%]": 12.34, "gain CI low [%]": 10.0, "gain CI high [%]": 15.0, "paper gain [%]": 32.0,
+                   "verdict": "holds"}]).to_csv(ref / "claims.csv", index=False)
+    (ref / "provenance.json").write_text(json.dumps({"git": {"commit": "abcdef0123", "dirty": False},
+                                                     "created_at": "2026-12-04T17:00:00+00:00",
+                                                     "command": "airpose reproduce", "seeds": [1, 2, 3]}))
+
+
+def test_the_block_is_the_bundle(tmp_path):
+    _bundle(tmp_path)
+    block = results_block("toy", tmp_path).splitlines()
+    assert block[0] == "<!-- results:toy -->" and block[-1] == "<!-- /results:toy -->"
+    assert "3 seeds, commit abcdef0, 2026-12-04; `airpose reproduce`" in block[1]
+    assert "| Baseline | 1.000 ± 0.010 | 0.500 | 0.123 ± 0.000 | 0.091 | 14.6 |" in block
+    assert "| Reference: neutral mean body (GT pose) | 0.500 | - | - | - | - |" in block
+    assert "| MPE: A > B | +0.2500 (+0.2000, +0.3000) | +12.3 (+10.0, +15.0) | 32.0 | holds |" in block
+
+
+def test_replace_block_swaps_only_the_block(tmp_path):
+    _bundle(tmp_path)
+    text = "intro\n<!-- results:toy -->\nold\n<!-- /results:toy -->\nrest\n"
+    block = results_block("toy", tmp_path)
+    new = replace_block(text, block, "toy")
+    assert new.startswith("intro\n") and new.endswith("\nrest\n") and readme_block(new, "toy") == block
+    with pytest.raises(ValueError, match="no <!-- results:other -->"):
+        replace_block(text, block, "other")
+

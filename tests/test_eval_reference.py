@@ -396,7 +396,6 @@ def test_write_reference_refuses_a_bundle_made_from_a_dirty_checkout(tmp_path, c
 # Committed results that predate the clean-commit rule, with why; each must leave this list when
 # it is regenerated (the test below fails if a listed bundle is clean).
 STALE_REFERENCES = {
-    "results/cpu/provenance.json": "Table I before the validation split (issue 28); the next cpu reference run",
     "results/cpu/recordings/provenance.json": "recordings before the validation split; the next cpu reference run",
 }
 

@@ -47,3 +47,9 @@ def test_replace_block_swaps_only_the_block(tmp_path):
     with pytest.raises(ValueError, match="no <!-- results:other -->"):
         replace_block(text, block, "other")
 
+
+
+def test_the_readme_block_matches_the_committed_cpu_results():
+    # `python scripts/readme_results.py` after a new results/cpu/ (airpose reproduce --write-reference)
+    assert readme_block(README.read_text(), "cpu") == results_block("cpu"), \
+        "README.md's cpu block differs from results/cpu/: run python scripts/readme_results.py"

@@ -49,7 +49,8 @@ def test_replace_block_swaps_only_the_block(tmp_path):
 
 
 
-def test_the_readme_block_matches_the_committed_cpu_results():
-    # `python scripts/readme_results.py` after a new results/cpu/ (airpose reproduce --write-reference)
-    assert readme_block(README.read_text(), "cpu") == results_block("cpu"), \
-        "README.md's cpu block differs from results/cpu/: run python scripts/readme_results.py"
+@pytest.mark.parametrize("profile", ["cpu", "cpu_paper_layout"])
+def test_the_readme_blocks_match_the_committed_results(profile):
+    # `python scripts/readme_results.py --profile P` after a new results/P/ (airpose reproduce --write-reference)
+    assert readme_block(README.read_text(), profile) == results_block(profile), \
+        f"README.md's {profile} block differs from results/{profile}/: run python scripts/readme_results.py --profile {profile}"

@@ -27,6 +27,12 @@ def block_markers(profile: str) -> tuple[str, str]:
     return f"<!-- results:{profile} -->", f"<!-- /results:{profile} -->"
 
 
+def _block_pattern(profile: str) -> re.Pattern:
+    """The block of ``profile``, markers included, in a text."""
+    opening, closing = block_markers(profile)
+    return re.compile(re.escape(opening) + r".*?" + re.escape(closing), re.S)
+
+
 def _fmt(x, digits: int = 3) -> str:
     return "-" if pd.isna(x) else f"{x:.{digits}f}"
 
@@ -91,15 +97,13 @@ def replace_block(text: str, block: str, profile: str) -> str:
     Raises:
         ValueError: ``text`` lacks the block's markers.
     """
-    opening, closing = block_markers(profile)
-    pattern = re.compile(re.escape(opening) + r".*?" + re.escape(closing), re.S)
+    pattern = _block_pattern(profile)
     if not pattern.search(text):
-        raise ValueError(f"no {opening} ... {closing} block")
+        raise ValueError(f"no {' ... '.join(block_markers(profile))} block")
     return pattern.sub(lambda _: block, text, count=1)
 
 
 def readme_block(text: str, profile: str) -> str | None:
     """The block of ``profile`` in ``text`` (markers included), or None."""
-    opening, closing = block_markers(profile)
-    m = re.search(re.escape(opening) + r".*?" + re.escape(closing), text, re.S)
+    m = _block_pattern(profile).search(text)
     return m.group(0) if m else None

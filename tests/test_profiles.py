@@ -205,3 +205,64 @@ def test_the_paper_layout_profile_is_cpu_on_other_data():
         {k: v for k, v in cpu["notebooks"].items() if k != "02_ablation_table"}
     assert paper["train"] == {**cpu["train"], "pretrained": "profile:cpu"}  # cpu's backbone
     assert {k: v for k, v in paper["data"]["still"].items() if k != "scene"} == cpu["data"]["still"]
+
+
+def test_a_profile_read_once_is_passed_down_and_later_edits_do_not_reach_it(tmp_path):
+    import copy
+    import json
+    import pickle
+
+    import yaml
+
+    from airpose_lib.data.still.config import GenerationConfig
+    from airpose_lib.profiles import Profile, loaded, section_config
+
+    path = tmp_path / "mine.yaml"
+    path.write_text("data:\n  still:\n    num_samples: 40\n    seed: 3\nnotebooks: {}\n")
+    prof = loaded(str(path))
+    assert isinstance(prof, Profile) and prof == str(path) and prof.name == "mine" and prof.path == path
+    assert loaded(prof) is prof  # not read again
+    before = prof.digest
+    path.write_text("data:\n  still:\n    num_samples: 99\n    seed: 3\nnotebooks: {}\n")
+    # the reading passed down, not the file as it is now
+    assert section_config(prof, "data.still", GenerationConfig).num_samples == 40
+    assert profile_section(prof, "data.still") == {"num_samples": 40, "seed": 3}
+    assert section_config(str(path), "data.still", GenerationConfig).num_samples == 99
+    assert loaded(str(path)).digest != before and loaded(prof).digest == before
+    # a reader's copy is its own
+    read_profile(prof)["data"]["still"]["num_samples"] = 0
+    assert prof.sections["data"]["still"]["num_samples"] == 40
+    # it is the string it was given as: records and paths are unchanged, plain strings
+    assert json.dumps({"profile": prof}) == json.dumps({"profile": str(path)})
+    assert yaml.safe_dump({"profile": prof}) == yaml.safe_dump({"profile": str(path)})
+    assert type(str(prof)) is str and (tmp_path / prof).name == "mine.yaml"
+    # pickled (to a worker, into a checkpoint) or copied it is the plain string: loads without the class
+    for back in (pickle.loads(pickle.dumps(prof)), copy.deepcopy(prof)):
+        assert type(back) is str and back == str(path)
+
+
+def test_a_kit_profile_by_name_reads_as_the_name():
+    from airpose_lib.profiles import loaded
+
+    prof = loaded("smoke")
+    assert prof == "smoke" and prof.name == "smoke" and prof.path == PROFILES_DIR / "smoke.yaml"
+    assert prof.sections == read_profile("smoke")
+
+
+def test_a_command_reads_its_profile_once_and_passes_the_reading_down(monkeypatch):
+    import airpose_lib.cli as cli
+    from airpose_lib.profiles import Profile
+
+    seen = []
+    parser = cli.build_parser()
+    parse = parser.parse_args
+
+    def recording(argv):
+        args = parse(argv)
+        args.func = lambda a: seen.append(a.profile)
+        return args
+
+    monkeypatch.setattr(parser, "parse_args", recording)
+    monkeypatch.setattr(cli, "build_parser", lambda: parser)
+    assert cli.main(["data", "generate", "--profile", "smoke"]) == 0
+    assert isinstance(seen[0], Profile) and seen[0] == "smoke" and seen[0].sections == read_profile("smoke")

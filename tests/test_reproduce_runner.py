@@ -358,3 +358,18 @@ def test_explicit_official_data_source_fails_at_once_naming_the_missing_asset(tm
     assert code == 2 and err.startswith("airpose: error: --data-source official: official_synthetic is missing")
     assert str(tmp_path / "nowhere") in err and "\n" not in err
     assert not (tmp_path / "runs" / "smoke").exists()  # nothing ran
+
+
+def test_a_profile_edited_during_a_run_stops_it_before_the_next_notebook(kit):
+    """The run reads its profile once; a kernel reads it again by name, so an edit would give
+    the later notebooks other settings than the earlier ones: refused, naming the file."""
+    root, run = kit
+    profile = root / "profiles" / "tiny.yaml"
+    edit = f"p = Path({str(profile)!r})\np.write_text(p.read_text().replace('size: 7', 'size: 8'))\n"
+    _write_nb(root / "notebooks" / "00_ok.ipynb", OK_BODY + edit)
+    _write_nb(root / "notebooks" / "02_forget.ipynb", "raise RuntimeError('must not run')")
+    with pytest.raises(ReproductionError, match=r"tiny\.yaml changed during the run, before 02_forget"):
+        run(only=["00_ok", "02_forget"])
+    rep = json.loads((root / "runs" / "tiny" / "report.json").read_text())
+    assert [r["status"] for r in rep["results"]] == ["ok", "skipped"]
+    assert not (root / "runs" / "tiny" / "notebooks" / "02_forget.ipynb").exists()

@@ -104,6 +104,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     """
     args = build_parser().parse_args(argv)
     try:
+        if isinstance(getattr(args, "profile", None), str):
+            from airpose_lib.profiles import loaded
+
+            args.profile = loaded(args.profile)  # read once; every step of the command gets this reading
         return int(args.func(args) or 0)
     except KeyboardInterrupt:
         print("airpose: interrupted", file=sys.stderr)

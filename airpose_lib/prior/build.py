@@ -129,7 +129,7 @@ def _train_and_save_prior(profile: str, path: Path, steps: int | None, seed: int
     val["samples_within_joint_limits"] = float(within_limits(samples, tol=np.deg2rad(5.0)).mean())
     report = {"steps": cfg.steps, "seconds": hist["seconds"], "final_train_loss": hist["loss"][-1],
               "train_poses": len(train_poses), "val_poses": len(val_poses), **val}
-    save_prior(model, path, {"profile": profile, "train": cfg.to_dict(), "corpus": corpus.to_dict(),
+    save_prior(model, path, {"profile": str(profile), "train": cfg.to_dict(), "corpus": corpus.to_dict(),
                              "train_seconds": hist["seconds"], "final_train_loss": hist["loss"][-1],
                              "validation": val})
     return path, report

@@ -17,12 +17,22 @@ on other data) says only what differs.
 
 A profile is named (``"smoke"``) or given as the path of a YAML file of the same format. Readers
 raise :class:`~airpose_lib.errors.ProfileError` (one line naming the file and the fix; the
-``airpose`` command exits with status 2). Files are read on every call: they are small, and a
-test or a user may edit one between calls. Imports nothing of the kit but the helpers ``errors``
-and ``config_fields``, so that every layer may use it.
+``airpose`` command exits with status 2).
+
+A run reads its profile once: :func:`loaded` reads the file (and those it inherits from) and gives
+a :class:`Profile`, which *is* the name or path it was given as (a ``str``: run folders, records
+and messages stay as they were) and carries the sections read. Every reader here takes it in place
+of a name and uses those sections, so that a command, a notebook or a reproduction passes one
+reading down and a file edited while it runs cannot change its later steps (``airpose`` loads
+``--profile`` once; ``reproduce`` also refuses to go on when the file changed under a run). A
+plain name or path is read afresh on every call. Imports nothing of the kit but the helpers
+``errors`` and ``config_fields``, so that every layer may use it.
 """
 from __future__ import annotations
 
+import copy
+import hashlib
+import json
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -33,8 +43,8 @@ from airpose_lib import config_fields
 from airpose_lib.config_fields import config_from
 from airpose_lib.errors import ProfileError, ProfileSettingError
 
-__all__ = ["PROFILES_DIR", "INHERITS", "ProfileError", "ProfileSettingError", "profile_names", "profile_path",
-           "read_profile", "profile_section", "section_where", "section_config"]
+__all__ = ["PROFILES_DIR", "INHERITS", "ProfileError", "ProfileSettingError", "Profile", "loaded", "profile_names",
+           "profile_path", "read_profile", "profile_section", "section_where", "section_config"]
 
 #: Folder of the kit's ``<name>.yaml`` profile files.
 PROFILES_DIR = Path(__file__).resolve().parent
@@ -52,6 +62,8 @@ def profile_path(profile: str | Path, folder: str | Path = PROFILES_DIR) -> Path
     Raises:
         ProfileError: no such profile or file.
     """
+    if isinstance(profile, Profile):
+        return profile.path
     path = Path(profile)
     if path.suffix in (".yaml", ".yml"):
         if not path.is_file():
@@ -77,7 +89,64 @@ def read_profile(profile: str | Path, folder: str | Path = PROFILES_DIR) -> dict
         ProfileError: no such profile, an empty file, invalid YAML, not a mapping of sections, or
             an ``inherits:`` that names no profile or comes back to a file already read.
     """
+    if isinstance(profile, Profile):
+        return copy.deepcopy(dict(profile.sections))  # a reader may change its copy, never the run's
     return _read_inheriting(profile_path(profile, folder), folder, ())
+
+
+class Profile(str):
+    """A profile read once: the name or path it was given as, with its sections.
+
+    It is that string (``Profile(...) == "cpu"``), so that run folders, records and messages built
+    from it are those of the name; :func:`read_profile`, :func:`profile_section` and
+    :func:`section_config` take their sections from it instead of the file. Make one with
+    :func:`loaded`.
+
+    Attributes:
+        path: the profile's file.
+        sections: ``{section: settings}``, the inherited ones merged in (:func:`read_profile`).
+    """
+
+    path: Path
+    sections: dict
+
+    def __new__(cls, given: str | Path, path: str | Path, sections: Mapping) -> Profile:
+        self = super().__new__(cls, str(given))
+        self.path = Path(path)
+        self.sections = copy.deepcopy(dict(sections))
+        return self
+
+    def __reduce__(self):
+        # pickled, deep-copied or saved in a checkpoint it is the plain string: a worker process
+        # reads the profile itself, and a file loads without this class (torch weights_only)
+        return (str, (str(self),))
+
+    @property
+    def name(self) -> str:
+        """The profile's name: its file's stem (``"cpu"``)."""
+        return self.path.stem
+
+    @property
+    def digest(self) -> str:
+        """SHA-256 of the sections read (inherited ones included): equal digests, equal profiles."""
+        text = json.dumps(self.sections, sort_keys=True, default=str)
+        return hashlib.sha256(text.encode()).hexdigest()
+
+
+# written to YAML (manifests, records) as the plain string it is
+yaml.SafeDumper.add_representer(Profile, yaml.representer.SafeRepresenter.represent_str)
+
+
+def loaded(profile: str | Path, folder: str | Path = PROFILES_DIR) -> Profile:
+    """A profile read now, to be passed down (a :class:`Profile` is returned as it is).
+
+    Raises:
+        ProfileError: as :func:`read_profile`.
+    """
+    if isinstance(profile, Profile):
+        return profile
+    path = profile_path(profile, folder)
+    return Profile(profile, path, _read_inheriting(path, folder, ()))
 
 
 def _read_inheriting(path: Path, folder: str | Path, seen: tuple[Path, ...]) -> dict:
@@ -140,7 +209,7 @@ def profile_section(profile: str | Path, section: str, *, required: str | None =
             that is not a mapping.
     """
     path = profile_path(profile, folder)
-    value = read_profile(path)
+    value = read_profile(profile, folder)
     label = ": ".join(section.split(".")) + ":"
     for key in section.split("."):
         if not isinstance(value, dict) or key not in value:
@@ -192,7 +261,7 @@ def section_config(profile: str | Path, section: str, cls, overrides: Mapping[st
         ConfigError: the same in ``overrides``.
     """
     path = profile_path(profile, folder)
-    values = profile_section(path, section, required=required)
+    values = profile_section(profile, section, required=required, folder=folder)
     where = section_where(path, section)
     if isinstance(cls, tuple):
         config_fields.check_keys(values, cls, where, ProfileSettingError)

@@ -24,6 +24,7 @@ from typing import Any
 
 from airpose_lib.assets import DataSource, resolve_data_source
 from airpose_lib.paths import figures_root, run_path, runs_root
+from airpose_lib.profiles import loaded
 from airpose_lib.reproduce.runner import load_profile
 from airpose_lib.viz import use_kit_style
 
@@ -62,7 +63,8 @@ class NotebookContext:
 
     Attributes:
         notebook: catalogue name.
-        profile: the ``profile`` parameter (name or YAML path).
+        profile: the ``profile`` parameter (name or YAML path), read once
+            (:class:`~airpose_lib.profiles.Profile`): the notebook passes this one down.
         out: the output folder (absolute, created).
         runs: the kit's runs folder (:func:`airpose_lib.paths.runs_root`).
         figures: ``figures/<profile>/``, where ``reproduce`` collects the catalogued figures.
@@ -130,6 +132,7 @@ def setup_notebook(notebook: str, profile: str, output_dir: str | Path | None = 
     Returns:
         The :class:`NotebookContext`.
     """
+    profile = loaded(profile)  # read once here; the notebook passes ctx.profile down
     p = notebook_defaults(notebook, profile, output_dir, **values)
     use_kit_style()
     _show_kit_warnings()
@@ -139,8 +142,8 @@ def setup_notebook(notebook: str, profile: str, output_dir: str | Path | None = 
         source = resolve_data_source(data_source, needs=needs)
     print(source.message)
     filled = {k: getattr(p, k) for k in values}
-    params = {"notebook": notebook, "profile": profile, "data_source": source.source, **filled,
+    params = {"notebook": notebook, "profile": str(profile), "data_source": source.source, **filled,
               **(record or {})}
-    name = load_profile(profile)["name"]
+    name = profile.name
     return NotebookContext(notebook=notebook, profile=profile, out=p.output_dir, runs=runs_root(),
                            figures=figures_root() / name, source=source, values=filled, params=params)

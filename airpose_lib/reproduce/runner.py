@@ -46,7 +46,7 @@ from airpose_lib import __version__  # the package root holds only the version
 from airpose_lib.errors import UserError
 from airpose_lib.folder_lock import folder_lock
 from airpose_lib.paths import figures_root, runs_root
-from airpose_lib.profiles import PROFILES_DIR, ProfileError, profile_path, read_profile
+from airpose_lib.profiles import PROFILES_DIR, ProfileError, loaded, read_profile
 from airpose_lib.profiles import profile_names as list_profiles
 
 __all__ = [
@@ -62,6 +62,7 @@ __all__ = [
     "Interrupted",
     "load_catalog",
     "load_profile",
+    "check_profile_unchanged",
     "list_profiles",
     "check_notebook",
     "notebook_outputs",
@@ -202,13 +203,15 @@ def load_catalog(path: Path = CATALOG_PATH) -> list[CatalogEntry]:
 
 
 def load_profile(profile: str | Path, profiles_dir: Path = PROFILES_DIR) -> dict:
-    """A profile as ``{"name", "description", "cell_timeout_s", "notebooks": {name: params}}``.
+    """A profile as ``{"name", "path", "description", "cell_timeout_s", "notebooks": {name: params},
+    "profile"}``, the last the :class:`~airpose_lib.profiles.Profile` it was read into.
 
-    ``profile`` is a profile name or a path to a YAML file of the same format.
+    ``profile`` is a profile name, a path to a YAML file of the same format, or a profile already
+    read (:func:`airpose_lib.profiles.loaded`, not read again).
     """
     try:
-        path = profile_path(profile, profiles_dir)
-        raw = read_profile(path)
+        prof = loaded(profile, profiles_dir)
+        path, raw = prof.path, read_profile(prof)
     except ProfileError as e:  # the runner reports every configuration error as its own
         raise ReproductionError(str(e)) from None
     notebooks = raw.get("notebooks") or {}
@@ -221,7 +224,23 @@ def load_profile(profile: str | Path, profiles_dir: Path = PROFILES_DIR) -> dict
             raise ReproductionError(f"{path}: {nb_name} sets {sorted(clash)}, which the runner injects")
     return {"name": path.stem, "path": str(path), "description": str(raw.get("description", "")).strip(),
             "cell_timeout_s": raw.get("cell_timeout_s"),
-            "notebooks": {k: dict(v or {}) for k, v in notebooks.items()}}
+            "notebooks": {k: dict(v or {}) for k, v in notebooks.items()}, "profile": prof}
+
+
+def check_profile_unchanged(prof, before: str) -> None:
+    """Raise :class:`ReproductionError` if the file of ``prof`` (a
+    :class:`~airpose_lib.profiles.Profile`) now reads differently.
+
+    The run reads its profile once, but each notebook's kernel reads it again by name: a file
+    edited during a run would give its later notebooks other settings than its earlier ones.
+    """
+    try:
+        now = loaded(prof.path).digest
+    except ProfileError as e:
+        now = f"unreadable ({e})"
+    if now != prof.digest:
+        raise ReproductionError(f"{prof.path} changed during the run, before {before}; a run's notebooks must "
+                                "all read one profile: restore the file, or start the run again to use the new one")
 
 
 # -- notebook checks ------------------------------------------------------------------------------
@@ -626,6 +645,7 @@ def run_profile(
                 report.results[i].parameters = params
                 report.results[i].error = "not run: an earlier notebook failed"
                 continue
+            check_profile_unchanged(prof["profile"], entry.name)
             if verbose:
                 print(f"[reproduce:{prof['name']}] {entry.name} ...", flush=True)
             result = _run_one(entry, notebooks_dir / entry.file, params, run_dir, figures_dir,

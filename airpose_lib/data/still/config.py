@@ -177,7 +177,7 @@ def profile_config(profile: str) -> GenerationConfig:
     """
     try:  # the data commands report every unusable input as a DatasetError
         path = profile_path(profile)
-        return section_config(path, "data.still", GenerationConfig, required="the still-frame dataset sizes",
+        return section_config(profile, "data.still", GenerationConfig, required="the still-frame dataset sizes",
                               build=GenerationConfig.from_dict)
     except ProfileError as e:  # before ValueError: it is one
         raise DatasetError(str(e)) from None

@@ -395,9 +395,7 @@ def test_write_reference_refuses_a_bundle_made_from_a_dirty_checkout(tmp_path, c
 
 # Committed results that predate the clean-commit rule, with why; each must leave this list when
 # it is regenerated (the test below fails if a listed bundle is clean).
-STALE_REFERENCES = {
-    "results/cpu/recordings/provenance.json": "recordings before the validation split; the next cpu reference run",
-}
+STALE_REFERENCES: dict[str, str] = {}
 
 
 def test_committed_reference_results_come_from_clean_commits_of_this_history():

@@ -74,3 +74,26 @@ def test_report_needs_ground_truth_and_the_detections():
     rec.ground_truth = None
     with pytest.raises(ValueError, match="ground truth"):
         detector_report(rec, ("a",))
+
+
+def test_the_script_names_the_recordings_and_writes_the_summary_it_printed(tmp_path, monkeypatch):
+    import importlib.util
+
+    script = Path(__file__).resolve().parents[1] / "scripts" / "detector_report.py"
+    spec = importlib.util.spec_from_file_location("detector_report_script", script)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    monkeypatch.setattr(mod, "load_sequence", lambda root, detectors: _recording())
+    out, md = tmp_path / "r.csv", tmp_path / "summary.md"
+    assert mod.main(["/x/one", "/x/two", "--detectors", "a", "b", "--labels", "p1", "p2",
+                     "--out", str(out), "--markdown", str(md)]) == 0
+    rows = pd.read_csv(out)
+    assert list(dict.fromkeys(rows.recording)) == ["p1", "p2"]
+    table = md.read_text().splitlines()
+    assert table[0].startswith("| recording | view | detector | detection_rate")
+    # one line per recording and detector, all joints against the truth, values as in the CSV
+    assert len(table) == 2 + 2 * 2
+    truth = rows[(rows.group == "all") & (rows.reference == "truth")]
+    assert f"| p1 | 0 | a | {truth.detection_rate.iloc[0]:.3f} |" in table[2]
+    with pytest.raises(SystemExit):
+        mod.main(["/x/one", "/x/two", "--labels", "p1", "--out", str(out)])

@@ -262,7 +262,7 @@ def provenance_record(profile: str, command: str) -> dict:
     """What every results bundle records about how it was made: profile, kit version, git commit
     (clean but for the profile's own reference outputs, :func:`reference_outputs`), time (UTC),
     machine and the command."""
-    return {"profile": str(profile), "kit_version": __version__, "git": git_commit(outputs=reference_outputs(profile)),
+    return {"profile": profile, "kit_version": __version__, "git": git_commit(outputs=reference_outputs(profile)),
             "created_at": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
             "machine": machine_description(), "command": command}
 

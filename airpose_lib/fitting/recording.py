@@ -109,7 +109,7 @@ def save_refinement(out: str | os.PathLike, frames: np.ndarray, result: AirPoseP
     ``provenance`` (recording, initialisation, profile, configuration, prior, seconds, final loss,
     skipped frames) to ``out`` atomically."""
     cfg = result.config
-    provenance = {"sequence": str(sequence), "init": str(init), "profile": str(profile), "config": cfg.to_dict(),
+    provenance = {"sequence": str(sequence), "init": str(init), "profile": profile, "config": cfg.to_dict(),
                   "prior": prior, "seconds": result.seconds, "final_loss": result.history["loss"][-1],
                   "skipped_frames": result.skipped_frames}
     with atomic_path(Path(out)) as tmp:

@@ -117,8 +117,9 @@ class Profile(str):
         return self
 
     def __reduce__(self):
-        # pickled, deep-copied or saved in a checkpoint it is the plain string: a worker process
-        # reads the profile itself, and a file loads without this class (torch weights_only)
+        # pickled or deep-copied it is the plain string: a worker process reads the profile itself.
+        # torch's weights_only loader refuses even this call of str, so a record that goes into a
+        # checkpoint stores str(profile) (prior.build)
         return (str, (str(self),))
 
     @property

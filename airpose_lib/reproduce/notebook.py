@@ -142,7 +142,7 @@ def setup_notebook(notebook: str, profile: str, output_dir: str | Path | None = 
         source = resolve_data_source(data_source, needs=needs)
     print(source.message)
     filled = {k: getattr(p, k) for k in values}
-    params = {"notebook": notebook, "profile": str(profile), "data_source": source.source, **filled,
+    params = {"notebook": notebook, "profile": profile, "data_source": source.source, **filled,
               **(record or {})}
     name = profile.name
     return NotebookContext(notebook=notebook, profile=profile, out=p.output_dir, runs=runs_root(),

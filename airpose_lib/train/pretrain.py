@@ -354,7 +354,7 @@ def _train_stage(profile: str, cfg: TrainConfig, key: str, start: Path | None, o
         model = _load_pretrain_model(run.checkpoint, cfg)
         gate = gate_metrics(model, StillFrameDataset(data_root, "val", augment=False),  # the whole validation split
                             device=resolve_device(cfg.device))
-        meta = {"backbone": cfg.backbone, "key": key, "profile": str(profile), "kit_version": kit_version(),
+        meta = {"backbone": cfg.backbone, "key": key, "profile": profile, "kit_version": kit_version(),
                 "config": cfg.to_dict(), "data_fingerprint": data_fingerprint, "gate": gate, "gate_split": "val",
                 "train_wall_s": round(wall, 1), "steps": run.step, "git": git_commit(),  # the code that trained it
                 "command": f"airpose pretrain --profile {profile}"}

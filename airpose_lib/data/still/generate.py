@@ -91,7 +91,7 @@ def _new_manifest(config: GenerationConfig, profile: str | None, body_models: di
         "kind": DATASET_KIND,
         "generator_version": GENERATOR_VERSION,
         "kit_version": __version__,
-        "profile": None if profile is None else str(profile),  # a plain string in the YAML
+        "profile": profile,
         "seed": config.seed,
         "fingerprint": config.fingerprint(),
         "status": "incomplete",
@@ -174,7 +174,7 @@ def generate_still_dataset(
     if manifest is None:
         manifest = _new_manifest(config, profile, body_models)
     if profile is not None:
-        manifest["profile"] = str(profile)
+        manifest["profile"] = profile
 
     kept, todo = [], []
     records = {r["index"]: r for r in manifest.get("shards") or []}

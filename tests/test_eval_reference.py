@@ -12,6 +12,8 @@ import pytest
 from airpose_lib.eval.ablation import ablation_table, per_seed_table
 from airpose_lib.eval.mean_body import GENDERED_LABEL, NEUTRAL_LABEL
 from airpose_lib.eval.reference import (
+    FIELD_RECORDING_FILES,
+    MARKER_RECORDING_FILES,
     RECORDING_FILES,
     REFERENCE_FILES,
     RESULTS_ROOT,
@@ -284,6 +286,17 @@ def test_recordings_reference_installs_and_reports_changed_verdicts(tmp_path, cl
             (nb / name).write_text("x\n")
     dst = install_recordings_reference(nb, "cpu", "airpose reproduce --write-reference", root=tmp_path / "results")
     assert sorted(p.name for p in dst.iterdir()) == sorted([*RECORDING_FILES, "provenance.json"])
+    # the optional tables (field recordings, markers) go in when the run made them, out when not
+    optional = [*FIELD_RECORDING_FILES, *MARKER_RECORDING_FILES]
+    for name in optional:
+        (nb / name).write_text("y\n")
+    install_recordings_reference(nb, "cpu", "cmd", root=tmp_path / "results")
+    assert sorted(p.name for p in dst.iterdir()) == sorted([*RECORDING_FILES, *optional, "provenance.json"])
+    for name in MARKER_RECORDING_FILES:
+        (nb / name).unlink()
+    install_recordings_reference(nb, "cpu", "cmd", root=tmp_path / "results")
+    assert sorted(p.name for p in dst.iterdir()) == sorted([*RECORDING_FILES, *FIELD_RECORDING_FILES,
+                                                            "provenance.json"])
     assert "same verdicts" in recordings_report(nb, "cpu", root=tmp_path / "results")
     _claims([True, False, False]).to_csv(nb / "paper_claims.csv", index=False)  # one verdict flips
     msg = recordings_report(nb, "cpu", root=tmp_path / "results")

@@ -188,3 +188,108 @@ def test_runs_field_follows_the_profile_and_the_data_source():
         runs_field(official, "smoke", True)
     with pytest.raises(ConfigError, match="paper has none"):
         runs_field(generated, "paper", True)
+
+
+def _rotation_z(deg: float) -> np.ndarray:
+    c, s = np.cos(np.radians(deg)), np.sin(np.radians(deg))
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def test_marker_table_measures_markers_and_methods_against_both_references():
+    # Hand case. Two cameras with known extrinsics see a body; an estimate equal to the truth has
+    # no UAV2-in-UAV1 error, one with view 2 pushed 0.5 m along camera 2's z is off by exactly
+    # 0.5 m, one with view 1 turned 10 deg about camera 1's z is off by 10 deg and |Rz t - t|. The
+    # markers are the true relative pose moved 0.03 m along x; frames 0-4 have no marker pose and
+    # a network missed frame 6, so every row is over the other F - 6 frames.
+    from types import SimpleNamespace
+
+    from scipy.spatial.transform import Rotation
+
+    from airpose_lib.experiments.recording_tables import MARKERS_LABEL, marker_table, uav2_in_uav1
+    from airpose_lib.experiments.recordings import RecordingExperiment
+
+    F, V = 40, 2
+    rng = np.random.default_rng(3)
+    R_cw = Rotation.random(F * V, random_state=4).as_matrix().reshape(F, V, 3, 3)
+    t_cw = rng.normal(0.0, 5.0, (F, V, 3))
+    phi_w = Rotation.random(F, random_state=5).as_matrix()
+    p_w = rng.normal(0.0, 1.0, (F, 3))
+    phi = R_cw @ phi_w[:, None]
+    tau = np.einsum("fvij,fj->fvi", R_cw, p_w) + t_cw
+    gt = {"R_cw": R_cw, "t_cw": t_cw, "phi": phi, "tau": tau}
+    R12 = R_cw[:, 0] @ np.swapaxes(R_cw[:, 1], -1, -2)  # x_c1 = R12 x_c2 + t12
+    t12 = t_cw[:, 0] - np.einsum("fij,fj->fi", R12, t_cw[:, 1])
+
+    def estimate(phi_e, tau_e):
+        return {"phi": phi_e, "tau": tau_e, "valid": np.ones((F, V), bool)}
+
+    pushed = tau.copy()
+    pushed[:, 1] += np.array([0.0, 0.0, 0.5])  # 0.5 m along camera 2's own z (tau is in camera 2)
+    Rz = _rotation_z(10.0)
+    turned_phi, turned_tau = phi.copy(), tau.copy()
+    turned_phi[:, 0], turned_tau[:, 0] = Rz @ phi[:, 0], tau[:, 0] @ Rz.T
+    est = {m: estimate(phi, tau) for m in ("Baseline (pre-trained)", "Baseline", "AirPose")}
+    est["AirPose (pre-trained)"] = estimate(turned_phi, turned_tau)
+    est["AirPose+"] = estimate(phi, pushed)
+    est["Baseline"]["valid"][6, 1] = False
+    valid = np.arange(F) >= 5
+    truth = {"R_12": R12, "t_12": t12 + np.array([0.03, 0.0, 0.0]), "valid": valid,
+             "count": np.full((F, V), 4), "rms_px": np.full((F, V), 0.4)}
+    exp = RecordingExperiment("smoke", None, {"person2": SimpleNamespace(ground_truth=gt)}, {"person2": est}, {},
+                              None, {}, markers={"person2": truth})
+    t = marker_table(exp).set_index(["method", "reference"])
+    assert (t["frames"] == F - 6).all() and np.allclose(t["frames_share"], (F - 6) / F)
+    keep = valid & (np.arange(F) != 6)
+    mk = t.loc[(MARKERS_LABEL, "generated cameras")]
+    assert np.isclose(mk["rel_t_median_m"], 0.03) and mk["rel_rot_median_deg"] < 1e-6
+    assert mk["markers_median"] == 4 and np.isclose(mk["rms_median_px"], 0.4)
+    assert t.loc[("AirPose", "generated cameras"), "rel_t_median_m"] < 1e-9
+    assert np.isclose(t.loc[("AirPose", "markers"), "rel_t_median_m"], 0.03)
+    plus = t.loc[("AirPose+", "generated cameras")]
+    assert np.isclose(plus["rel_t_median_m"], 0.5) and np.isclose(plus["rel_t_mean_m"], 0.5)
+    pre = t.loc[("AirPose (pre-trained)", "generated cameras")]
+    expected_t = np.linalg.norm(t12[keep] @ Rz.T - t12[keep], axis=-1)
+    assert np.isclose(pre["rel_rot_median_deg"], 10.0) and np.isclose(pre["rel_t_median_m"], np.median(expected_t))
+    assert set(t.index) == {(MARKERS_LABEL, "generated cameras")} | {
+        (m, r) for m in ("AirPose (pre-trained)", "AirPose", "AirPose+") for r in ("generated cameras", "markers")}
+    # the plotted lines: the markers' where they posed both drones, NaN elsewhere
+    lines = uav2_in_uav1(exp, "person2")
+    assert list(lines) == ["AirPose", "AirPose+", MARKERS_LABEL]
+    assert np.isnan(lines[MARKERS_LABEL][:5]).all() and np.allclose(lines[MARKERS_LABEL][5:], truth["t_12"][5:])
+    np.testing.assert_allclose(lines["AirPose"], t12, atol=1e-9)
+    # no markers: an empty table
+    exp.markers = {}
+    assert marker_table(exp).empty and MARKERS_LABEL not in uav2_in_uav1(exp, "person2")
+
+
+def test_official_marker_poses_give_the_relative_camera_reference(official, tmp_path):
+    """On the official layout the markers come from its marker-pose files: UAV2 in UAV1 against
+    them, computed here by hand from the pickled rvec / tvec (OpenCV's Rodrigues, SciPy's angle)."""
+    import pickle
+
+    import cv2
+    from scipy.spatial.transform import Rotation
+
+    from airpose_lib.data.official.real import MARKER_POSES_FILE
+    from airpose_lib.experiments.recording_tables import marker_table
+    from airpose_lib.experiments.recordings import official_networks, official_recordings, run_recording_experiment
+
+    seqs = official_recordings(official / "real")
+    exp = run_recording_experiment("smoke", tmp_path / "exp", sequences=seqs, networks=official_networks(official / "ckpt"))
+    assert sorted(exp.markers) == ["person1", "person2"]
+    t = marker_table(exp)
+    assert set(t["reference"]) == {"markers"} and len(t) == 2 * 3  # no generated cameras on real data
+    files = [pickle.loads((official / "real" / f"machine_{v}" / MARKER_POSES_FILE).read_bytes()) for v in (1, 2)]
+    for person, seq in seqs.items():
+        pose = [[(cv2.Rodrigues(np.asarray(f[f"{i:06d}"]["0"]["rvec"], float))[0],
+                  np.asarray(f[f"{i:06d}"]["0"]["tvec"], float)) for f in files] for i in seq.frames]
+        R12 = np.stack([R1 @ R2.T for (R1, _), (R2, _) in pose])
+        t12 = np.stack([t1 - (R1 @ R2.T) @ t2 for (R1, t1), (R2, t2) in pose])
+        e = exp.estimates[person]["AirPose"]
+        Re = e["phi"][:, 0] @ np.swapaxes(e["phi"][:, 1], -1, -2)
+        te = e["tau"][:, 0] - np.einsum("fij,fj->fi", Re, e["tau"][:, 1])
+        row = t[(t["sequence"] == person) & (t["method"] == "AirPose")].iloc[0]
+        assert row["frames"] == 3
+        assert np.isclose(row["rel_t_median_m"], np.median(np.linalg.norm(te - t12, axis=-1)))
+        angle = Rotation.from_matrix(np.swapaxes(Re, -1, -2) @ R12).magnitude()
+        assert np.isclose(row["rel_rot_median_deg"], np.degrees(np.median(angle)), atol=1e-6)

@@ -24,7 +24,7 @@ import numpy as np
 import pandas as pd
 import torch
 
-from airpose_lib.geometry import relative_camera_pose
+from airpose_lib.geometry import geodesic_angle, relative_camera_pose
 from airpose_lib.model.smplx_params import posed_joints_and_vertices
 
 from . import metrics as M
@@ -36,6 +36,7 @@ __all__ = [
     "body_joints",
     "person_positions",
     "relative_camera_positions",
+    "relative_camera_errors_against",
     "recording_frame_table",
     "recording_table",
     "COMPARISON_METRICS",
@@ -139,6 +140,22 @@ def relative_camera_positions(params: Mapping, views: tuple[int, int] = (0, 1)) 
     i, j = views
     R, t = relative_camera_pose(phi[:, i], tau[:, i], phi[:, j], tau[:, j])
     return R.numpy(), t.numpy()
+
+
+def relative_camera_errors_against(R: np.ndarray, t: np.ndarray, R_ref: np.ndarray,
+                                   t_ref: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Errors of UAV 2's pose in UAV 1 against a reference of the same quantity (the generated
+    cameras, or the ArUco markers' :func:`airpose_lib.data.sequences.markers.marker_relative_cameras`).
+
+    Args:
+        R, R_ref: ``(..., 3, 3)`` UAV 2's orientation in UAV 1's camera frame.
+        t, t_ref: ``(..., 3)`` UAV 2's position in UAV 1's camera frame, metres.
+
+    Returns:
+        ``t_err (...)`` metres and ``rot_err (...)`` degrees (geodesic), float64.
+    """
+    R, t, R_ref, t_ref = (torch.as_tensor(_np(x), dtype=torch.float64) for x in (R, t, R_ref, t_ref))
+    return M.translation_error(t, t_ref).numpy(), torch.rad2deg(geodesic_angle(R, R_ref)).numpy()
 
 
 def recording_frame_table(estimate: Mapping, ground_truth: Mapping, joints: np.ndarray,

@@ -46,7 +46,7 @@ __all__ = ["REFERENCE_FILES", "RESULTS_ROOT", "ProvenanceError", "reference_dir"
            "require_clean_checkout", "reference_outputs", "provenance_problems", "provenance_record",
            "train_settings", "train_wall_s", "mean_body_summary", "write_reference", "read_reference_table", "side_by_side",
            "compare_to_reference", "check_against_reference", "install_reference", "reference_report",
-           "RECORDING_FILES", "FIELD_RECORDING_FILES", "install_recordings_reference", "recordings_report"]
+           "RECORDING_FILES", "FIELD_RECORDING_FILES", "MARKER_RECORDING_FILES", "install_recordings_reference", "recordings_report"]
 
 #: The files of a results bundle.
 REFERENCE_FILES = ("table1.csv", "table1.md", "per_seed.csv", "claims.csv", "claims.md", "mean_body.csv",
@@ -476,6 +476,10 @@ RECORDING_FILES = ("recording_errors.csv", "recording_errors.md", "comparisons.c
 #: (a profile with ``sequences: field_recordings:``), removed from the reference when it did not.
 FIELD_RECORDING_FILES = ("field_gap.csv", "field_gap.md", "field_finetune_transfer.csv", "field_finetune_transfer.md",
                          "field_paper_claims.csv", "field_paper_claims.md")
+#: Notebook 05's tables of the ArUco markers' UAV2-in-UAV1 (issue 31), on the clean and on the
+#: field recordings, installed the same way when the recordings had markers.
+MARKER_RECORDING_FILES = ("markers.csv", "markers.md", "field_markers.csv", "field_markers.md")
+_OPTIONAL_RECORDING_FILES = FIELD_RECORDING_FILES + MARKER_RECORDING_FILES
 
 
 def install_recordings_reference(notebook_dir: str | Path, profile: str, command: str,
@@ -494,10 +498,10 @@ def install_recordings_reference(notebook_dir: str | Path, profile: str, command
     if missing:
         raise FileNotFoundError(f"{src}: no {', '.join(missing)}; run notebook 05_airpose_plus first")
     require_clean_checkout(_checkout_of(root), reference_outputs(profile))
-    for name in RECORDING_FILES + tuple(n for n in FIELD_RECORDING_FILES if (src / n).is_file()):
+    for name in RECORDING_FILES + tuple(n for n in _OPTIONAL_RECORDING_FILES if (src / n).is_file()):
         with atomic_path(dst / name) as tmp:
             shutil.copyfile(src / name, tmp)
-    for name in FIELD_RECORDING_FILES:
+    for name in _OPTIONAL_RECORDING_FILES:
         if not (src / name).is_file():
             (dst / name).unlink(missing_ok=True)  # a reference never mixes two runs' tables
     _write_text(dst / "provenance.json", json.dumps(provenance_record(profile, command), indent=2, default=str) + "\n")

@@ -10,12 +10,20 @@ import numpy as np
 import pandas as pd
 
 from airpose_lib.body import load_body_model
-from airpose_lib.eval.recordings import compare_methods, paper_claims, recording_frame_table
+from airpose_lib.data.sequences.markers import relative_camera_from_markers
+from airpose_lib.eval.recordings import (
+    compare_methods,
+    paper_claims,
+    recording_frame_table,
+    relative_camera_errors_against,
+    relative_camera_positions,
+)
 
 from .recordings import RecordingExperiment, body_vertices, scored_frames
 
 __all__ = ["depth_summary", "overlay_inputs", "airpose_plus_checks", "finetune_table", "selection_table",
-           "transfer_table", "COMPARISONS", "comparisons_table", "GAP_METHODS", "field_gap_table", "claims_table",
+           "transfer_table", "COMPARISONS", "comparisons_table", "GAP_METHODS", "field_gap_table", "MARKER_METHODS",
+           "MARKERS_LABEL", "uav2_in_uav1", "marker_table", "claims_table",
            "markdown_table"]
 
 
@@ -240,6 +248,78 @@ def field_gap_table(clean: RecordingExperiment, field: RecordingExperiment, meth
         part = compare_methods(frames, pairs, block=max(1, round(block_s * fps)))
         parts.append(part.assign(sequence=person)[["sequence", *part.columns]])
     return pd.concat(parts, ignore_index=True) if parts else pd.DataFrame()
+
+
+#: Methods whose UAV2-in-UAV1 :func:`marker_table` measures against both references.
+MARKER_METHODS = ("AirPose (pre-trained)", "AirPose", "AirPose+")
+#: The method label of the markers' own row in :func:`marker_table`.
+MARKERS_LABEL = "ArUco markers"
+
+
+def uav2_in_uav1(exp: RecordingExperiment, person: str, methods=("AirPose", "AirPose+")) -> dict[str, np.ndarray]:
+    """What notebook 05 plots: method -> ``(F, 3)`` UAV 2's position in UAV 1's camera frame from
+    the two body poses, and :data:`MARKERS_LABEL` -> the markers' (NaN where they did not pose
+    both drones) when the recording has markers."""
+    lines = {m: relative_camera_positions(exp.estimates[person][m])[1] for m in methods}
+    if (truth := exp.markers.get(person)) is not None:
+        lines[MARKERS_LABEL] = np.where(np.asarray(truth["valid"], bool)[:, None], truth["t_12"], np.nan)
+    return lines
+
+
+def marker_table(exp: RecordingExperiment, methods=MARKER_METHODS) -> pd.DataFrame:
+    """UAV 2 in UAV 1 from the ArUco markers: how good that truth is, and the methods against it.
+
+    For each recording with markers (:attr:`RecordingExperiment.markers`): the markers against
+    the generated cameras (where the recording has ground truth), then each method's UAV2-in-UAV1
+    (:func:`~airpose_lib.eval.recordings.relative_camera_positions`) against the generated
+    cameras and against the markers. Every row of a recording is over the same frames: those
+    where the markers posed both drones and every network estimated both views
+    (:func:`~airpose_lib.experiments.recordings.scored_frames`). Medians, as the issue's target
+    (a pose solver's rare flips would dominate a mean); the means beside them.
+
+    Returns:
+        columns ``sequence, method, reference`` ("generated cameras" or "markers"), ``frames``,
+        ``frames_share`` (of the recording's frames), ``rel_t_median_m``, ``rel_rot_median_deg``,
+        ``rel_t_mean_m``, ``rel_rot_mean_deg``, and for the markers' own row
+        ``markers_median`` (markers detected per view) and ``rms_median_px``; empty without markers.
+    """
+    rows = []
+    for person, truth in exp.markers.items():
+        gt = exp.sequences[person].ground_truth
+        keep = np.asarray(truth["valid"], bool) & scored_frames(exp.estimates[person])
+        references = {"markers": (truth["R_12"], truth["t_12"])}
+        if gt is not None:  # the cameras the renderer used: x_ck = R_cw x_w + t_cw
+            references = {"generated cameras": relative_camera_from_markers(
+                gt["R_cw"][:, 0], gt["t_cw"][:, 0], gt["R_cw"][:, 1], gt["t_cw"][:, 1]), **references}
+        head = {"sequence": person, "frames": int(keep.sum()), "frames_share": float(keep.mean())}
+        if gt is not None:
+            extra = {}
+            if "count" in truth and keep.any():
+                extra = {"markers_median": float(np.median(truth["count"][keep])),
+                         "rms_median_px": float(np.nanmedian(truth["rms_px"][keep]))}
+            rows.append({**head, "method": MARKERS_LABEL, "reference": "generated cameras",
+                         **_relative_camera_errors(truth["R_12"], truth["t_12"], *references["generated cameras"],
+                                                   keep), **extra})
+        for m in methods:
+            if m in exp.estimates[person]:
+                R, t = relative_camera_positions(exp.estimates[person][m])
+                rows += [{**head, "method": m, "reference": ref, **_relative_camera_errors(R, t, *pose, keep)}
+                         for ref, pose in references.items()]
+    columns = ["sequence", "method", "reference", "frames", "frames_share", *_RELATIVE_ERROR_COLUMNS]
+    table = pd.DataFrame(rows)
+    return table[columns + [c for c in table.columns if c not in columns]] if rows else table
+
+
+_RELATIVE_ERROR_COLUMNS = ("rel_t_median_m", "rel_rot_median_deg", "rel_t_mean_m", "rel_rot_mean_deg")
+
+
+def _relative_camera_errors(R, t, R_ref, t_ref, keep: np.ndarray) -> dict:
+    """Median and mean UAV2-in-UAV1 errors over the frames ``keep`` ``(F,)`` (NaN over none)."""
+    if not keep.any():
+        return dict.fromkeys(_RELATIVE_ERROR_COLUMNS, float("nan"))
+    t_err, r_err = relative_camera_errors_against(R[keep], t[keep], R_ref[keep], t_ref[keep])
+    return dict(zip(_RELATIVE_ERROR_COLUMNS, (float(np.median(t_err)), float(np.median(r_err)),
+                                              float(t_err.mean()), float(r_err.mean()))))
 
 
 def claims_table(exp: RecordingExperiment, spin: str = "Baseline (pre-trained)") -> pd.DataFrame:

@@ -46,8 +46,9 @@ from airpose_lib.assets import resolve_data_source
 from airpose_lib.atomic import atomic_path
 from airpose_lib.body import load_body_model
 from airpose_lib.body.joint_sets import BODY_25_FROM_SMPLX
-from airpose_lib.data.official.real import load_official_real
+from airpose_lib.data.official.real import MARKER_POSES_FILE, load_marker_poses, load_official_real
 from airpose_lib.data.sequences import ensure_sequences, profile_field_sequences
+from airpose_lib.data.sequences.markers import marker_relative_cameras, sequence_marker_poses
 from airpose_lib.data.sequences.reader import load_sequence
 from airpose_lib.engine.checkpoint import StaleRunError
 from airpose_lib.errors import ConfigError
@@ -81,7 +82,8 @@ from airpose_lib.train.official import find_official_checkpoint
 
 __all__ = ["METHODS", "RecordingExperiment", "default_experiment_dir", "run_recording_experiment", "runs_field",
            "body_vertices", "recording_prior", "ground_truth_diagnostic", "scored_frames",
-           "CONTROL_LABEL", "official_recordings", "official_networks", "networks_for", "recordings_for"]
+           "CONTROL_LABEL", "official_recordings", "official_networks", "networks_for", "recordings_for",
+           "marker_truth"]
 
 #: Estimate names in plotting order.
 METHODS = ("Baseline (pre-trained)", "AirPose (pre-trained)", "Baseline", "AirPose", "AirPose+")
@@ -117,6 +119,8 @@ class RecordingExperiment:
         finetune_info: variant -> fine-tuning summary (steps, selected step, agreement-filter
             counts, per-view threshold, the selection log).
         prior_info: the pose prior used (``source`` kit or vposer, ``file``, ``message``).
+        markers: person -> UAV 2 in UAV 1 from the ArUco markers on the ground (``R_12``,
+            ``t_12``, ``valid``; :func:`marker_truth`), for the recordings that have them.
     """
 
     profile: str
@@ -129,6 +133,7 @@ class RecordingExperiment:
     fit_info: dict = field(default_factory=dict)
     finetune_info: dict = field(default_factory=dict)
     prior_info: dict = field(default_factory=dict)
+    markers: dict = field(default_factory=dict)
 
     @property
     def persons(self) -> list[str]:
@@ -205,6 +210,41 @@ def _network_estimate(checkpoint: Path, sequence, out: Path) -> dict:
     arrays = {k: np.asarray(v) for k, v in pred.items() if k != "provenance"}
     _save_npz(out, key, arrays)
     return arrays
+
+
+def marker_truth(sequence, out: Path) -> dict | None:
+    """UAV 2 in UAV 1 from the ArUco markers on a recording's ground, or None without markers.
+
+    The official release ships each drone's marker pose per frame (``data.official.real``, marker
+    ``"0"`` as the world frame, as the official loader); a generated recording with the
+    ``markers`` option is searched for its markers frame by frame (``cv2.aruco``,
+    :func:`~airpose_lib.data.sequences.markers.sequence_marker_poses`; cached, about 10 ms an image).
+
+    Returns:
+        ``R_12 (F, 3, 3)``, ``t_12 (F, 3)``, ``valid (F,)`` (both drones posed), and for
+        generated recordings ``count (F, V)`` markers detected and ``rms_px (F, V)`` reprojection
+        error (NaN where not posed).
+    """
+    root = Path(sequence.root) if sequence.root is not None else None
+    if root is not None and (root / "machine_1" / MARKER_POSES_FILE).is_file():
+        poses = load_marker_poses(root, sequence.frames, num_views=sequence.num_views)
+        R_12, t_12, valid = marker_relative_cameras(poses)
+        return {"R_12": R_12, "t_12": t_12, "valid": valid}
+    if ((sequence.meta or {}).get("config") or {}).get("markers") is None:
+        return None
+    key = _key("markers", _MARKER_VERSION, str(sequence.root), sequence.frames.tolist(), _sequence_stamp(sequence))
+    cached = _cached_npz(out, key)
+    if cached is not None:
+        return cached
+    poses, count, rms = sequence_marker_poses(sequence)
+    R_12, t_12, valid = marker_relative_cameras(poses)
+    arrays = {"R_12": R_12, "t_12": t_12, "valid": valid, "count": count, "rms_px": rms}
+    _save_npz(out, key, arrays)
+    return arrays
+
+
+#: Bumped when the marker detection or pose of an unchanged recording changes.
+_MARKER_VERSION = 1
 
 
 def _airpose_plus(sequence, init: dict, profile: str, prior, prior_info: dict, out: Path,
@@ -514,7 +554,7 @@ def _run_recording_experiment(profile: str, out: Path, sequences: dict | None, s
         tests = {n: s for n, s in seqs.items() if n != fine_tune_on and s.ground_truth is not None}
         checkpoints, finetune_info = _kit_networks(profile, seed, seqs[fine_tune_on], tests, prior, prior_info, out,
                                                    progress)
-    estimates, joints, fit_info, tables = {}, {}, {}, []
+    estimates, joints, fit_info, tables, markers = {}, {}, {}, [], {}
     body = load_body_model("open", "neutral", dtype=torch.float32)
     for person, seq in seqs.items():
         est = {}
@@ -531,6 +571,8 @@ def _run_recording_experiment(profile: str, out: Path, sequences: dict | None, s
         est["AirPose+"] = plus
         fit_info[person] = info
         estimates[person] = est
+        if (truth := marker_truth(seq, out / "estimates" / person / "markers.npz")) is not None:
+            markers[person] = truth
         joints[person] = {m: body_joints(e, body) for m, e in est.items()}
         if seq.ground_truth is not None:
             mask = scored_frames(est)
@@ -545,4 +587,4 @@ def _run_recording_experiment(profile: str, out: Path, sequences: dict | None, s
     table = pd.concat(tables, ignore_index=True) if tables else pd.DataFrame()
     return RecordingExperiment(profile=profile, out_dir=out, sequences=seqs, estimates=estimates, joints=joints,
                                tables=table, checkpoints=checkpoints, fit_info=fit_info,
-                               finetune_info=finetune_info, prior_info=prior_info)
+                               finetune_info=finetune_info, prior_info=prior_info, markers=markers)

@@ -43,6 +43,7 @@ __all__ = [
     "marker_pose",
     "camera_pose_from_markers",
     "relative_camera_from_markers",
+    "recording_lens_distortion",
     "sequence_marker_poses",
     "marker_relative_cameras",
 ]
@@ -256,8 +257,20 @@ def relative_camera_from_markers(R1: np.ndarray, t1: np.ndarray, R2: np.ndarray,
     return R.numpy(), t.numpy()
 
 
-def sequence_marker_poses(seq, layout: MarkerLayout | None = None, min_markers: int = 1
-                          ) -> tuple[MarkerPoses, np.ndarray, np.ndarray]:
+def recording_lens_distortion(seq) -> np.ndarray | None:
+    """OpenCV distortion coefficients ``(k1, k2, 0, 0)`` of a generated recording's stored frames
+    (its field pipeline's ``distortion``), or None when they are pinhole images. A real drone's
+    calibration gives them; here the renderer knows them, and ignoring them would put the
+    markers' corners pixels off near the image border."""
+    settings = ((seq.meta or {}).get("config") or {}).get("field") or {}
+    k = settings.get("distortion") if settings.get("enabled") else None
+    if k is None or not any(k):
+        return None
+    return np.array([float(k[0]), float(k[1]), 0.0, 0.0])
+
+
+def sequence_marker_poses(seq, layout: MarkerLayout | None = None, min_markers: int = 1,
+                          dist: np.ndarray | None = None) -> tuple[MarkerPoses, np.ndarray, np.ndarray]:
     """Each drone's camera pose from the markers in every frame of a recording.
 
     Args:
@@ -267,6 +280,8 @@ def sequence_marker_poses(seq, layout: MarkerLayout | None = None, min_markers: 
             (``SequenceConfig.markers`` in its ``sequence.json``).
         min_markers: fewer detected markers than this leave the view invalid (two markers from
             12 m can be tens of centimetres off along the line of sight; three or four are not).
+        dist: OpenCV distortion coefficients of the stored images; default: a generated
+            recording's own (:func:`recording_lens_distortion`).
     Returns:
         :class:`~airpose_lib.data.official.real.MarkerPoses` in the layout's (world) frame
         (``R_cm``, ``t_cm`` = ``R_cw``, ``t_cw``; identity / zero where invalid), the number of
@@ -279,6 +294,8 @@ def sequence_marker_poses(seq, layout: MarkerLayout | None = None, min_markers: 
             raise ConfigError(f"recording {seq.root} has no markers on its ground (a profile's `sequences: "
                               "markers: {}` adds them); give their layout")
         layout = MarkerLayout(**stored)
+    if dist is None:
+        dist = recording_lens_distortion(seq)
     F, V = seq.num_frames, seq.num_views
     R = np.tile(np.eye(3), (F, V, 1, 1))
     t = np.zeros((F, V, 3))
@@ -288,7 +305,7 @@ def sequence_marker_poses(seq, layout: MarkerLayout | None = None, min_markers: 
         for v in range(V):
             det = detect_markers(seq.image(i, v), layout)
             count[i, v] = len(det)
-            pose = camera_pose_from_markers(det, layout, seq.K[v]) if len(det) >= max(min_markers, 1) else None
+            pose = camera_pose_from_markers(det, layout, seq.K[v], dist) if len(det) >= max(min_markers, 1) else None
             if pose is not None:
                 R[i, v], t[i, v], rms[i, v] = pose
     return MarkerPoses(np.asarray(seq.frames), R, t, ~np.isnan(rms)), count, rms

@@ -273,6 +273,13 @@ def test_regress_features_equals_forward(tiny_ckpt):
     out = regress_features(model, feat, P, S)
     for k in ("phi6d", "theta6d", "beta", "tau"):
         assert torch.equal(out[k], ref[k]), k
+    # from the cached input of the last block (fine-tuning's trainable_from)
+    h = model.backbone.forward_until(images.flatten(0, 1), "layer4.1").unflatten(0, (2, 2))
+    cut = regress_features(model, h, P, S, cut="layer4.1")
+    for k in ("phi6d", "theta6d", "beta", "tau"):
+        torch.testing.assert_close(cut[k], ref[k], rtol=1e-5, atol=1e-6)
+    with pytest.raises(ValueError, match=r"\(B, V, C, h, w\)"):
+        regress_features(model, feat, P, S, cut="layer4.1")
 
 
 def test_detection_boxes_reuse_and_flag():
@@ -397,6 +404,42 @@ def test_finetune_freezes_backbone_and_lowers_the_2d_loss(tiny_ckpt, smoke_root,
     np.testing.assert_allclose(net["camera_K"], load_sized_network(tiny_ckpt)[0].camera_K)
     assert [int(r["step"]) for r in read_log(tmp_path / "ft" / "log.csv")] == list(range(1, 9))
     assert res.history["step"] == list(range(1, 9)) and len(res.history["j2d"]) == 8
+
+
+def test_finetune_trains_the_backbones_last_block_from_its_cached_input(tiny_ckpt, smoke_root, tmp_path, body32,
+                                                                       tiny_prior):
+    """trainable_from: block layer4.1 and the regressor change, nothing before the block, nor its
+    BatchNorm statistics; before a step the loss is the frozen network's (the block's cached input
+    gives the same outputs), and the test person's diagnostic with the cut is the one without it.
+    A block the backbone lacks is refused before anything is written."""
+    from airpose_lib.data.sequences.reader import load_sequence
+    from airpose_lib.errors import ConfigError
+    from airpose_lib.experiments.recordings import ground_truth_diagnostic
+    from airpose_lib.train import load_checkpoint
+
+    kw = dict(prior=tiny_prior, body_model=body32)
+    frozen = finetune(tiny_ckpt, smoke_root, tmp_path / "frozen", _cfg(steps=0), **kw)
+    res = finetune(tiny_ckpt, smoke_root, tmp_path / "tail", _cfg(steps=8, trainable_from="layer4.1",
+                                                                  backbone_lr_scale=1.0), **kw)
+    for k, v in frozen.initial.items():
+        assert np.isclose(res.initial[k], v, rtol=1e-5, atol=1e-8), k
+    assert res.final["j2d"] < res.initial["j2d"]
+    before, after = load_checkpoint(tiny_ckpt)["model"], load_checkpoint(res.checkpoint)["model"]
+    trainable = [k for k in before if k.startswith(("regressor.", "backbone.layer4.1."))
+                 and not k.endswith(("running_mean", "running_var", "num_batches_tracked"))]
+    changed = {k for k in before if not torch.equal(before[k], after[k])}
+    assert changed <= set(trainable)
+    assert {"backbone.layer4.1.conv1.weight", "backbone.layer4.1.bn2.weight", "regressor.fc1.weight"} <= changed
+    model, _, _ = load_sized_network(tiny_ckpt)
+    test = load_sequence(smoke_root, frames=range(40, 43), detectors=("openpose",))
+    with torch.no_grad():  # as fine-tuning calls it
+        plain = ground_truth_diagnostic(model, test, input_size=S)(model)
+        with_cut = ground_truth_diagnostic(model, test, input_size=S, cut="layer4.1")(model)
+    for k, v in plain.items():
+        assert np.isclose(with_cut[k], v, rtol=1e-4), k
+    with pytest.raises(ConfigError, match="trainable_from='layer9.0' is not a block"):
+        finetune(tiny_ckpt, smoke_root, tmp_path / "bad", _cfg(trainable_from="layer9.0"), **kw)
+    assert not (tmp_path / "bad").exists()
 
 
 def test_resume_matches_an_uninterrupted_run(tiny_ckpt, smoke_root, tmp_path, body32, tiny_prior):

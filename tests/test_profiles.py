@@ -109,7 +109,7 @@ def _with_key(tmp_path, section: str, key: str, value) -> object:
 def _helpers():
     from airpose_lib.data.sequences.config import profile_sequences
     from airpose_lib.data.still.config import profile_config
-    from airpose_lib.finetune.train import finetune_config
+    from airpose_lib.finetune.config import finetune_config
     from airpose_lib.fitting.airpose_plus import fitting_profile
     from airpose_lib.fitting.recording import fit_config
     from airpose_lib.prior.train import prior_profile
@@ -149,7 +149,7 @@ def test_every_section_reader_names_an_unknown_key_the_file_and_the_closest_key(
 
 def test_a_bad_value_in_a_section_names_the_file_and_a_bad_option_the_options(tmp_path):
     from airpose_lib.errors import ConfigError, ProfileSettingError
-    from airpose_lib.finetune.train import finetune_config
+    from airpose_lib.finetune.config import finetune_config
     from airpose_lib.prior.train import prior_profile
 
     path = _with_key(tmp_path, "finetune", "steps", "thirty")

@@ -24,8 +24,9 @@ __all__ = ["add_finetune", "add_predict"]
 
 # -- finetune -------------------------------------------------------------------------------------
 def _cmd_finetune(args: argparse.Namespace) -> int:
+    from airpose_lib.finetune.config import FineTuneConfig, finetune_config
     from airpose_lib.finetune.loss import FineTuneLossConfig
-    from airpose_lib.finetune.train import FineTuneConfig, finetune, finetune_config
+    from airpose_lib.finetune.train import finetune
 
     overrides = parse_sets(args.set, FineTuneConfig, {"loss": FineTuneLossConfig})
     for name, field in (("steps", "steps"), ("batch_size", "batch_size"), ("seed", "seed"), ("threads", "num_threads"),

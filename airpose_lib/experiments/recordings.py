@@ -59,6 +59,7 @@ from airpose_lib.eval.recordings import (
     per_view_params,
     recording_table,
 )
+from airpose_lib.finetune.config import finetune_config
 from airpose_lib.finetune.keypoints import resolution_scales
 from airpose_lib.finetune.network import load_sized_network
 from airpose_lib.finetune.predict import (
@@ -68,7 +69,7 @@ from airpose_lib.finetune.predict import (
     regress_features,
     sequence_features,
 )
-from airpose_lib.finetune.train import finetune, finetune_config, finetune_done
+from airpose_lib.finetune.train import finetune, finetune_done
 from airpose_lib.fitting import airpose_plus, fitting_profile
 from airpose_lib.folder_lock import folder_lock
 from airpose_lib.model import posed_joints_and_vertices, to_smplx_params
@@ -300,24 +301,27 @@ def recording_prior(profile: str, progress: bool = False):
     return prior, {"source": source, "file": str(file), "stamp": _stamp(file), "message": msg}
 
 
-def ground_truth_diagnostic(model, sequence, *, input_size: int, features: dict | None = None):
+def ground_truth_diagnostic(model, sequence, *, input_size: int, features: dict | None = None,
+                            cut: str | None = None):
     """A fine-tuning diagnostic on a recording with ground truth (the test person): ``f(model) ->
     {"mpjpe_m", "mpe_m", "j2d_px"}`` for ``finetune(..., diagnostic=f)``.
 
-    The backbone is frozen during fine-tuning, so the recording's features are computed once here
-    (with ``model``'s backbone) and every call only runs the regressor. ``j2d_px`` is the mean
+    The backbone is frozen during fine-tuning up to block ``cut`` (``FineTuneConfig.trainable_from``;
+    None: all of it), so the recording's features up to there are computed once here (with
+    ``model``'s backbone) and every call runs only the rest: the trainable blocks and the regressor. ``j2d_px`` is the mean
     distance of the predicted BODY_25 keypoints to the true ones, in pixels at the reference
     width (1920); ``mpjpe_m`` pelvis-aligned, 22 joints; ``mpe_m`` the position error.
 
     Args:
-        features: precomputed :func:`~airpose_lib.finetune.predict.sequence_features` output.
+        features: precomputed :func:`~airpose_lib.finetune.predict.sequence_features` output
+            (with the same ``cut``).
     """
     import torch
 
     gt = sequence.ground_truth
     if gt is None:
         raise ValueError(f"{sequence.root}: no ground truth for a diagnostic")
-    feats = features if features is not None else sequence_features(model, sequence, input_size=input_size)
+    feats = features if features is not None else sequence_features(model, sequence, input_size=input_size, cut=cut)
     K_net = network_camera_of(model)
     body = load_body_model("open", "neutral", dtype=torch.float32)
     f = torch.as_tensor(np.asarray(feats["features"]), dtype=torch.float32)
@@ -333,7 +337,7 @@ def ground_truth_diagnostic(model, sequence, *, input_size: int, features: dict 
     idx = torch.as_tensor(BODY_25_FROM_SMPLX)
 
     def diagnostic(net) -> dict[str, float]:
-        out = regress_features(net, f.to(net.init_beta.dtype), P.to(net.init_beta.dtype), input_size)
+        out = regress_features(net, f.to(net.init_beta.dtype), P.to(net.init_beta.dtype), input_size, cut=cut)
         pred = {k: v.float() for k, v in to_smplx_params(out, P, K_p, input_size).items()}
         flat = {k: v.reshape(F * V, *v.shape[2:]) for k, v in pred.items()}
         joints = posed_joints_and_vertices(body, flat, joints_only=True)["joints"].reshape(F, V, -1, 3)
@@ -446,9 +450,10 @@ def _finetune_logged(pre: Path, tuning, tests: dict, ft_cfg, run_dir: Path, prio
     diagnostics = {}
     if tests and not finetune_done(run_dir, pre, ft_cfg):
         net, _, size = load_sized_network(pre)
-        for name, seq in tests.items():  # the frozen backbone's features, once per network
-            feats = sequence_features(net, seq, input_size=size)
-            diagnostics[name] = ground_truth_diagnostic(net, seq, input_size=size, features=feats)
+        cut = ft_cfg.trainable_from
+        for name, seq in tests.items():  # the frozen part's features, once per network
+            feats = sequence_features(net, seq, input_size=size, cut=cut)
+            diagnostics[name] = ground_truth_diagnostic(net, seq, input_size=size, features=feats, cut=cut)
 
     def diagnostic(model, _d=diagnostics):
         return {f"{name}_{k}": v for name, d in _d.items() for k, v in d(model).items()}

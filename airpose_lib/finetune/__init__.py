@@ -1,7 +1,7 @@
 """Fine-tuning on 2D detections of a two-drone recording (paper Sec. IV, real data) and running a
 network over a recording.
 
-Modules: ``keypoints`` (the OpenPose/AlphaPose agreement filter -> 2D targets), ``predict``
+Modules: ``config`` (a run's settings, from a profile's ``finetune:`` section), ``keypoints`` (the OpenPose/AlphaPose agreement filter -> 2D targets), ``predict``
 (detections -> crops -> per-view SMPL-X parameters; the predictions ``.npz``), ``loss`` (the
 fine-tuning loss), ``network`` (a checkpoint's network and crop size), ``selection`` (which checkpoint is
 kept: the paper's "stop once any loss component starts overfitting"), ``train`` (frozen
@@ -15,5 +15,5 @@ from __future__ import annotations
 
 from airpose_lib._lazy import lazy_namespace
 
-_MODULES = ("keypoints", "loss", "network", "predict", "selection", "train")
+_MODULES = ("config", "keypoints", "loss", "network", "predict", "selection", "train")
 __getattr__, __dir__ = lazy_namespace(__name__, globals(), _MODULES)

@@ -85,7 +85,7 @@ class PredictionFormatError(UserError, ValueError):
 
 # -- the network after the backbone ---------------------------------------------------------------
 def regress_features(model: nn.Module, feat: Tensor, P: Tensor | None = None,
-                     input_size: int | None = None) -> dict:
+                     input_size: int | None = None, cut: str | None = None) -> dict:
     """The regressor part of :meth:`AirPoseNet.forward` on given backbone features.
 
     All views of a sample iterate together; the multi-view variants fuse the other views'
@@ -94,14 +94,21 @@ def regress_features(model: nn.Module, feat: Tensor, P: Tensor | None = None,
 
     Args:
         model: an :class:`~airpose_lib.model.AirPoseNet`.
-        feat: ``(B, V, C)`` backbone features (:meth:`AirPoseNet.features`).
+        feat: ``(B, V, C)`` backbone features (:meth:`AirPoseNet.features`), or with ``cut``
+            ``(B, V, C, h, w)`` the input of backbone block ``cut`` (:func:`sequence_features`
+            with that cut), run through that block and the rest of the backbone first.
         P: ``(B, V, 3)`` crop vectors (needed by Fullcam and AirPose).
         input_size: crop side S (stored as ``out["input_size"]`` for ``to_smplx_params``).
+        cut: a backbone block name (``FineTuneConfig.trainable_from``) or None.
 
     Returns:
         the dict of :meth:`AirPoseNet.forward`: phi6d (B, V, 6), theta6d (B, V, 21, 6),
         beta (B, V, 10), tau (B, V, 3) or cam (B, V, 3), messages, and input_size if given.
     """
+    if cut is not None:
+        if feat.dim() != 5:
+            raise ValueError(f"features of block {cut!r}'s input must be (B, V, C, h, w), got {tuple(feat.shape)}")
+        feat = model.features_from(feat, cut)
     if feat.dim() != 3:
         raise ValueError(f"features must be (B, V, C), got {tuple(feat.shape)}")
     out = model.regress(feat, P)
@@ -236,14 +243,16 @@ def _resolve_input_size(model: nn.Module, input_size: int | None) -> int:
 @torch.no_grad()
 def sequence_features(model: nn.Module, sequence, *, input_size: int, detector: str = "openpose",
                       frames=None, batch_size: int = 16, box_min_confidence: float = 0.2,
-                      margin_px: float | None = None, K_net=None, progress: bool = False) -> dict[str, np.ndarray]:
+                      margin_px: float | None = None, K_net=None, progress: bool = False,
+                      cut: str | None = None) -> dict[str, np.ndarray]:
     """Backbone features of every frame and view (eval mode, no gradients).
 
     Args: as :func:`predict_sequence`; the crops and P are formed in the virtual camera
-    ``K_net`` (:func:`network_camera_of`).
+    ``K_net`` (:func:`network_camera_of`). ``cut``: a backbone block name; the features are
+    then that block's input (``ResNet.forward_until``), for training that block and the rest.
 
     Returns:
-        ``features (F, V, C)`` float32, ``P (F, V, 3)`` float32, ``boxes (F, V, 4)`` float32,
+        ``features (F, V, C)`` float32 (with ``cut``: ``(F, V, C, h, w)``), ``P (F, V, 3)`` float32, ``boxes (F, V, 4)`` float32,
         ``valid (F, V)`` bool, ``frames (F,)`` int64 image numbers, ``positions (F,)`` int64 rows
         of ``sequence``, ``margin_px (V,)`` float64 the box margin of each view.
     """
@@ -275,7 +284,8 @@ def sequence_features(model: nn.Module, sequence, *, input_size: int, detector: 
             rows = pos[a:a + batch_size]
             crops, P = _crops(sequence, rows, boxes[a:a + batch_size], input_size, K_net)
             x = torch.from_numpy(crops).to(device=device, dtype=dtype)
-            f = model.features(x.flatten(0, 1)).unflatten(0, (len(rows), V))
+            x = x.flatten(0, 1)
+            f = (model.features(x) if cut is None else model.backbone.forward_until(x, cut)).unflatten(0, (len(rows), V))
             feats.append(f.float().cpu())
             Ps.append(torch.from_numpy(P))
     finally:

@@ -68,9 +68,8 @@ from torch import nn
 
 from airpose_lib.atomic import atomic_path
 from airpose_lib.body import load_body_model
-from airpose_lib.config_fields import ConfigError, check_fields, config_from, finite, require
+from airpose_lib.config_fields import ConfigError
 from airpose_lib.data.sequences.reader import load_sequence
-from airpose_lib.devices import is_device_name
 from airpose_lib.engine import (
     AFRESH_HINT,
     EngineRun,
@@ -92,151 +91,16 @@ from airpose_lib.folder_lock import folder_lock
 from airpose_lib.model import to_smplx_params
 from airpose_lib.model.record import network_record
 from airpose_lib.prior import load_prior
-from airpose_lib.profiles import section_config
 from airpose_lib.train.sampling import epoch_permutation, seed_everything
 
+from .config import FineTuneConfig
 from .keypoints import agreement_masks, agreement_summary, kept_targets, pixel_settings, resolution_scales, true_targets
 from .loss import FineTuneLoss, finetune_loss_config
 from .network import load_sized_network
 from .predict import frames_in_range, image_sizes, regress_features, sequence_features
-from .selection import SELECTION_RULES, select_step
+from .selection import select_step
 
-__all__ = ["TARGET_SOURCES", "FineTuneConfig", "FineTuneResult", "finetune_config", "finetune", "finetune_done",
-           "evaluate_finetune_loss", "heldout_split"]
-
-#: Where the 2D targets come from (``FineTuneConfig.targets``).
-TARGET_SOURCES = ("detections", "ground_truth", "mediapipe")
-
-
-@dataclass
-class FineTuneConfig:
-    """Everything that determines a fine-tuning run (stored in its checkpoints).
-
-    Attributes:
-        steps: optimiser steps in total.
-        batch_size: frames per step (each with all its views); paper: 30.
-        lr, amsgrad, weight_decay: Adam (paper: lr 5e-5, AMSGrad).
-        seed: frame order, dropout and VPoser samples (paper: 123).
-        loss: :class:`~airpose_lib.finetune.loss.FineTuneLossConfig` overrides (``w_j2d``,
-            ``w_beta``, ``w_vposer``, ``w_theta``, ``cross_view_beta`` ...) on top of the variant's
-            paper weights; ``official_loss`` applies the official code's x60 and depth term first.
-        threshold_px, min_confidence, unmatched: the agreement filter (``agreement_targets``);
-            ``threshold_px`` at ``reference_width``.
-        targets: ``detections`` (the paper: OpenPose keypoints that AlphaPose confirms) or
-            ``ground_truth``, a control on generated recordings: the true BODY_25 keypoints
-            (:func:`~airpose_lib.finetune.keypoints.true_targets`) with the same frames and crops,
-            to tell what the detectors' errors cost from what fine-tuning on one person does; or
-            ``mediapipe``: the same agreement filter with MediaPipe's BODY_25 keypoints (a real
-            detector, ``scripts/mediapipe_detect.py``) in OpenPose's place, confirmed by AlphaPose.
-        reference_width: image width (px) the pixel quantities (``threshold_px``, the 2D loss
-            weight) refer to: the paper's 1920; each view uses them at its own width.
-        holdout_fraction: the last part of the selected frames held out for model selection
-            (0: no selection, the last checkpoint is the result).
-        selection: the model-selection rule (:data:`~airpose_lib.finetune.selection.SELECTION_RULES`):
-            ``first_overfit`` (the paper's) or ``min_heldout_j2d``.
-        frames: ``[start, stop)`` image numbers to train on (paper: ``[0, 7000]``); None: all.
-        input_size: crop side S (default: from the checkpoint).
-        detector, box_min_confidence, margin_px: where the crops' boxes come from
-            (``predict_sequence``; the drones' defaults: a margin of None frames the person as
-            the training crops do, ``data.network_input.network_box_margin``).
-        feature_batch_size: frames per backbone batch when caching the features.
-        checkpoint_every, keep_checkpoints, log_every: as ``TrainConfig``.
-        prior, prior_path, prior_tag: the pose prior (``airpose_lib.prior.load_prior``).
-        body_source: body model of the loss (``open`` or ``smplx``; the predictions' neutral body).
-        missing_detections: ``load_sequence``'s handling of short detector files.
-        eval_batch_size: frames per batch of the before/after loss evaluation.
-        num_threads: torch threads during the run (None: unchanged).
-        device: ``auto`` (CUDA if available), ``cpu`` or ``cuda``.
-    """
-
-    steps: int = 1000
-    batch_size: int = 30
-    lr: float = 5e-5
-    amsgrad: bool = True
-    weight_decay: float = 0.0
-    seed: int = 123
-    loss: dict = field(default_factory=dict)
-    official_loss: bool = False
-    threshold_px: float = 100.0
-    targets: str = "detections"
-    reference_width: float = 1920.0
-    holdout_fraction: float = 0.2
-    selection: str = "first_overfit"
-    min_confidence: float = 0.05
-    unmatched: str = "drop"
-    frames: list | None = None
-    input_size: int | None = None
-    detector: str = "openpose"
-    box_min_confidence: float = 0.2
-    margin_px: float | None = None
-    feature_batch_size: int = 16
-    checkpoint_every: int = 100
-    keep_checkpoints: int = 2
-    log_every: int = 10
-    prior: str = "kit"
-    prior_path: str | None = None
-    prior_tag: str | None = None
-    body_source: str = "open"
-    missing_detections: str = "error"
-    eval_batch_size: int = 256
-    num_threads: int | None = None
-    device: str = "auto"
-
-    # Fields whose change makes a resumed run differ from a straight one.
-    RESUME_KEYS = ("batch_size", "lr", "amsgrad", "weight_decay", "seed", "loss", "official_loss", "threshold_px",
-                   "targets", "reference_width", "holdout_fraction", "selection",
-                   "min_confidence", "unmatched", "frames", "input_size", "detector", "box_min_confidence",
-                   "margin_px", "prior", "prior_path", "prior_tag", "body_source")
-
-    def __post_init__(self) -> None:
-        check_fields(self)  # types first (`--set lr=abc`, a profile's `steps: ten`), then ranges
-        require(self.steps >= 0, "steps", ">= 0", self.steps)
-        require(self.batch_size >= 1, "batch_size", ">= 1", self.batch_size)
-        for name in ("checkpoint_every", "log_every", "feature_batch_size", "eval_batch_size"):
-            require(getattr(self, name) >= 1, name, ">= 1", getattr(self, name))
-        require(self.keep_checkpoints >= 0, "keep_checkpoints", ">= 0 (0: only last.pt)", self.keep_checkpoints)
-        require(finite(self.lr) and self.lr > 0, "lr", "a finite number > 0", self.lr)
-        require(finite(self.weight_decay) and self.weight_decay >= 0, "weight_decay", "a finite number >= 0",
-                self.weight_decay)
-        require(finite(self.threshold_px) and self.threshold_px > 0, "threshold_px", "a finite number > 0",
-                self.threshold_px)
-        require(0 <= self.min_confidence <= 1, "min_confidence", "in [0, 1]", self.min_confidence)
-        require(0 <= self.box_min_confidence <= 1, "box_min_confidence", "in [0, 1]", self.box_min_confidence)
-        require(self.margin_px is None or finite(self.margin_px) and self.margin_px >= 0, "margin_px",
-                "null or a finite number >= 0", self.margin_px)
-        require(self.input_size is None or self.input_size >= 32, "input_size", "null or >= 32", self.input_size)
-        require(self.num_threads is None or self.num_threads >= 1, "num_threads", "null or >= 1", self.num_threads)
-        require(self.body_source in ("open", "smplx"), "body_source", "'open' or 'smplx'", self.body_source)
-        require(is_device_name(self.device), "device",
-                "'auto', 'cpu', 'cuda' or 'cuda:N'", self.device)
-        require(0 <= self.holdout_fraction < 1, "holdout_fraction", "in [0, 1)", self.holdout_fraction)
-        require(self.targets in TARGET_SOURCES, "targets", f"one of {', '.join(TARGET_SOURCES)}", self.targets)
-        require(self.selection in SELECTION_RULES, "selection", f"one of {', '.join(SELECTION_RULES)}",
-                self.selection)
-        require(finite(self.reference_width) and self.reference_width > 0, "reference_width", "a finite number > 0",
-                self.reference_width)
-        if self.frames is not None:
-            frames = list(self.frames)
-            if len(frames) != 2 or not all(isinstance(x, (int, np.integer)) for x in frames) or frames[0] >= frames[1]:
-                raise ConfigError(f"frames must be [start, stop) image numbers with start < stop, got {self.frames!r}")
-            self.frames = [int(frames[0]), int(frames[1])]
-        self.loss = dict(self.loss or {})
-
-    def to_dict(self) -> dict:
-        return dataclasses.asdict(self)
-
-    def replace(self, **changes: Any) -> "FineTuneConfig":
-        return dataclasses.replace(self, **changes)
-
-
-def finetune_config(profile: str | Path | None, **overrides: Any) -> FineTuneConfig:
-    """:class:`FineTuneConfig` from a profile's ``finetune:`` section (defaults where the profile
-    has none), then ``overrides``. An unknown key or a bad value raises
-    :class:`~airpose_lib.errors.ConfigError` naming the file (or the options) and the field."""
-    if profile is None:
-        return config_from(FineTuneConfig, overrides, "fine-tuning options")
-    return section_config(profile, "finetune", FineTuneConfig, overrides, overrides_where="fine-tuning options")
-
+__all__ = ["FineTuneResult", "finetune", "finetune_done", "evaluate_finetune_loss", "heldout_split"]
 
 @dataclass
 class FineTuneResult:
@@ -323,7 +187,7 @@ def _feature_fingerprint(model, seq, cfg: FineTuneConfig, input_size: int, K_net
     files = [(str(p), p.stat().st_size, p.stat().st_mtime_ns) for imgs in seq.images for p in imgs.paths]
     h.update(json.dumps({"input_size": input_size, "detector": cfg.detector, "box": [cfg.box_min_confidence,
                          cfg.margin_px], "frames": np.asarray(seq.frames).tolist(), "images": files,
-                         "dtype": str(model.init_beta.dtype),
+                         "dtype": str(model.init_beta.dtype), **({"cut": cfg.trainable_from} if cfg.trainable_from else {}),
                          "K_net": np.asarray(K_net, np.float64).tolist()}).encode())
     h.update(np.ascontiguousarray(seq.keypoints[cfg.detector]).tobytes())
     return h.hexdigest()
@@ -342,7 +206,7 @@ def _feature_cache(model, seq, cfg: FineTuneConfig, input_size: int, K_net: np.n
             pass
     arrays = sequence_features(model, seq, input_size=input_size, detector=cfg.detector,
                                batch_size=cfg.feature_batch_size, box_min_confidence=cfg.box_min_confidence,
-                               margin_px=cfg.margin_px, K_net=K_net, progress=progress)
+                               margin_px=cfg.margin_px, K_net=K_net, progress=progress, cut=cfg.trainable_from)
     with atomic_path(path) as tmp:
         torch.save({"fingerprint": fp, "arrays": {k: torch.from_numpy(np.asarray(v)) for k, v in arrays.items()}},
                    tmp)
@@ -350,8 +214,8 @@ def _feature_cache(model, seq, cfg: FineTuneConfig, input_size: int, K_net: np.n
 
 
 def _step_terms(model, loss_fn, feat, P, targets, K, input_size: int, K_net=None,
-                pixel_scale=None) -> dict[str, torch.Tensor]:
-    out = regress_features(model, feat, P, input_size)
+                pixel_scale=None, cut: str | None = None) -> dict[str, torch.Tensor]:
+    out = regress_features(model, feat, P, input_size, cut=cut)
     # P lives in the virtual camera K_net (a weak camera converts there); the body projects with K.
     K_p = K if K_net is None else K_net
     pred = to_smplx_params(out, P, K_p.expand(feat.shape[0], *K.shape[-3:]), input_size)
@@ -362,11 +226,12 @@ def _step_terms(model, loss_fn, feat, P, targets, K, input_size: int, K_net=None
 def evaluate_finetune_loss(model: nn.Module, loss_fn: nn.Module, features: torch.Tensor, P: torch.Tensor,
                            targets: torch.Tensor, K: torch.Tensor, input_size: int,
                            batch_size: int = 256, K_net: torch.Tensor | None = None,
-                           pixel_scale: torch.Tensor | None = None) -> dict[str, float]:
+                           pixel_scale: torch.Tensor | None = None, cut: str | None = None) -> dict[str, float]:
     """Mean loss terms over frames in eval mode (no dropout), VPoser at the posterior mean.
 
     Args:
-        features: ``(F, V, C)``; P: ``(F, V, 3)``; targets: ``(F, V, 25, 3)``; K: ``(V, 3, 3)``.
+        features: ``(F, V, C)`` (with ``cut``: ``(F, V, C, h, w)``, block ``cut``'s input);
+            P: ``(F, V, 3)``; targets: ``(F, V, 25, 3)``; K: ``(V, 3, 3)``.
         K_net: ``(V, 3, 3)`` the virtual camera of P (default K).
         pixel_scale: ``(V,)`` resolution scale of the 2D residuals (``FineTuneLoss.forward``).
 
@@ -382,7 +247,7 @@ def evaluate_finetune_loss(model: nn.Module, loss_fn: nn.Module, features: torch
     try:
         for a in range(0, n, batch_size):
             sl = slice(a, a + batch_size)
-            terms = _step_terms(model, det, features[sl], P[sl], targets[sl], K, input_size, K_net, pixel_scale)
+            terms = _step_terms(model, det, features[sl], P[sl], targets[sl], K, input_size, K_net, pixel_scale, cut)
             k = features[sl].shape[0]
             for key, v in terms.items():
                 sums[key] = sums.get(key, 0.0) + float(v) * k
@@ -399,7 +264,8 @@ def _stream_seed(seed: int) -> int:
 
 def _set_train_mode(model: nn.Module) -> None:
     model.train()
-    model.backbone.eval()  # frozen: never run here anyway, but keep its BatchNorm out of training
+    # frozen, or only its last blocks training: its BatchNorm keeps pretraining's statistics
+    model.backbone.eval()
 
 
 def heldout_split(num_frames: int, fraction: float) -> tuple[np.ndarray, np.ndarray]:
@@ -548,7 +414,7 @@ class _FineTuneTask(TrainingTask):
     def train_step(self, idx: torch.Tensor, step: int) -> dict[str, torch.Tensor]:
         f = self.frames
         return _step_terms(self.model, self.loss_fn, f["features"][idx], f["P"][idx], f["targets"][idx], f["K"],
-                           self.input_size, f["K_net"], f["r_px"])
+                           self.input_size, f["K_net"], f["r_px"], self.cfg.trainable_from)
 
     def train_mode(self) -> None:
         _set_train_mode(self.model)
@@ -619,6 +485,9 @@ def _read_inputs(checkpoint: Path, root: Path, cfg: FineTuneConfig) -> tuple:
     device = resolve_device(cfg.device)
     seed_everything(cfg.seed)  # first, as before the split: the network's build draws from it
     model, train_cfg, input_size = load_sized_network(checkpoint, device, cfg.input_size)
+    if cfg.trainable_from is not None and cfg.trainable_from not in model.backbone.block_names():
+        raise ConfigError(f"trainable_from={cfg.trainable_from!r} is not a block of {checkpoint}'s backbone; "
+                          f"choose one of {', '.join(model.backbone.block_names())}")
     seq = _load_frames(root, cfg)
     scales = resolution_scales(image_sizes(seq), cfg.reference_width)  # (V,)
     threshold = cfg.threshold_px * scales
@@ -671,16 +540,23 @@ def _finetune(inputs: tuple, checkpoint: Path, root: Path, out_dir: Path, cfg: F
     params = [p for p in model.regressor.parameters()]
     for p in params:
         p.requires_grad_(True)
+    groups = [{"params": params}]
+    if cfg.trainable_from is not None:  # the last blocks adapt to the recording (checked in _read_inputs)
+        tail = [p for block in model.backbone.blocks_from(cfg.trainable_from) for p in block.parameters()]
+        for p in tail:
+            p.requires_grad_(True)
+        groups.append({"params": tail, "lr": cfg.lr * cfg.backbone_lr_scale})
     loss_cfg = finetune_loss_config(train_cfg.variant, cfg.official_loss, **cfg.loss)
     if body_model is None:
         body_model = load_body_model(cfg.body_source, "neutral")
     if prior is None and loss_cfg.w_vposer != 0:
         prior = load_prior(cfg.prior, cfg.prior_path, tag=cfg.prior_tag)
     loss_fn = FineTuneLoss(loss_cfg, body_model=body_model, prior=prior).to(device)
-    optimizer = torch.optim.Adam(params, lr=cfg.lr, amsgrad=cfg.amsgrad, weight_decay=cfg.weight_decay)
+    optimizer = torch.optim.Adam(groups, lr=cfg.lr, amsgrad=cfg.amsgrad, weight_decay=cfg.weight_decay)
 
     def evaluate(f, p_, t):
-        return evaluate_finetune_loss(model, loss_fn, f, p_, t, K, input_size, cfg.eval_batch_size, K_net, r_px)
+        return evaluate_finetune_loss(model, loss_fn, f, p_, t, K, input_size, cfg.eval_batch_size, K_net, r_px,
+                                      cfg.trainable_from)
 
     info = {"config": cfg.to_dict(), "loss": loss_cfg.to_dict(), "base_checkpoint": str(checkpoint),
             "base_fingerprint": base_fp, "sequence": str(root),

@@ -1,0 +1,163 @@
+"""The settings of a fine-tuning run (:class:`FineTuneConfig`, stored in its checkpoints) and
+where they come from: a profile's ``finetune:`` section and the command line's overrides."""
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from airpose_lib.config_fields import ConfigError, check_fields, config_from, finite, require
+from airpose_lib.devices import is_device_name
+from airpose_lib.profiles import section_config
+
+from .selection import SELECTION_RULES
+
+__all__ = ["TARGET_SOURCES", "FineTuneConfig", "finetune_config"]
+
+#: Where the 2D targets come from (``FineTuneConfig.targets``).
+TARGET_SOURCES = ("detections", "ground_truth", "mediapipe")
+
+
+@dataclass
+class FineTuneConfig:
+    """Everything that determines a fine-tuning run (stored in its checkpoints).
+
+    Attributes:
+        steps: optimiser steps in total.
+        batch_size: frames per step (each with all its views); paper: 30.
+        lr, amsgrad, weight_decay: Adam (paper: lr 5e-5, AMSGrad).
+        seed: frame order, dropout and VPoser samples (paper: 123).
+        loss: :class:`~airpose_lib.finetune.loss.FineTuneLossConfig` overrides (``w_j2d``,
+            ``w_beta``, ``w_vposer``, ``w_theta``, ``cross_view_beta`` ...) on top of the variant's
+            paper weights; ``official_loss`` applies the official code's x60 and depth term first.
+        threshold_px, min_confidence, unmatched: the agreement filter (``agreement_targets``);
+            ``threshold_px`` at ``reference_width``.
+        targets: ``detections`` (the paper: OpenPose keypoints that AlphaPose confirms) or
+            ``ground_truth``, a control on generated recordings: the true BODY_25 keypoints
+            (:func:`~airpose_lib.finetune.keypoints.true_targets`) with the same frames and crops,
+            to tell what the detectors' errors cost from what fine-tuning on one person does; or
+            ``mediapipe``: the same agreement filter with MediaPipe's BODY_25 keypoints (a real
+            detector, ``scripts/mediapipe_detect.py``) in OpenPose's place, confirmed by AlphaPose.
+        reference_width: image width (px) the pixel quantities (``threshold_px``, the 2D loss
+            weight) refer to: the paper's 1920; each view uses them at its own width.
+        holdout_fraction: the last part of the selected frames held out for model selection
+            (0: no selection, the last checkpoint is the result).
+        selection: the model-selection rule (:data:`~airpose_lib.finetune.selection.SELECTION_RULES`):
+            ``first_overfit`` (the paper's) or ``min_heldout_j2d``.
+        frames: ``[start, stop)`` image numbers to train on (paper: ``[0, 7000]``); None: all.
+        input_size: crop side S (default: from the checkpoint).
+        detector, box_min_confidence, margin_px: where the crops' boxes come from
+            (``predict_sequence``; the drones' defaults: a margin of None frames the person as
+            the training crops do, ``data.network_input.network_box_margin``).
+        feature_batch_size: frames per backbone batch when caching the features.
+        trainable_from: the first backbone block that trains with the regressor (e.g.
+            ``layer4.1``, the last block of a ResNet-18), the features then cached at that
+            block's input; None (the paper's fine-tuning here so far): the backbone stays frozen.
+            A frozen backbone can only re-weigh features learned on the training renders; the
+            last block can adapt them to the recording's pixels. Its BatchNorm statistics stay
+            those of pretraining (one recording's batches are too alike to re-estimate them).
+        backbone_lr_scale: the trainable blocks' rate as a share of ``lr``.
+        checkpoint_every, keep_checkpoints, log_every: as ``TrainConfig``.
+        prior, prior_path, prior_tag: the pose prior (``airpose_lib.prior.load_prior``).
+        body_source: body model of the loss (``open`` or ``smplx``; the predictions' neutral body).
+        missing_detections: ``load_sequence``'s handling of short detector files.
+        eval_batch_size: frames per batch of the before/after loss evaluation.
+        num_threads: torch threads during the run (None: unchanged).
+        device: ``auto`` (CUDA if available), ``cpu`` or ``cuda``.
+    """
+
+    steps: int = 1000
+    batch_size: int = 30
+    lr: float = 5e-5
+    amsgrad: bool = True
+    weight_decay: float = 0.0
+    seed: int = 123
+    loss: dict = field(default_factory=dict)
+    official_loss: bool = False
+    threshold_px: float = 100.0
+    targets: str = "detections"
+    reference_width: float = 1920.0
+    holdout_fraction: float = 0.2
+    selection: str = "first_overfit"
+    min_confidence: float = 0.05
+    unmatched: str = "drop"
+    frames: list | None = None
+    input_size: int | None = None
+    detector: str = "openpose"
+    box_min_confidence: float = 0.2
+    margin_px: float | None = None
+    feature_batch_size: int = 16
+    trainable_from: str | None = None
+    backbone_lr_scale: float = 0.1
+    checkpoint_every: int = 100
+    keep_checkpoints: int = 2
+    log_every: int = 10
+    prior: str = "kit"
+    prior_path: str | None = None
+    prior_tag: str | None = None
+    body_source: str = "open"
+    missing_detections: str = "error"
+    eval_batch_size: int = 256
+    num_threads: int | None = None
+    device: str = "auto"
+
+    # Fields whose change makes a resumed run differ from a straight one.
+    RESUME_KEYS = ("batch_size", "lr", "amsgrad", "weight_decay", "seed", "loss", "official_loss", "threshold_px",
+                   "targets", "reference_width", "holdout_fraction", "selection",
+                   "min_confidence", "unmatched", "frames", "input_size", "detector", "box_min_confidence",
+                   "margin_px", "prior", "prior_path", "prior_tag", "body_source", "trainable_from",
+                   "backbone_lr_scale")
+
+    def __post_init__(self) -> None:
+        check_fields(self)  # types first (`--set lr=abc`, a profile's `steps: ten`), then ranges
+        require(self.steps >= 0, "steps", ">= 0", self.steps)
+        require(self.batch_size >= 1, "batch_size", ">= 1", self.batch_size)
+        for name in ("checkpoint_every", "log_every", "feature_batch_size", "eval_batch_size"):
+            require(getattr(self, name) >= 1, name, ">= 1", getattr(self, name))
+        require(self.keep_checkpoints >= 0, "keep_checkpoints", ">= 0 (0: only last.pt)", self.keep_checkpoints)
+        require(finite(self.lr) and self.lr > 0, "lr", "a finite number > 0", self.lr)
+        require(finite(self.backbone_lr_scale) and self.backbone_lr_scale > 0, "backbone_lr_scale",
+                "a finite number > 0", self.backbone_lr_scale)
+        require(finite(self.weight_decay) and self.weight_decay >= 0, "weight_decay", "a finite number >= 0",
+                self.weight_decay)
+        require(finite(self.threshold_px) and self.threshold_px > 0, "threshold_px", "a finite number > 0",
+                self.threshold_px)
+        require(0 <= self.min_confidence <= 1, "min_confidence", "in [0, 1]", self.min_confidence)
+        require(0 <= self.box_min_confidence <= 1, "box_min_confidence", "in [0, 1]", self.box_min_confidence)
+        require(self.margin_px is None or finite(self.margin_px) and self.margin_px >= 0, "margin_px",
+                "null or a finite number >= 0", self.margin_px)
+        require(self.input_size is None or self.input_size >= 32, "input_size", "null or >= 32", self.input_size)
+        require(self.num_threads is None or self.num_threads >= 1, "num_threads", "null or >= 1", self.num_threads)
+        require(self.body_source in ("open", "smplx"), "body_source", "'open' or 'smplx'", self.body_source)
+        require(is_device_name(self.device), "device",
+                "'auto', 'cpu', 'cuda' or 'cuda:N'", self.device)
+        require(0 <= self.holdout_fraction < 1, "holdout_fraction", "in [0, 1)", self.holdout_fraction)
+        require(self.targets in TARGET_SOURCES, "targets", f"one of {', '.join(TARGET_SOURCES)}", self.targets)
+        require(self.selection in SELECTION_RULES, "selection", f"one of {', '.join(SELECTION_RULES)}",
+                self.selection)
+        require(finite(self.reference_width) and self.reference_width > 0, "reference_width", "a finite number > 0",
+                self.reference_width)
+        if self.frames is not None:
+            frames = list(self.frames)
+            if len(frames) != 2 or not all(isinstance(x, (int, np.integer)) for x in frames) or frames[0] >= frames[1]:
+                raise ConfigError(f"frames must be [start, stop) image numbers with start < stop, got {self.frames!r}")
+            self.frames = [int(frames[0]), int(frames[1])]
+        self.loss = dict(self.loss or {})
+
+    def to_dict(self) -> dict:
+        return dataclasses.asdict(self)
+
+    def replace(self, **changes: Any) -> "FineTuneConfig":
+        return dataclasses.replace(self, **changes)
+
+
+def finetune_config(profile: str | Path | None, **overrides: Any) -> FineTuneConfig:
+    """:class:`FineTuneConfig` from a profile's ``finetune:`` section (defaults where the profile
+    has none), then ``overrides``. An unknown key or a bad value raises
+    :class:`~airpose_lib.errors.ConfigError` naming the file (or the options) and the field."""
+    if profile is None:
+        return config_from(FineTuneConfig, overrides, "fine-tuning options")
+    return section_config(profile, "finetune", FineTuneConfig, overrides, overrides_where="fine-tuning options")

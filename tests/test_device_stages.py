@@ -196,16 +196,17 @@ def test_the_provenance_names_each_trainings_device_and_precision(tmp_path):
         def __init__(self, folder):
             self.checkpoint = folder / "checkpoints" / "last.pt"
 
-    for name, result in (("a", {"config": {"device": "cuda:1", "precision": "bf16"}}),
+    git = {"commit": "0123abc", "dirty": False}
+    for name, result in (("a", {"config": {"device": "cuda:1", "precision": "bf16"}, "git": git}),
                          ("b", {"config": {"device": "cpu"}}), ("c", [])):
         (tmp_path / name / "checkpoints").mkdir(parents=True)
         (tmp_path / name / "result.json").write_text(json.dumps(result))
     runs = {("airpose", 1): Run(tmp_path / "a"), ("baseline", 1): Run(tmp_path / "b"),
             ("fullcam", 1): Run(tmp_path / "c"), ("multiview", 1): Run(tmp_path / "missing")}
-    assert train_settings(runs) == {("airpose", 1): {"device": "cuda:1", "precision": "bf16"},
-                                    ("baseline", 1): {"device": "cpu", "precision": None},
-                                    ("fullcam", 1): {"device": None, "precision": None},
-                                    ("multiview", 1): {"device": None, "precision": None}}
+    assert train_settings(runs) == {("airpose", 1): {"device": "cuda:1", "precision": "bf16", "git": git},
+                                    ("baseline", 1): {"device": "cpu", "precision": None, "git": None},
+                                    ("fullcam", 1): {"device": None, "precision": None, "git": None},
+                                    ("multiview", 1): {"device": None, "precision": None, "git": None}}
 
 
 def test_notebook_02s_bundle_records_the_trainings_device_and_precision(tmp_path):
@@ -222,11 +223,13 @@ def test_notebook_02s_bundle_records_the_trainings_device_and_precision(tmp_path
         folder = tmp_path / "runs" / variant
         (folder / "checkpoints").mkdir(parents=True)
         (folder / "result.json").write_text(json.dumps({"wall_s": 2.0, "config": {"device": "cuda:0",
-                                                                                  "precision": "bf16"}}))
+                                                                                  "precision": "bf16"},
+                                                        "git": {"commit": "0123abc", "dirty": False}}))
         runs[variant, seed] = AblationRun(variant, seed, folder / "checkpoints" / "last.pt", {"per_view": per_view})
     exp = AblationExperiment("smoke", "generated", list(VARIANTS), [1], runs, test=None)
     out = write_ablation_bundle(exp, tmp_path / "bundle", table=ablation_table(exp.per_view, references=_references()),
                                 claims=claims_table(exp.per_view, n_resamples=50), references=_references())
     prov = json.loads((out / "provenance.json").read_text())
-    assert prov["training"] == {f"{v} seed 1": {"device": "cuda:0", "precision": "bf16"} for v in VARIANTS}
+    assert prov["training"] == {f"{v} seed 1": {"device": "cuda:0", "precision": "bf16",
+                                                "git": {"commit": "0123abc", "dirty": False}} for v in VARIANTS}
     assert prov["wall_s"]["train airpose seed 1"] == 2.0

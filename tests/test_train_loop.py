@@ -231,6 +231,9 @@ def test_checkpoint_contents_and_outputs(straight_run):
     np.testing.assert_array_equal(net.camera_K, SceneConfig().K)
     result = json.loads((out / "result.json").read_text())
     assert result["step"] == 4 and result["val_losses"]["total"] > 0
+    from airpose_lib.eval.reference import git_commit
+
+    assert result["git"] == git_commit()  # the code that trained it (this checkout, or None outside git)
     assert json.loads((out / "config.json").read_text())["batch_size"] == 4
     rows = read_log(out / "log.csv")
     assert [r["step"] for r in rows if r["split"] == "val"] == ["2", "4"]

@@ -222,19 +222,21 @@ def train_wall_s(runs: Mapping) -> dict:
 
 
 def train_settings(runs: Mapping) -> dict:
-    """(variant, seed) -> ``{"device", "precision"}`` each network was trained with, from the
-    configuration in its ``result.json`` (the device the run resolved ``auto`` to); None where
-    unknown (no ``result.json``: the authors' checkpoints; a run from before precision existed
-    trained in fp32, the config's default, but its file does not say so).
+    """(variant, seed) -> ``{"device", "precision", "git"}`` each network was trained with, from
+    its ``result.json`` (the device the run resolved ``auto`` to; the commit that finished the
+    training); None where unknown (no ``result.json``: the authors' checkpoints; a run from before
+    precision existed trained in fp32, the config's default, but its file does not say so; a run
+    from before its commit was recorded).
 
     Args:
         runs: (variant, seed) -> ``AblationRun`` (see :func:`_run_result`).
     """
     out = {}
     for key, run in runs.items():
-        config = _run_result(run).get("config")
+        result = _run_result(run)
+        config = result.get("config")
         config = config if isinstance(config, dict) else {}
-        out[key] = {"device": config.get("device"), "precision": config.get("precision")}
+        out[key] = {"device": config.get("device"), "precision": config.get("precision"), "git": result.get("git")}
     return out
 
 

@@ -70,6 +70,7 @@ from airpose_lib.data.still.training_input import training_input
 from airpose_lib.engine import EngineRun, Schedule, StaleRunError, TrainingTask, process_rank, run_engine, run_folder
 from airpose_lib.engine.launch import check_precision, launch_env, resolve_device
 from airpose_lib.errors import ConfigError
+from airpose_lib.eval.reference import git_commit
 from airpose_lib.losses import SupervisedLoss, loss_config
 from airpose_lib.losses.pretrain import PretrainLoss, PretrainLossConfig
 from airpose_lib.model import build_model, to_smplx_params
@@ -265,19 +266,22 @@ class TrainResult:
     stopped_early: bool = False
     config: dict = field(default_factory=dict)
     wall_s: float | None = None  # seconds of this call (a resumed run counts from its resume)
+    # the kit's commit that ran this call (``eval.reference.git_commit``: ``commit``, ``dirty``);
+    # a resumed run names the commit that finished it. None: not a git checkout, or an older run.
+    git: dict | None = None
 
     def to_json(self) -> dict:
         return {"out_dir": str(self.out_dir), "step": self.step,
                 "checkpoint": str(self.checkpoint) if self.checkpoint else None,
                 "train_loss": self.train_loss, "val_losses": self.val_losses, "tensorboard": self.tensorboard,
-                "stopped_early": self.stopped_early, "config": self.config, "wall_s": self.wall_s}
+                "stopped_early": self.stopped_early, "config": self.config, "wall_s": self.wall_s, "git": self.git}
 
     @classmethod
     def from_json(cls, d: dict) -> "TrainResult":
         return cls(out_dir=Path(d["out_dir"]), step=d["step"],
                    checkpoint=Path(d["checkpoint"]) if d["checkpoint"] else None, train_loss=d["train_loss"],
                    val_losses=d["val_losses"], tensorboard=d["tensorboard"], stopped_early=d["stopped_early"],
-                   config=d["config"], wall_s=d.get("wall_s"))
+                   config=d["config"], wall_s=d.get("wall_s"), git=d.get("git"))
 
 
 def default_out_dir(profile: str | Path | None, variant: str, seed: int) -> Path:
@@ -525,7 +529,8 @@ def _run_training(cfg: TrainConfig, out_dir: Path, resume: bool, model_factory: 
     result = TrainResult(out_dir=out_dir, step=run.step, checkpoint=run.checkpoint,
                          train_loss=run.values["total"] if run.values else None, val_losses=run.val,
                          tensorboard=run.tensorboard, stopped_early=run.stopped_early,
-                         config=cfg.to_dict(), wall_s=round(time.time() - t_start, 1))
+                         config=cfg.to_dict(), wall_s=round(time.time() - t_start, 1),
+                         git=git_commit() if rank == 0 else None)
     if rank == 0:
         (out_dir / "result.json").write_text(json.dumps(result.to_json(), indent=2))
     return result

@@ -20,7 +20,8 @@ from airpose_lib.reproduce import (
     notebook_outputs,
     run_profile,
 )
-from airpose_lib.reproduce.runner import NOTEBOOKS_DIR, kernel_environment
+from airpose_lib.reproduce.kernels import kernel_environment
+from airpose_lib.reproduce.runner import NOTEBOOKS_DIR
 
 PARAMS = 'profile = "none"\noutput_dir = "."\nsize = 1\n'
 
@@ -238,7 +239,7 @@ def test_data_source_reaches_only_notebooks_that_declare_it(kit, tmp_path):
 
 
 def test_kernels_use_ipc_sockets_outside_the_checkout():
-    km = __import__("airpose_lib.reproduce.runner", fromlist=["x"])._ipc_kernel_manager()(kernel_name="python3")
+    km = __import__("airpose_lib.reproduce.kernels", fromlist=["x"]).ipc_kernel_manager()(kernel_name="python3")
     assert km.transport == "ipc"
     assert not Path(km.ip).resolve().is_relative_to(NOTEBOOKS_DIR.parent)
 
@@ -332,7 +333,7 @@ def test_kernels_are_not_interrupted_on_their_way_to_shutdown(monkeypatch):
         sent.append(self.shutting_down)
 
     monkeypatch.setattr(AsyncKernelManager, "_async_interrupt_kernel", interrupt)
-    km = __import__("airpose_lib.reproduce.runner", fromlist=["x"])._ipc_kernel_manager()(kernel_name="python3")
+    km = __import__("airpose_lib.reproduce.kernels", fromlist=["x"]).ipc_kernel_manager()(kernel_name="python3")
     km.shutting_down = True
     asyncio.run(km._async_interrupt_kernel())
     km.shutting_down = False

@@ -18,24 +18,20 @@ the folder training runs and notebooks run by hand use too.
 It stops at the first failure (later notebooks may consume earlier outputs) unless asked to keep
 going. One run per ``<out>/<profile>/`` at a time (:func:`~airpose_lib.folder_lock.folder_lock`).
 This module imports nothing else of the kit but the leaves :mod:`airpose_lib.paths` and
-:mod:`airpose_lib.folder_lock`: it must be able to run any notebook.
+:mod:`airpose_lib.folder_lock` (and :mod:`.kernels`, the kernels' environment, sockets and
+signals): it must be able to run any notebook.
 """
 
 from __future__ import annotations
 
 import ast
-import contextlib
 import datetime as _dt
 import json
-import logging
-import os
 import re
 import shutil
 import signal
-import threading
 import time
-import weakref
-from collections.abc import Iterator, Sequence
+from collections.abc import Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
@@ -49,6 +45,8 @@ from airpose_lib.paths import figures_root, runs_root
 from airpose_lib.profiles import PROFILES_DIR, ProfileError, loaded, read_profile
 from airpose_lib.profiles import profile_names as list_profiles
 
+from .kernels import Interrupted, in_worker_thread, ipc_kernel_manager, kernel_environment, stop_on_signals
+
 __all__ = [
     "check_official_assets",
     "official_needs",
@@ -59,14 +57,12 @@ __all__ = [
     "NotebookResult",
     "RunReport",
     "ReproductionError",
-    "Interrupted",
     "load_catalog",
     "load_profile",
     "check_profile_unchanged",
     "list_profiles",
     "check_notebook",
     "notebook_outputs",
-    "kernel_environment",
     "run_profile",
 ]
 
@@ -284,167 +280,6 @@ def notebook_outputs(path: Path) -> list[int]:
 
 
 # -- execution ------------------------------------------------------------------------------------
-@contextlib.contextmanager
-def kernel_environment(extra: dict[str, str] | None = None) -> Iterator[dict[str, str]]:
-    """Temporarily set the environment the notebook kernels inherit, then restore it.
-
-    VTK renders through EGL without an X server, matplotlib uses Agg, progress bars print a text
-    line every few seconds (a widget bar would be saved as a dead widget), interactive views draw
-    their static fallback, and the checkout is put on ``PYTHONPATH`` so the kernel imports this kit
-    even when it is not pip-installed.
-    """
-    env = {
-        "PYVISTA_OFF_SCREEN": "true",
-        "VTK_DEFAULT_OPENGL_WINDOW": "vtkEGLRenderWindow",
-        "MPLBACKEND": "Agg",
-        "AIRPOSE_PROGRESS": "log",
-        "AIRPOSE_INTERACTIVE": "0",
-    }
-    if (REPO_ROOT / "airpose_lib").is_dir():
-        paths = [str(REPO_ROOT)] + [p for p in os.environ.get("PYTHONPATH", "").split(os.pathsep) if p]
-        env["PYTHONPATH"] = os.pathsep.join(dict.fromkeys(paths))
-    env.update(extra or {})
-    saved = {k: os.environ.get(k) for k in env}
-    os.environ.update(env)
-    try:
-        yield env
-    finally:
-        for k, v in saved.items():
-            if v is None:
-                os.environ.pop(k, None)
-            else:
-                os.environ[k] = v
-
-
-def _ipc_kernel_manager():
-    """A kernel manager whose kernel listens on IPC sockets in a private temporary folder.
-
-    nbclient's default TCP transport makes ipykernel (>= 7) warn "Kernel is running over TCP
-    without encryption" in every executed notebook; local sockets are neither exposed nor warned
-    about. The kernel is not interrupted on its way to shutdown (see the method). The socket files live in one private temporary folder of this process (removed at
-    exit), never in the checkout; the kernel manager deletes each kernel's sockets when it ends.
-    """
-    import uuid
-
-    from jupyter_client.manager import AsyncKernelManager
-    from traitlets import default
-
-    class IPCKernelManager(AsyncKernelManager):
-        def __init__(self, *args, **kwargs):
-            super().__init__(*args, **kwargs)
-            _LIVE_KERNELS.add(self)  # a stop signal kills their kernels (_stop_on_signals)
-
-        async def _async_interrupt_kernel(self) -> None:
-            # jupyter_client sends SIGINT before every shutdown; a kernel caught between messages
-            # then logs "KeyboardInterrupt caught in kernel" on the runner's terminal. The notebook
-            # has finished (or its cell timed out and was interrupted already): nothing to stop.
-            if not self.shutting_down:
-                await super()._async_interrupt_kernel()
-
-        @default("transport")
-        def _transport_default(self) -> str:
-            return "ipc"
-
-        @default("ip")
-        def _ip_default(self) -> str:
-            return str(_socket_dir() / f"kernel-{uuid.uuid4().hex[:8]}")
-
-    return IPCKernelManager
-
-
-_SOCKET_DIR: Path | None = None
-_LIVE_KERNELS: "weakref.WeakSet" = weakref.WeakSet()
-
-
-class Interrupted(KeyboardInterrupt):
-    """SIGINT or SIGTERM stopped the run (the notebook's kernel was killed; finished notebooks and
-    checkpoints stay, and the same command resumes). A ``KeyboardInterrupt``: the ``airpose``
-    command prints one line for it."""
-
-
-def _kernel_pids() -> list[int]:
-    pids = []
-    for km in list(_LIVE_KERNELS):
-        process = getattr(getattr(km, "provisioner", None), "process", None)
-        if process is not None and process.poll() is None:
-            pids.append(process.pid)
-    return pids
-
-
-def _in_worker_thread(fn, *args, **kwargs):
-    """``fn(*args, **kwargs)`` in a worker thread, while the main thread waits and keeps handling
-    signals (:func:`_stop_on_signals`). In the main thread nbclient replaces the SIGINT and SIGTERM
-    handlers with its own, which shut the kernel down politely after the running cell (and print
-    a ZMQ traceback); outside it, it leaves them alone."""
-    box: dict = {}
-
-    def target() -> None:
-        try:
-            box["value"] = fn(*args, **kwargs)
-        except BaseException as e:  # noqa: BLE001 - re-raised in the caller's thread
-            box["error"] = e
-
-    worker = threading.Thread(target=target, name="papermill", daemon=True)
-    worker.start()
-    while worker.is_alive():
-        worker.join(0.2)  # returns to the interpreter: a signal's handler runs within 0.2 s
-    if "error" in box:
-        raise box["error"]
-    return box.get("value")
-
-
-@contextlib.contextmanager
-def _stop_on_signals() -> Iterator[list[int]]:
-    """SIGINT and SIGTERM stop the run at once and quietly.
-
-    The signal kills the running notebook's kernel with its whole process group (the kernel is a
-    session leader: its training workers go with it); nbclient, running in a worker thread
-    (:func:`_in_worker_thread`), then finds the kernel dead and papermill returns, and
-    :func:`run_profile` raises :class:`Interrupted`. A run started in the background ignores
-    SIGINT unless the handler is set here. Yields the list that receives the signal's number.
-    """
-    caught: list[int] = []
-    if threading.current_thread() is not threading.main_thread():
-        yield caught
-        return
-
-    def handler(signum, frame):
-        caught.append(signum)
-        pids = _kernel_pids()
-        for pid in pids:
-            with contextlib.suppress(ProcessLookupError, PermissionError):
-                os.killpg(pid, signal.SIGKILL)
-        if not pids:  # between notebooks: stop right here
-            raise Interrupted(signal.Signals(signum).name)
-
-    def after_stop(record) -> bool:  # nbclient's "Kernel died ..." is our doing, not news
-        return not caught
-
-    loggers = [logging.getLogger(name) for name in ("papermill", "traitlets")]
-    previous = {sig: signal.signal(sig, handler) for sig in (signal.SIGINT, signal.SIGTERM)}
-    for log in loggers:
-        log.addFilter(after_stop)
-    try:
-        yield caught
-    finally:
-        for log in loggers:
-            log.removeFilter(after_stop)
-        for sig, old in previous.items():
-            signal.signal(sig, old)
-
-
-def _socket_dir() -> Path:
-    """This process's folder for kernel sockets, created on first use and removed at exit."""
-    global _SOCKET_DIR
-    if _SOCKET_DIR is None:
-        import atexit
-        import tempfile
-
-        _SOCKET_DIR = Path(tempfile.mkdtemp(prefix="airpose-kernels-"))
-        atexit.register(shutil.rmtree, _SOCKET_DIR, ignore_errors=True)
-    return _SOCKET_DIR
-
-
 def _select(catalog: list[CatalogEntry], only: Sequence[str] | None) -> list[CatalogEntry]:
     if not only:
         return list(catalog)
@@ -505,11 +340,11 @@ def _run_one(entry: CatalogEntry, nb_path: Path, params: dict, run_dir: Path, fi
     result.executed_notebook = str(executed)
     try:
         with kernel_environment():
-            _in_worker_thread(
+            in_worker_thread(
                 papermill.execute_notebook,
                 str(nb_path), str(executed), parameters=params, kernel_name=kernel_name,
                 cwd=str(nb_path.parent), progress_bar=False, log_output=log_output,
-                execution_timeout=cell_timeout_s, kernel_manager_class=_ipc_kernel_manager())
+                execution_timeout=cell_timeout_s, kernel_manager_class=ipc_kernel_manager())
     except Exception as e:  # noqa: BLE001 - any failure is reported with the notebook's name
         result.wall_s = time.perf_counter() - t0
         result.status, result.error = "failed", _execution_error(e, executed)
@@ -634,7 +469,7 @@ def run_profile(
                        run_dir=str(run_dir), figures_dir=str(figures_dir))
     report.results = [NotebookResult(e.name, e.file) for e in selected]
     # stale=(): a notebook run by hand may be writing below run_dir; its temp files are not ours
-    with folder_lock(run_dir, "reproduction folder", stale=()), _stop_on_signals() as caught:
+    with folder_lock(run_dir, "reproduction folder", stale=()), stop_on_signals() as caught:
         t_start = time.perf_counter()
         stop = False
         for i, entry in enumerate(selected):

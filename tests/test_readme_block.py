@@ -7,7 +7,7 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
-from airpose_lib.eval.readme_block import readme_block, replace_block, results_block
+from airpose_lib.eval.readme_block import readme_block, recordings_block, replace_block, results_block
 
 README = Path(__file__).resolve().parents[1] / "README.md"
 
@@ -47,6 +47,37 @@ def test_replace_block_swaps_only_the_block(tmp_path):
     with pytest.raises(ValueError, match="no <!-- results:other -->"):
         replace_block(text, block, "other")
 
+
+
+def test_the_recordings_block_is_the_marker_tables(tmp_path):
+    rec = tmp_path / "toy" / "recordings"
+    rec.mkdir(parents=True)
+    assert recordings_block("toy", tmp_path) is None  # no marker table: no block
+    row = {"sequence": "person2", "method": "ArUco markers", "reference": "generated cameras", "frames": 850,
+           "frames_share": 0.94, "rel_t_median_m": 0.04412, "rel_rot_median_deg": 0.1666, "rel_t_mean_m": 0.09,
+           "rel_rot_mean_deg": 0.3}
+    pd.DataFrame([row, {**row, "method": "AirPose+", "reference": "markers", "rel_t_median_m": 1.2345,
+                        "rel_rot_median_deg": 12.345}]).to_csv(rec / "markers.csv", index=False)
+    pd.DataFrame([{**row, "rel_t_median_m": float("nan")}]).to_csv(rec / "field_markers.csv", index=False)
+    (rec / "provenance.json").write_text(json.dumps({"git": {"commit": "abcdef0123"}, "created_at": "2026-12-05T01:00",
+                                                     "command": "airpose reproduce --profile toy"}))
+    block = recordings_block("toy", tmp_path).splitlines()
+    assert block[0] == "<!-- recordings:toy -->" and block[-1] == "<!-- /recordings:toy -->"
+    assert "commit abcdef0, 2026-12-05; `airpose reproduce --profile toy`" in block[1]
+    assert block[-4:-1] == ["| clean | person2 | ArUco markers | generated cameras | 850 | 0.044 | 0.17 |",
+                            "| clean | person2 | AirPose+ | markers | 850 | 1.234 | 12.35 |",
+                            "| field | person2 | ArUco markers | generated cameras | 850 | - | 0.17 |"]
+    text = "a\n<!-- recordings:toy -->\nold\n<!-- /recordings:toy -->\n<!-- results:toy -->\nT\n<!-- /results:toy -->\n"
+    new = replace_block(text, "\n".join(block), "toy", "recordings")
+    assert readme_block(new, "toy", "recordings") == "\n".join(block) and readme_block(new, "toy") == readme_block(text, "toy")
+
+
+def test_the_readme_recordings_block_matches_the_committed_results():
+    block = readme_block(README.read_text(), "cpu", "recordings")
+    if block is None:
+        pytest.skip("README.md has no recordings block for cpu")
+    assert block == recordings_block("cpu"), \
+        "README.md's cpu recordings block differs from results/cpu/recordings/: run python scripts/readme_results.py"
 
 
 @pytest.mark.parametrize("profile", ["cpu", "cpu_paper_layout"])

@@ -3,7 +3,9 @@ Markdown the README opens with, so that no number in the README is typed by hand
 
 The block sits between two HTML comments, ``<!-- results:<profile> -->`` and
 ``<!-- /results:<profile> -->``; ``scripts/readme_results.py`` rewrites it from the bundle and
-``tests/test_eval_reference.py`` fails when the README's block and the bundle disagree.
+``tests/test_readme_block.py`` fails when the README's block and the bundle disagree. A second
+kind of block, ``<!-- recordings:<profile> -->``, holds the recordings' UAV2-in-UAV1 table
+against the ArUco markers (:func:`recordings_block`, from ``results/<profile>/recordings/``).
 """
 from __future__ import annotations
 
@@ -15,21 +17,22 @@ import pandas as pd
 
 from .reference import reference_dir
 
-__all__ = ["block_markers", "results_block", "replace_block", "readme_block"]
+__all__ = ["block_markers", "results_block", "recordings_block", "replace_block", "readme_block"]
 
 #: Table I's columns shown in the README: the kit's mean (± its seed spread) next to the paper's.
 _TABLE_COLUMNS = (("MPE", "MPE [m]", "MPE std [m]", "MPE paper [m]"),
                   ("MPJPE", "MPJPE [m]", "MPJPE std [m]", "MPJPE paper [m]"))
 
 
-def block_markers(profile: str) -> tuple[str, str]:
-    """The opening and closing comment of ``profile``'s block."""
-    return f"<!-- results:{profile} -->", f"<!-- /results:{profile} -->"
+def block_markers(profile: str, kind: str = "results") -> tuple[str, str]:
+    """The opening and closing comment of ``profile``'s block of ``kind`` (``results``: Table I;
+    ``recordings``: :func:`recordings_block`)."""
+    return f"<!-- {kind}:{profile} -->", f"<!-- /{kind}:{profile} -->"
 
 
-def _block_pattern(profile: str) -> re.Pattern:
+def _block_pattern(profile: str, kind: str = "results") -> re.Pattern:
     """The block of ``profile``, markers included, in a text."""
-    opening, closing = block_markers(profile)
+    opening, closing = block_markers(profile, kind)
     return re.compile(re.escape(opening) + r".*?" + re.escape(closing), re.S)
 
 
@@ -91,19 +94,49 @@ def results_block(profile: str, root: str | Path | None = None) -> str:
     return "\n".join(lines)
 
 
-def replace_block(text: str, block: str, profile: str) -> str:
-    """``text`` with ``profile``'s block replaced by ``block``.
+#: The recordings' marker tables (notebook 05) and how the README names each.
+_MARKER_TABLES = (("markers.csv", "clean"), ("field_markers.csv", "field"))
+
+
+def recordings_block(profile: str, root: str | Path | None = None) -> str | None:
+    """The README's block (markers included) of the recordings' UAV2 in UAV1 against the ArUco
+    markers, from ``results/<profile>/recordings/`` (``markers.csv``, ``field_markers.csv``):
+    per recording and person, the markers against the generated cameras, then each method against
+    both references, medians. None when the bundle has no marker table."""
+    ref = reference_dir(profile, root) / "recordings"
+    parts = [pd.read_csv(ref / name).assign(recordings=tag) for name, tag in _MARKER_TABLES if (ref / name).is_file()]
+    if not parts:
+        return None
+    prov = json.loads((ref / "provenance.json").read_text())
+    commit = (prov.get("git") or {}).get("commit") or "unknown"
+    head = ["recordings", "person", "method", "reference", "frames", "position median [m]",
+            "orientation median [deg]"]
+    lines = [*block_markers(profile, "recordings")[:1],
+             f"UAV2 in UAV1 on the `{profile}` recordings (`results/{profile}/recordings/`: commit {commit[:7]}, "
+             f"{str(prov.get('created_at', ''))[:10]}; `{prov.get('command', '')}`): the ArUco markers against the "
+             "cameras the renderer used, then each method against both; medians over the frames where the markers "
+             "posed both drones and every network estimated both views.", "",
+             "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for _, r in pd.concat(parts, ignore_index=True).iterrows():
+        lines.append("| " + " | ".join([r["recordings"], str(r["sequence"]), str(r["method"]), str(r["reference"]),
+                                        str(int(r["frames"])), _fmt(r["rel_t_median_m"]),
+                                        _fmt(r["rel_rot_median_deg"], 2)]) + " |")
+    return "\n".join(lines + [block_markers(profile, "recordings")[1]])
+
+
+def replace_block(text: str, block: str, profile: str, kind: str = "results") -> str:
+    """``text`` with ``profile``'s block of ``kind`` replaced by ``block``.
 
     Raises:
         ValueError: ``text`` lacks the block's markers.
     """
-    pattern = _block_pattern(profile)
+    pattern = _block_pattern(profile, kind)
     if not pattern.search(text):
-        raise ValueError(f"no {' ... '.join(block_markers(profile))} block")
+        raise ValueError(f"no {' ... '.join(block_markers(profile, kind))} block")
     return pattern.sub(lambda _: block, text, count=1)
 
 
-def readme_block(text: str, profile: str) -> str | None:
-    """The block of ``profile`` in ``text`` (markers included), or None."""
-    m = _block_pattern(profile).search(text)
+def readme_block(text: str, profile: str, kind: str = "results") -> str | None:
+    """The block of ``profile`` of ``kind`` in ``text`` (markers included), or None."""
+    m = _block_pattern(profile, kind).search(text)
     return m.group(0) if m else None

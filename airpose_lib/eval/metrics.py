@@ -53,6 +53,7 @@ __all__ = [
     "jitter",
     "acceleration_error",
     "relative_camera_errors",
+    "relative_pose_errors",
 ]
 
 PELVIS = 0
@@ -206,4 +207,17 @@ def relative_camera_errors(phi_pred: Tensor, tau_pred: Tensor, phi_gt: Tensor, t
                                     phi_pred[..., j, :, :], tau_pred[..., j, :])
     R_g, t_g = relative_camera_pose(phi_gt[..., i, :, :], tau_gt[..., i, :],
                                     phi_gt[..., j, :, :], tau_gt[..., j, :])
-    return translation_error(t_p, t_g), geodesic_angle(R_p, R_g)
+    return relative_pose_errors(R_p, t_p, R_g, t_g)
+
+
+def relative_pose_errors(R: Tensor, t: Tensor, R_ref: Tensor, t_ref: Tensor) -> tuple[Tensor, Tensor]:
+    """Errors of camera 2's pose in camera 1 against a reference of the same quantity (from the
+    ground-truth body poses, the generated cameras or the ArUco markers).
+
+    Args:
+        R, R_ref: ``(..., 3, 3)`` camera 2's orientation in camera 1; t, t_ref: ``(..., 3)`` its position.
+
+    Returns:
+        ``t_err (...)`` metres and ``R_err (...)`` radians (geodesic).
+    """
+    return translation_error(t, t_ref), geodesic_angle(R, R_ref)

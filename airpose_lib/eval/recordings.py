@@ -24,7 +24,7 @@ import numpy as np
 import pandas as pd
 import torch
 
-from airpose_lib.geometry import geodesic_angle, relative_camera_pose
+from airpose_lib.geometry import relative_camera_pose
 from airpose_lib.model.smplx_params import posed_joints_and_vertices
 
 from . import metrics as M
@@ -154,8 +154,8 @@ def relative_camera_errors_against(R: np.ndarray, t: np.ndarray, R_ref: np.ndarr
     Returns:
         ``t_err (...)`` metres and ``rot_err (...)`` degrees (geodesic), float64.
     """
-    R, t, R_ref, t_ref = (torch.as_tensor(_np(x), dtype=torch.float64) for x in (R, t, R_ref, t_ref))
-    return M.translation_error(t, t_ref).numpy(), torch.rad2deg(geodesic_angle(R, R_ref)).numpy()
+    t_err, R_err = M.relative_pose_errors(*(torch.as_tensor(_np(x), dtype=torch.float64) for x in (R, t, R_ref, t_ref)))
+    return t_err.numpy(), torch.rad2deg(R_err).numpy()
 
 
 def recording_frame_table(estimate: Mapping, ground_truth: Mapping, joints: np.ndarray,

@@ -287,12 +287,11 @@ def marker_table(exp: RecordingExperiment, methods=MARKER_METHODS) -> pd.DataFra
     for person, truth in exp.markers.items():
         gt = exp.sequences[person].ground_truth
         keep = np.asarray(truth["valid"], bool) & scored_frames(exp.estimates[person])
+        head = {"sequence": person, "frames": int(keep.sum()), "frames_share": float(keep.mean())}
         references = {"markers": (truth["R_12"], truth["t_12"])}
         if gt is not None:  # the cameras the renderer used: x_ck = R_cw x_w + t_cw
             references = {"generated cameras": relative_camera_from_markers(
                 gt["R_cw"][:, 0], gt["t_cw"][:, 0], gt["R_cw"][:, 1], gt["t_cw"][:, 1]), **references}
-        head = {"sequence": person, "frames": int(keep.sum()), "frames_share": float(keep.mean())}
-        if gt is not None:
             extra = {}
             if "count" in truth and keep.any():
                 extra = {"markers_median": float(np.median(truth["count"][keep])),

@@ -188,12 +188,11 @@ def test_off_by_default_keeps_the_recordings_keys():
     # The settings dicts (the recordings' cache key, ``cache._is_complete``) as made before the
     # option existed (commit 462ba9f): the committed recordings stay current.
     assert _key(SequenceConfig()) == "8c759625ec8a5cb0"
-    # smoke and cpu have since put ArUco markers on the ground (`sequences: markers: {}`, a new
-    # key on purpose); without them their recordings' keys are still those of 462ba9f
+    # smoke and cpu put ArUco markers on their field recordings only (`sequences: field_markers: {}`):
+    # the clean recordings keep the keys of 462ba9f
     recs = {p: profile_sequences(p) for p in ("smoke", "cpu", "paper")}
-    assert {p: {k for k, c in r.items() if c.markers is not None} for p, r in recs.items()} == {
-        "smoke": {"person1", "person2"}, "cpu": {"person1", "person2"}, "paper": set()}
-    assert {p: {k: _key(dataclasses.replace(c, markers=None)) for k, c in r.items()} for p, r in recs.items()} == {
+    assert all(c.markers is None for r in recs.values() for c in r.values())
+    assert {p: {k: _key(c) for k, c in r.items()} for p, r in recs.items()} == {
         "smoke": {"person1": "d2012b0c0901be57", "person2": "78765eac4941ace4"},
         "cpu": {"person1": "9c09252796577e29", "person2": "ffd84e642696b7e2"},
         "paper": {"person1": "f7f9b0226585b467", "person2": "431236088a97577f"},

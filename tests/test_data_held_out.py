@@ -25,6 +25,7 @@ from airpose_lib.data.sequences.held_out import (
     held_out_betas,
     held_out_ground_photo,
 )
+from airpose_lib.data.sequences.markers import MarkerLayout
 from airpose_lib.data.sequences.presets import field_sequence_configs_from_profile
 from airpose_lib.data.still.appearance import (
     HELD_OUT_SATURATION,
@@ -164,7 +165,9 @@ def test_profile_field_recordings_are_the_clean_ones_through_the_preset(profile)
     for name, c in clean.items():
         f = field[name]
         assert f.field == cam and f.held_out == held and cam.enabled and held.enabled
-        assert dataclasses.replace(f, field=c.field, held_out=c.held_out) == c  # nothing else differs
+        # markers on the field twins only (`field_markers: {}`); nothing else differs
+        assert f.markers == MarkerLayout() and c.markers is None
+        assert dataclasses.replace(f, field=c.field, held_out=c.held_out, markers=None) == c
         assert _key(f) != _key(c)
     assert held.clothing and held.ground == "moon" and held.betas_max is None
 
@@ -177,6 +180,15 @@ def test_field_recordings_setting():
         field_sequence_configs_from_profile({**section, "field_recordings": "gopro"})
     with pytest.raises(ConfigError, match="unknown field preset"):
         field_variant(SequenceConfig(), "gopro")
+    # markers on the field twins: a layout's settings, checked like every section's
+    twins = field_sequence_configs_from_profile({**section, "field_recordings": "dji", "field_markers": {"side_m": 0.5}})
+    assert twins["person1"].markers == MarkerLayout(side_m=0.5)
+    assert sequence_configs_from_profile({**section, "field_markers": {}})["person1"].markers is None
+    for bad, match in (({"field_markers": {}}, "needs `field_recordings"),
+                       ({"field_recordings": "dji", "field_markers": True}, "marker layout's settings"),
+                       ({"field_recordings": "dji", "field_markers": {"side": 1}}, "did you mean 'side_m'")):
+        with pytest.raises(ProfileSettingError, match=match):
+            field_sequence_configs_from_profile({**section, **bad})
 
 
 def test_renderer_applies_the_option_only_when_on(open_model_files):

@@ -176,7 +176,8 @@ class SequenceConfig:
         markers: ArUco markers printed on the ground (:class:`~airpose_lib.data.sequences.markers.MarkerLayout`,
             world coordinates), as in the paper's scene; None (default) = none, and then absent
             from :meth:`to_dict` like ``field``. A profile turns the default layout on with
-            ``markers: {}``.
+            ``markers: {}`` (every recording) or ``field_markers: {}`` (the field twins only,
+            :func:`~.presets.field_sequence_configs_from_profile`).
         held_out: appearance the networks never saw (:mod:`.held_out`: clothing colours, a
             ground photograph, a body shape outside the still frames' draw); off by default,
             and then absent from :meth:`to_dict` like ``field``.
@@ -279,6 +280,7 @@ def sequence_configs_from_profile(profile_section: Mapping,
     section = dict(profile_section)
     recordings = section.pop("recordings", None)
     section.pop("field_recordings", None)  # the field twins' preset (.presets.profile_field_sequences)
+    section.pop("field_markers", None)  # the field twins' markers (the same)
     if not recordings:
         raise ProfileError(f"{where} needs a `recordings:` mapping")
     out = {}

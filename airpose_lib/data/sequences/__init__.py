@@ -35,7 +35,8 @@ Model of one recording (all numbers configurable in :class:`SequenceConfig`):
   (exposure, white balance, tone curve, sensor noise, motion blur, lens distortion,
   compression; :mod:`.field`); ``markers``, printed ArUco markers on the ground as in the
   paper's scene, from which each drone's pose and UAV 2 in UAV 1 can be measured
-  (:mod:`airpose_lib.data.sequences.markers`).
+  (:mod:`airpose_lib.data.sequences.markers`; a profile's ``field_markers:`` puts them on its
+  field recordings only, :mod:`.presets`).
 
 Ground-truth arrays (:data:`GROUND_TRUTH_KEYS`; F frames, V views; the paper's root convention
 ``V_world = R_wb V0 + t_wb`` about the model origin, cameras OpenCV ``x_cam = R_cw x_world +

@@ -292,7 +292,8 @@ def sequence_marker_poses(seq, layout: MarkerLayout | None = None, min_markers: 
         stored = (seq.meta or {}).get("config", {}).get("markers")
         if stored is None:
             raise ConfigError(f"recording {seq.root} has no markers on its ground (a profile's `sequences: "
-                              "markers: {}` adds them); give their layout")
+                              "markers: {}` adds them, `field_markers: {}` to its field recordings); "
+                              "give their layout")
         layout = MarkerLayout(**stored)
     if dist is None:
         dist = recording_lens_distortion(seq)

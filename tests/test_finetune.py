@@ -464,22 +464,43 @@ def test_resume_matches_an_uninterrupted_run(tiny_ckpt, smoke_root, tmp_path, bo
         finetune(tiny_ckpt, smoke_root, tmp_path / "b", _cfg(steps=8, lr=5e-5, **sel), **kw)
 
 
-def test_a_finished_run_from_another_network_is_not_done(tiny_ckpt, smoke_root, tmp_path, body32, tiny_prior):
+def test_a_finished_run_from_another_network_or_recording_is_not_done(tiny_ckpt, smoke_root, tmp_path, body32,
+                                                                       tiny_prior):
     """The recordings experiment computes the test person's diagnostics only for runs it will
-    train: a finished run from another base network (the profile's networks retrained) is one."""
+    train, and reuses a finished run otherwise: a run from another base network (the profile's
+    networks retrained), on other pixels (the recording rendered again with other settings) or
+    with another diagnostic's recordings is not finished; a copy of the same recording is."""
+    import shutil
+
+    import cv2
+
     from airpose_lib.engine.checkpoint import load_checkpoint, save_checkpoint
     from airpose_lib.finetune.train import finetune_done
 
+    root = shutil.copytree(smoke_root, tmp_path / "rec")
     cfg = _cfg(steps=2)
-    finetune(tiny_ckpt, smoke_root, tmp_path / "ft", cfg, prior=tiny_prior, body_model=body32)
-    assert finetune_done(tmp_path / "ft", tiny_ckpt, cfg)
+    finetune(tiny_ckpt, root, tmp_path / "ft", cfg, prior=tiny_prior, body_model=body32, diagnostic_key="tests-a")
+    assert finetune_done(tmp_path / "ft", tiny_ckpt, root, cfg, diagnostic_key="tests-a")
+    assert finetune_done(tmp_path / "ft", tiny_ckpt, shutil.copytree(root, tmp_path / "copy"), cfg,
+                         diagnostic_key="tests-a")  # content, not the path or the files' dates
+    assert not finetune_done(tmp_path / "ft", tiny_ckpt, root, cfg, diagnostic_key="tests-b")
+    assert not finetune_done(tmp_path / "ft", tiny_ckpt, root, cfg)
     state = load_checkpoint(tiny_ckpt)
     state["model"]["regressor.fc1.bias"] = state["model"]["regressor.fc1.bias"] + 1.0
     other = save_checkpoint(tmp_path / "other", state, keep=0)
-    assert not finetune_done(tmp_path / "ft", other, cfg)
-    assert not finetune_done(tmp_path / "ft", tiny_ckpt, _cfg(steps=3))
-    assert not finetune_done(tmp_path / "ft", tiny_ckpt, _cfg(steps=2, lr=5e-5))
-    assert not finetune_done(tmp_path / "empty", tiny_ckpt, cfg)
+    assert not finetune_done(tmp_path / "ft", other, root, cfg, diagnostic_key="tests-a")
+    assert not finetune_done(tmp_path / "ft", tiny_ckpt, root, _cfg(steps=3), diagnostic_key="tests-a")
+    assert not finetune_done(tmp_path / "ft", tiny_ckpt, root, _cfg(steps=2, lr=5e-5), diagnostic_key="tests-a")
+    assert not finetune_done(tmp_path / "empty", tiny_ckpt, root, cfg, diagnostic_key="tests-a")
+    # one image with other pixels (a marker on the ground, say): not done, and not resumed either
+    image = sorted((root / "machine_1" / "images").glob("*.jpg"))[0]
+    pixels = cv2.imread(str(image))
+    pixels[:20, :20] = 255 - pixels[:20, :20]
+    cv2.imwrite(str(image), pixels)
+    assert not finetune_done(tmp_path / "ft", tiny_ckpt, root, cfg, diagnostic_key="tests-a")
+    with pytest.raises(ValueError, match="cannot resume.*recording"):
+        finetune(tiny_ckpt, root, tmp_path / "ft", _cfg(steps=3), prior=tiny_prior, body_model=body32,
+                 diagnostic_key="tests-a")
 
 
 def test_finetune_bad_input(tiny_ckpt, smoke_root, tmp_path, body32, tiny_prior):
@@ -709,7 +730,8 @@ def test_finetune_on_true_keypoints_uses_the_ground_truth(tiny_ckpt, smoke_root,
     # same network, frames and crops: only the targets differ, and the true ones are not the detections
     assert true.initial["j2d"] != det.initial["j2d"] and true.initial["beta"] == det.initial["beta"]
     # a changed target source is a different run, never a resumed one
-    assert not finetune_done(tmp_path / "true", tiny_ckpt, _cfg(steps=0))
+    assert not finetune_done(tmp_path / "true", tiny_ckpt, smoke_root, _cfg(steps=0))
+    assert finetune_done(tmp_path / "true", tiny_ckpt, smoke_root, _cfg(steps=0, targets="ground_truth"))
     with pytest.raises(ValueError, match="targets must be one of"):
         _cfg(targets="openpose")
 
@@ -753,11 +775,15 @@ def test_a_run_saved_before_an_option_existed_resumes_with_its_default():
 
     cfg = _cfg()
     old = {k: v for k, v in cfg.to_dict().items() if k != "targets"}  # written before `targets` existed
-    _check_resume({"config": old, "base_fingerprint": "f"}, cfg, "f")  # the default: same run
+    saved = {"config": old, "base_fingerprint": "f", "data_fingerprint": "d"}
+    _check_resume(saved, cfg, "f", "d")  # the default: same run
     with pytest.raises(StaleRunError, match="targets"):
-        _check_resume({"config": old, "base_fingerprint": "f"}, cfg.replace(targets="ground_truth"), "f")
+        _check_resume(saved, cfg.replace(targets="ground_truth"), "f", "d")
     with pytest.raises(StaleRunError, match="base checkpoint"):
-        _check_resume({"config": old, "base_fingerprint": "f"}, cfg, "g")
+        _check_resume(saved, cfg, "g", "d")
+    # a run saved before its recording was fingerprinted cannot show it was made on this one
+    with pytest.raises(StaleRunError, match="recording"):
+        _check_resume({"config": old, "base_fingerprint": "f"}, cfg, "f", "d")
 
 
 def test_the_training_frames_are_evaluated_once_per_selection_point(tiny_ckpt, smoke_root, tmp_path, body32,

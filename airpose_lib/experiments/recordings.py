@@ -49,7 +49,7 @@ from airpose_lib.body.joint_sets import BODY_25_FROM_SMPLX
 from airpose_lib.data.official.real import MARKER_POSES_FILE, load_marker_poses, load_official_real
 from airpose_lib.data.sequences import ensure_sequences, profile_field_sequences
 from airpose_lib.data.sequences.markers import marker_relative_cameras, sequence_marker_poses
-from airpose_lib.data.sequences.reader import load_sequence
+from airpose_lib.data.sequences.reader import load_sequence, recording_fingerprint
 from airpose_lib.engine.checkpoint import StaleRunError
 from airpose_lib.errors import ConfigError
 from airpose_lib.eval import metrics as M
@@ -443,12 +443,14 @@ def runs_field(source, profile: str, field: bool | None = None) -> bool:
 CONTROL_LABEL = "AirPose (control: true 2D targets)"
 
 
-def _finetune_logged(pre: Path, tuning, tests: dict, ft_cfg, run_dir: Path, prior, progress: bool):
-    """Fine-tune ``pre`` on ``tuning`` into ``run_dir`` (resumed, or afresh when its settings
-    changed), the ``tests`` recordings' errors logged per checkpoint; returns the result and the
-    summary row of :attr:`RecordingExperiment.finetune_info`."""
+def _finetune_logged(pre: Path, tuning, tests: dict, ft_cfg, run_dir: Path, prior, progress: bool,
+                     tests_key: str | None):
+    """Fine-tune ``pre`` on ``tuning`` into ``run_dir`` (resumed, or afresh when its settings,
+    network or recordings changed), the ``tests`` recordings' errors logged per checkpoint
+    (``tests_key``: their fingerprint, :func:`_tests_key`); returns the result and the summary row
+    of :attr:`RecordingExperiment.finetune_info`."""
     diagnostics = {}
-    if tests and not finetune_done(run_dir, pre, ft_cfg):
+    if tests and not finetune_done(run_dir, pre, tuning.root, ft_cfg, diagnostic_key=tests_key):
         net, _, size = load_sized_network(pre)
         cut = ft_cfg.trainable_from
         for name, seq in tests.items():  # the frozen part's features, once per network
@@ -458,7 +460,7 @@ def _finetune_logged(pre: Path, tuning, tests: dict, ft_cfg, run_dir: Path, prio
     def diagnostic(model, _d=diagnostics):
         return {f"{name}_{k}": v for name, d in _d.items() for k, v in d(model).items()}
 
-    kw = dict(progress=progress, prior=prior, diagnostic=diagnostic if diagnostics else None)
+    kw = dict(progress=progress, prior=prior, diagnostic=diagnostic if diagnostics else None, diagnostic_key=tests_key)
     try:
         res = finetune(pre, tuning.root, run_dir, ft_cfg, **kw)
     except StaleRunError:
@@ -471,6 +473,11 @@ def _finetune_logged(pre: Path, tuning, tests: dict, ft_cfg, run_dir: Path, prio
             "threshold_px": res.pixels.get("threshold_px"), "keypoints": res.keypoints,
             "selection": res.selection}
     return res, info
+
+
+def _tests_key(tests: dict) -> str | None:
+    """The content of the recordings a fine-tuning's diagnostic measures (None without any)."""
+    return _key(*((name, recording_fingerprint(seq)) for name, seq in sorted(tests.items()))) if tests else None
 
 
 def _kit_networks(profile: str, seed: int, tuning, tests: dict, prior, prior_info: dict, out: Path,
@@ -489,17 +496,18 @@ def _kit_networks(profile: str, seed: int, tuning, tests: dict, prior, prior_inf
     if ft_cfg.frames is None and "person" in tuning.meta:  # an official split: fine-tune on its frames only
         ft_cfg = dataclasses.replace(ft_cfg, frames=[int(tuning.frames[0]), int(tuning.frames[-1]) + 1])
     ft_cfg = dataclasses.replace(ft_cfg, prior=prior_info["source"], prior_path=prior_info["file"])
+    tests_key = _tests_key(tests)
     for variant, label in (("baseline", "Baseline"), ("airpose", "AirPose")):
         pre = trained_checkpoint(profile, variant, seed, progress=progress)
         checkpoints[f"{label} (pre-trained)"] = pre
         res, finetune_info[label] = _finetune_logged(pre, tuning, tests, ft_cfg, out / "finetune" / variant, prior,
-                                                     progress)
+                                                     progress, tests_key)
         checkpoints[label] = Path(res.best_checkpoint or res.checkpoint)
     if tests and tuning.ground_truth is not None and "kp2d_body25" in tuning.ground_truth:
         control = dataclasses.replace(ft_cfg, targets="ground_truth")
         _, finetune_info[CONTROL_LABEL] = _finetune_logged(checkpoints["AirPose (pre-trained)"], tuning, tests,
                                                            control, out / "finetune" / "airpose_true2d", prior,
-                                                           progress)
+                                                           progress, tests_key)
     return checkpoints, finetune_info
 
 

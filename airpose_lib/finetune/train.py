@@ -69,7 +69,7 @@ from torch import nn
 from airpose_lib.atomic import atomic_path
 from airpose_lib.body import load_body_model
 from airpose_lib.config_fields import ConfigError
-from airpose_lib.data.sequences.reader import load_sequence
+from airpose_lib.data.sequences.reader import load_sequence, recording_fingerprint
 from airpose_lib.engine import (
     AFRESH_HINT,
     EngineRun,
@@ -304,27 +304,37 @@ def _write_selection(out_dir: Path, rows: list[dict]) -> None:
         pd.DataFrame(rows).to_csv(tmp, index=False)
 
 
-def _check_resume(saved: Mapping, cfg: FineTuneConfig, base_fp: str) -> None:
+def _check_resume(saved: Mapping, cfg: FineTuneConfig, base_fp: str, data_fp: str,
+                  diagnostic_key: str | None = None) -> None:
     now, default = cfg.to_dict(), FineTuneConfig().to_dict()
     # a key the saved run predates ran with its default (options are added with the old behaviour)
     diff = [k for k in FineTuneConfig.RESUME_KEYS if saved["config"].get(k, default[k]) != now.get(k)]
     if saved.get("base_fingerprint") != base_fp:
         diff.append("base checkpoint")
+    # the recording's content: a run that predates the record is made again, as it cannot be checked
+    if saved.get("data_fingerprint") != data_fp:
+        diff.append("recording")
+    if saved.get("diagnostic_key") != diagnostic_key:  # the diagnostic's columns in selection.csv
+        diff.append("diagnostic's recordings")
     if diff:
         raise StaleRunError(diff, made="fine-tuned")
 
 
-def finetune_done(out_dir: str | Path, checkpoint: str | Path, cfg: FineTuneConfig) -> bool:
-    """Whether ``out_dir`` holds a finished run of ``cfg`` from the network ``checkpoint``, which
-    :func:`finetune` would load rather than train (the resume check of :func:`finetune` itself).
-    A run from another network, e.g. after the profile's networks were retrained, is not."""
+def finetune_done(out_dir: str | Path, checkpoint: str | Path, sequence_root: str | Path, cfg: FineTuneConfig,
+                  *, diagnostic_key: str | None = None) -> bool:
+    """Whether ``out_dir`` holds a finished run of ``cfg`` from the network ``checkpoint`` on the
+    recording ``sequence_root`` (its content, :func:`~airpose_lib.data.sequences.reader.recording_fingerprint`),
+    which :func:`finetune` would load rather than train (the resume check of :func:`finetune`
+    itself). A run from another network (the profile's networks retrained) or on other frames
+    (the recording rendered again) is not."""
     last = last_checkpoint(out_dir)
     try:
         state = load_checkpoint(last) if last is not None else None
         if state is None or int(state["step"]) < cfg.steps:
             return False
         model, _, _ = load_sized_network(checkpoint)
-        _check_resume(state["finetune"], cfg, _tensor_digest(model.state_dict()))
+        _check_resume(state["finetune"], cfg, _tensor_digest(model.state_dict()),
+                      recording_fingerprint(_load_frames(Path(sequence_root), cfg)), diagnostic_key)
     except (OSError, ValueError, KeyError, RuntimeError):  # StaleRunError is a ValueError
         return False
     return True
@@ -350,7 +360,8 @@ def _history(log_path: Path) -> dict[str, list]:
 def finetune(checkpoint: str | Path, sequence_root: str | Path, out_dir: str | Path,
              config: FineTuneConfig | None = None, resume: bool = True, progress: bool = False, *,
              prior=None, body_model=None, stop_at: int | None = None,
-             diagnostic: Callable[[nn.Module], Mapping[str, float]] | None = None) -> FineTuneResult:
+             diagnostic: Callable[[nn.Module], Mapping[str, float]] | None = None,
+             diagnostic_key: str | None = None) -> FineTuneResult:
     """Fine-tune a trained network on a recording's 2D detections.
 
     Args:
@@ -368,6 +379,9 @@ def finetune(checkpoint: str | Path, sequence_root: str | Path, out_dir: str | P
         diagnostic: ``f(model) -> {name: value}`` run at every model-selection point (e.g. the
             test person's 2D and 3D errors); logged as ``diag_<name>`` in ``selection.csv``, never
             used for the choice (it runs after it, isolated: eval mode, RNG state restored).
+        diagnostic_key: what the diagnostic measures on (e.g. the test recordings' fingerprints);
+            part of the resume check, so that a finished run is not reused with another
+            diagnostic's columns.
 
     Returns:
         :class:`FineTuneResult`.
@@ -381,7 +395,7 @@ def finetune(checkpoint: str | Path, sequence_root: str | Path, out_dir: str | P
         inputs = _read_inputs(Path(checkpoint), Path(sequence_root), cfg)
         with folder_lock(out_dir):  # one writer per run folder
             return _finetune(inputs, Path(checkpoint), Path(sequence_root), Path(out_dir), cfg, resume, progress, prior,
-                             body_model, stop_at, diagnostic)
+                             body_model, stop_at, diagnostic, diagnostic_key)
     finally:
         torch.set_num_threads(threads)
         restore_rng_state(caller_rng)
@@ -436,7 +450,8 @@ class _FineTuneTask(TrainingTask):
     def resume(self, state: Mapping) -> None:
         if "finetune" not in state:
             raise DamagedFileError(checkpoint_dir(self.out_dir) / "last.pt", "a fine-tuning checkpoint", AFRESH_HINT)
-        _check_resume(state["finetune"], self.cfg, self.info["base_fingerprint"])
+        _check_resume(state["finetune"], self.cfg, self.info["base_fingerprint"], self.info["data_fingerprint"],
+                      self.info["diagnostic_key"])
         self.info["initial"] = state["finetune"]["initial"]
         self.selection = dict(state["finetune"].get("selection") or self.selection)
         self.info["selection"] = self.selection
@@ -505,7 +520,7 @@ def _read_inputs(checkpoint: Path, root: Path, cfg: FineTuneConfig) -> tuple:
 
 
 def _finetune(inputs: tuple, checkpoint: Path, root: Path, out_dir: Path, cfg: FineTuneConfig, resume: bool,
-              progress: bool, prior, body_model, stop_at, diagnostic) -> FineTuneResult:
+              progress: bool, prior, body_model, stop_at, diagnostic, diagnostic_key) -> FineTuneResult:
     t0 = time.time()
     device, model, train_cfg, input_size, seq, scales, targets_np, keypoints = inputs
     K_net_np = np.asarray(model.camera_K, np.float64)
@@ -559,7 +574,8 @@ def _finetune(inputs: tuple, checkpoint: Path, root: Path, out_dir: Path, cfg: F
                                       cfg.trainable_from)
 
     info = {"config": cfg.to_dict(), "loss": loss_cfg.to_dict(), "base_checkpoint": str(checkpoint),
-            "base_fingerprint": base_fp, "sequence": str(root),
+            "base_fingerprint": base_fp, "sequence": str(root), "data_fingerprint": recording_fingerprint(seq),
+            "diagnostic_key": diagnostic_key,
             "frames": [int(seq.frames[0]), int(seq.frames[-1])], "num_frames": n,
             "heldout_frames": [int(seq.frames[held_pos[0]]), int(seq.frames[held_pos[-1]])] if len(held_pos) else [],
             "num_heldout": len(held), "keypoints": keypoints, "pixels": pixels,

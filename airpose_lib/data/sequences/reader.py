@@ -19,6 +19,7 @@ Reading (:func:`load_sequence`) conventions:
 from __future__ import annotations
 
 import csv
+import hashlib
 import json
 import warnings
 from collections.abc import Iterable
@@ -31,7 +32,7 @@ import numpy as np
 from .detector_files import read_detections
 from .layout import SequenceFormatError, _image_index, _machines, read_camera_calib
 
-__all__ = ["LazyImages", "Sequence", "load_sequence"]
+__all__ = ["LazyImages", "Sequence", "load_sequence", "recording_fingerprint"]
 
 
 class LazyImages(SequenceABC):
@@ -218,3 +219,26 @@ def _slice_ground_truth(path: Path, sel: np.ndarray) -> dict[str, np.ndarray]:
 # equal the frame count (e.g. a 2-frame sequence with 2 views).
 _CONSTANT_KEYS = frozenset({"K", "K_full", "image_size", "time_offsets", "betas", "fps", "gender",
                             "render_scale"})
+
+
+def recording_fingerprint(seq: Sequence) -> str:
+    """SHA-256 of what a recording gives a method: its frame numbers, the bytes of every image of
+    those frames, the intrinsics, each detector's keypoints and the ground truth (when present).
+
+    Content, not file dates: a re-rendered recording with other pixels (e.g. markers added on
+    the ground) changes it, a copied one does not. About 1 s per GB of images.
+    """
+    h = hashlib.sha256(json.dumps({"frames": np.asarray(seq.frames).tolist(),
+                                   "views": [len(v) for v in seq.images]}).encode())
+    for view in seq.images:
+        for path in view.paths:
+            h.update(Path(path).read_bytes())
+    h.update(np.ascontiguousarray(seq.K, np.float64).tobytes())
+    arrays = {f"kp/{k}": v for k, v in seq.keypoints.items()}
+    arrays.update({f"gt/{k}": v for k, v in (seq.ground_truth or {}).items()})
+    for name in sorted(arrays):
+        a = np.asarray(arrays[name])
+        h.update(f"{name}:{a.dtype}:{a.shape}".encode())
+        if a.dtype != object:
+            h.update(np.ascontiguousarray(a).tobytes())
+    return h.hexdigest()

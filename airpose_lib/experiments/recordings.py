@@ -69,7 +69,7 @@ from airpose_lib.finetune.predict import (
     regress_features,
     sequence_features,
 )
-from airpose_lib.finetune.train import finetune, finetune_done
+from airpose_lib.finetune.train import finetune
 from airpose_lib.fitting import airpose_plus, fitting_profile
 from airpose_lib.folder_lock import folder_lock
 from airpose_lib.model import posed_joints_and_vertices, to_smplx_params
@@ -449,18 +449,15 @@ def _finetune_logged(pre: Path, tuning, tests: dict, ft_cfg, run_dir: Path, prio
     network or recordings changed), the ``tests`` recordings' errors logged per checkpoint
     (``tests_key``: their fingerprint, :func:`_tests_key`); returns the result and the summary row
     of :attr:`RecordingExperiment.finetune_info`."""
-    diagnostics = {}
-    if tests and not finetune_done(run_dir, pre, tuning.root, ft_cfg, diagnostic_key=tests_key):
-        net, _, size = load_sized_network(pre)
-        cut = ft_cfg.trainable_from
-        for name, seq in tests.items():  # the frozen part's features, once per network
-            feats = sequence_features(net, seq, input_size=size, cut=cut)
-            diagnostics[name] = ground_truth_diagnostic(net, seq, input_size=size, features=feats, cut=cut)
+    diagnostics: dict = {}
 
     def diagnostic(model, _d=diagnostics):
+        if not _d:  # the frozen part's features, once, from the network being tuned: its BatchNorm
+            for name, seq in tests.items():  # statistics may be the recording's (adapt_bn)
+                _d[name] = ground_truth_diagnostic(model, seq, input_size=model.input_size, cut=ft_cfg.trainable_from)
         return {f"{name}_{k}": v for name, d in _d.items() for k, v in d(model).items()}
 
-    kw = dict(progress=progress, prior=prior, diagnostic=diagnostic if diagnostics else None, diagnostic_key=tests_key)
+    kw = dict(progress=progress, prior=prior, diagnostic=diagnostic if tests else None, diagnostic_key=tests_key)
     try:
         res = finetune(pre, tuning.root, run_dir, ft_cfg, **kw)
     except StaleRunError:

@@ -550,8 +550,12 @@ def test_a_finished_run_from_another_network_or_recording_is_not_done(tiny_ckpt,
     cfg = _cfg(steps=2)
     finetune(tiny_ckpt, root, tmp_path / "ft", cfg, prior=tiny_prior, body_model=body32, diagnostic_key="tests-a")
     assert finetune_done(tmp_path / "ft", tiny_ckpt, root, cfg, diagnostic_key="tests-a")
-    assert finetune_done(tmp_path / "ft", tiny_ckpt, shutil.copytree(root, tmp_path / "copy"), cfg,
-                         diagnostic_key="tests-a")  # content, not the path or the files' dates
+    copy = shutil.copytree(root, tmp_path / "copy")
+    assert finetune_done(tmp_path / "ft", tiny_ckpt, copy, cfg, diagnostic_key="tests-a")  # content, not the
+    cache = tmp_path / "ft" / "feature_cache.pt"  # path or the files' dates; the cached features too:
+    written = cache.stat().st_mtime_ns
+    finetune(tiny_ckpt, copy, tmp_path / "ft", cfg, prior=tiny_prior, body_model=body32, diagnostic_key="tests-a")
+    assert cache.stat().st_mtime_ns == written  # reused, not computed again
     assert not finetune_done(tmp_path / "ft", tiny_ckpt, root, cfg, diagnostic_key="tests-b")
     assert not finetune_done(tmp_path / "ft", tiny_ckpt, root, cfg)
     state = load_checkpoint(tiny_ckpt)

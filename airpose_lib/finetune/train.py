@@ -183,22 +183,23 @@ def _tensor_digest(tensors: Mapping[str, torch.Tensor]) -> str:
     return h.hexdigest()
 
 
-def _feature_fingerprint(model, seq, cfg: FineTuneConfig, input_size: int, K_net: np.ndarray) -> str:
+def _feature_fingerprint(model, data_fp: str, cfg: FineTuneConfig, input_size: int, K_net: np.ndarray) -> str:
+    """What the cached features depend on: the backbone (weights and BatchNorm statistics), the
+    recording's content (``data_fp``, :func:`recording_fingerprint`: frames, images, keypoints)
+    and the crop settings."""
     backbone = {k: v for k, v in model.state_dict().items() if k.startswith("backbone.")}
     h = hashlib.sha256(_tensor_digest(backbone).encode())
-    files = [(str(p), p.stat().st_size, p.stat().st_mtime_ns) for imgs in seq.images for p in imgs.paths]
     h.update(json.dumps({"input_size": input_size, "detector": cfg.detector, "box": [cfg.box_min_confidence,
-                         cfg.margin_px], "frames": np.asarray(seq.frames).tolist(), "images": files,
+                         cfg.margin_px], "recording": data_fp,
                          "dtype": str(model.init_beta.dtype), **({"cut": cfg.trainable_from} if cfg.trainable_from else {}),
                          "K_net": np.asarray(K_net, np.float64).tolist()}).encode())
-    h.update(np.ascontiguousarray(seq.keypoints[cfg.detector]).tobytes())
     return h.hexdigest()
 
 
-def _feature_cache(model, seq, cfg: FineTuneConfig, input_size: int, K_net: np.ndarray, out_dir: Path,
+def _feature_cache(model, seq, data_fp: str, cfg: FineTuneConfig, input_size: int, K_net: np.ndarray, out_dir: Path,
                    progress: bool) -> dict:
     path = out_dir / "feature_cache.pt"
-    fp = _feature_fingerprint(model, seq, cfg, input_size, K_net)
+    fp = _feature_fingerprint(model, data_fp, cfg, input_size, K_net)
     if path.is_file():
         try:
             cached = torch.load(path, map_location="cpu", weights_only=True)
@@ -535,7 +536,8 @@ def _finetune(inputs: tuple, checkpoint: Path, root: Path, out_dir: Path, cfg: F
                                   frames=np.asarray(seq.frames)[train_pos], box_min_confidence=cfg.box_min_confidence,
                                   margin_px=cfg.margin_px, K_net=K_net_np, seed=cfg.seed, weight=cfg.adapt_bn,
                                   progress=progress)
-    cache = _feature_cache(model, seq, cfg, input_size, K_net_np, out_dir, progress)
+    data_fp = recording_fingerprint(seq)
+    cache = _feature_cache(model, seq, data_fp, cfg, input_size, K_net_np, out_dir, progress)
     has_targets = targets_np[..., 2].sum(axis=(1, 2)) > 0
     usable = train_pos[has_targets[train_pos]]
     held = held_pos[has_targets[held_pos]]
@@ -582,7 +584,7 @@ def _finetune(inputs: tuple, checkpoint: Path, root: Path, out_dir: Path, cfg: F
                                       cfg.trainable_from)
 
     info = {"config": cfg.to_dict(), "loss": loss_cfg.to_dict(), "base_checkpoint": str(checkpoint),
-            "base_fingerprint": base_fp, "sequence": str(root), "data_fingerprint": recording_fingerprint(seq),
+            "base_fingerprint": base_fp, "sequence": str(root), "data_fingerprint": data_fp,
             "diagnostic_key": diagnostic_key,
             "frames": [int(seq.frames[0]), int(seq.frames[-1])], "num_frames": n,
             "heldout_frames": [int(seq.frames[held_pos[0]]), int(seq.frames[held_pos[-1]])] if len(held_pos) else [],

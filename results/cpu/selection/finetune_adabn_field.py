@@ -25,36 +25,11 @@ MARGIN = 0.95
 
 
 def measure(out: Path) -> list[dict]:
-    import dataclasses
+    from airpose_lib.experiments.recordings import finetune_candidates
 
-    from airpose_lib.data.sequences import ensure_sequences
-    from airpose_lib.data.sequences.reader import load_sequence
-    from airpose_lib.experiments.recordings import _finetune_logged, _tests_key, recording_prior, trained_checkpoint
-    from airpose_lib.finetune.config import finetune_config
-    from airpose_lib.train import load_train_config
-
-    profile = "cpu"
-    seqs = {n: load_sequence(p) for n, p in ensure_sequences(profile, field=True).items()}
-    tuning, tests = seqs["person1"], {"person2": seqs["person2"]}
-    prior, prior_info = recording_prior(profile, False)
-    seed = load_train_config(profile, "airpose").seed
-    base = dataclasses.replace(finetune_config(profile), prior=prior_info["source"], prior_path=prior_info["file"])
-    key = _tests_key(tests)
-    rows = []
-    for variant in ("airpose", "baseline"):
-        pre = trained_checkpoint(profile, variant, seed)
-        for share in SHARES:
-            run = out / variant / f"adapt_bn_{share}"
-            _, info = _finetune_logged(pre, tuning, tests, dataclasses.replace(base, adapt_bn=share), run, prior,
-                                       False, key)
-            log = {int(r["step"]): r for r in csv.DictReader(open(run / "selection.csv"))}
-            kept = int(info["selected_step"])
-            rows.append({"network": variant, "adapt_bn": share, "kept_step": kept,
-                         "heldout_j2d_step0": round(float(log[0]["heldout_j2d"]), 2),
-                         "heldout_j2d_kept": round(float(info["heldout_j2d"]), 2),
-                         "person2_mpjpe_step0_m": round(float(log[0]["diag_person2_mpjpe_m"]), 4),
-                         "person2_mpjpe_kept_m": round(float(log[kept]["diag_person2_mpjpe_m"]), 4)})
-            print(rows[-1], flush=True)
+    rows = finetune_candidates("cpu", {f"adapt_bn_{share}": {"adapt_bn": share} for share in SHARES}, out)
+    rows = [{"network": r["network"], "adapt_bn": float(r.pop("candidate")[len("adapt_bn_"):]),
+             **{k: v for k, v in r.items() if k != "network"}} for r in rows]
     with open(out / "finetune_adabn_field.csv", "w", newline="") as f:
         w = csv.DictWriter(f, fieldnames=list(rows[0]))
         w.writeheader()

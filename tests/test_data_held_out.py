@@ -189,6 +189,11 @@ def test_field_recordings_setting():
                        ({"field_recordings": "dji", "field_markers": {"side": 1}}, "did you mean 'side_m'")):
         with pytest.raises(ProfileSettingError, match=match):
             field_sequence_configs_from_profile({**section, **bad})
+    # every recording's `markers:` goes through the same rule
+    assert sequence_configs_from_profile({**section, "markers": {}})["person1"].markers == MarkerLayout()
+    for bad, match in ((True, "marker layout's settings"), ({"side": 1}, "did you mean 'side_m'")):
+        with pytest.raises(ProfileSettingError, match=match):
+            sequence_configs_from_profile({**section, "markers": bad})
 
 
 def test_renderer_applies_the_option_only_when_on(open_model_files):

@@ -442,6 +442,75 @@ def test_finetune_trains_the_backbones_last_block_from_its_cached_input(tiny_ckp
     assert not (tmp_path / "bad").exists()
 
 
+def test_adapt_batchnorm_takes_the_recordings_statistics(tiny_ckpt, smoke_root):
+    """AdaBN: with one batch of all crops, the stem's BatchNorm mean and variance are the
+    channel-wise mean and unbiased variance of conv1's output over those crops (computed here by
+    hand on the crops :func:`sequence_features` makes); the weights and the training flags are
+    unchanged."""
+    from airpose_lib.data.sequences.reader import load_sequence
+    from airpose_lib.errors import ConfigError
+    from airpose_lib.finetune.predict import adapt_batchnorm, sequence_features
+
+    model, _, _ = load_sized_network(tiny_ckpt)
+    model.train()
+    seq = load_sequence(smoke_root, frames=range(0, 6), detectors=("openpose",))
+    weights = {k: v.clone() for k, v in model.state_dict().items()
+               if not k.endswith(("running_mean", "running_var", "num_batches_tracked"))}
+    n = adapt_batchnorm(model, seq, input_size=S, frames=seq.frames[:3], batch_size=6)
+    assert n == 6 and model.training and model.backbone.bn1.momentum == 0.1
+    seen = []  # conv1's output on the crops fine-tuning's cached features come from
+    hook = model.backbone.conv1.register_forward_hook(lambda m, i, o: seen.append(o.detach().double()))
+    sequence_features(model, seq, input_size=S, frames=seq.frames[:3])
+    hook.remove()
+    y = torch.cat(seen)
+    assert y.shape[0] == 6
+    mean = y.mean(dim=(0, 2, 3))
+    var = y.permute(1, 0, 2, 3).flatten(1).var(dim=1, unbiased=True)
+    torch.testing.assert_close(model.backbone.bn1.running_mean.double(), mean, rtol=1e-4, atol=1e-6)
+    torch.testing.assert_close(model.backbone.bn1.running_var.double(), var, rtol=1e-4, atol=1e-6)
+    for k, v in model.state_dict().items():
+        if k in weights:
+            assert torch.equal(v, weights[k]), k
+    # a share: the convex combination of the stored statistics and the recording's
+    half, _, _ = load_sized_network(tiny_ckpt)
+    stored = {k: v.clone() for k, v in half.state_dict().items() if k.endswith(("running_mean", "running_var"))}
+    adapt_batchnorm(half, seq, input_size=S, frames=seq.frames[:3], batch_size=6, weight=0.25)
+    for k, v in stored.items():
+        torch.testing.assert_close(half.state_dict()[k], 0.75 * v + 0.25 * model.state_dict()[k], msg=k)
+    with pytest.raises(ConfigError, match="batch_size must be >= 2"):
+        adapt_batchnorm(model, seq, input_size=S, batch_size=1)
+    with pytest.raises(ConfigError, match="weight must be in"):
+        adapt_batchnorm(model, seq, input_size=S, weight=0.0)
+
+
+def test_finetune_with_adapted_batchnorm(tiny_ckpt, smoke_root, tmp_path, body32, tiny_prior):
+    """adapt_bn: the checkpoint carries the statistics of the training frames only (the held-out
+    ones unseen), every other backbone tensor is the base network's, and a finished frozen run is
+    not reused for it."""
+    from airpose_lib.data.sequences.reader import load_sequence
+    from airpose_lib.finetune.predict import adapt_batchnorm
+    from airpose_lib.finetune.train import finetune_done
+    from airpose_lib.train import load_checkpoint
+
+    kw = dict(prior=tiny_prior, body_model=body32)
+    cfg = _cfg(steps=2, holdout_fraction=0.5, adapt_bn=1.0)
+    res = finetune(tiny_ckpt, smoke_root, tmp_path / "adabn", cfg, **kw)
+    assert res.step == 2
+    model, _, _ = load_sized_network(tiny_ckpt)
+    seq = load_sequence(smoke_root, frames=range(0, 6), detectors=("openpose",))
+    adapt_batchnorm(model, seq, input_size=S, frames=seq.frames[:3], seed=cfg.seed)  # the first half trains
+    before, after = load_checkpoint(tiny_ckpt)["model"], load_checkpoint(res.checkpoint)["model"]
+    stats = [k for k in before if k.startswith("backbone.") and k.endswith(("running_mean", "running_var"))]
+    for k in before:
+        if k.startswith("backbone."):
+            expected = model.state_dict()[k] if k in stats or k.endswith("num_batches_tracked") else before[k]
+            torch.testing.assert_close(after[k], expected, rtol=0, atol=0, msg=k)
+    assert any(not torch.equal(before[k], after[k]) for k in stats)
+    frozen = finetune(tiny_ckpt, smoke_root, tmp_path / "frozen", cfg.replace(adapt_bn=0.0), **kw)
+    assert finetune_done(tmp_path / "adabn", tiny_ckpt, smoke_root, cfg)
+    assert not finetune_done(frozen.out_dir, tiny_ckpt, smoke_root, cfg)
+
+
 def test_resume_matches_an_uninterrupted_run(tiny_ckpt, smoke_root, tmp_path, body32, tiny_prior):
     from airpose_lib.train import load_checkpoint, read_log
 
@@ -481,8 +550,12 @@ def test_a_finished_run_from_another_network_or_recording_is_not_done(tiny_ckpt,
     cfg = _cfg(steps=2)
     finetune(tiny_ckpt, root, tmp_path / "ft", cfg, prior=tiny_prior, body_model=body32, diagnostic_key="tests-a")
     assert finetune_done(tmp_path / "ft", tiny_ckpt, root, cfg, diagnostic_key="tests-a")
-    assert finetune_done(tmp_path / "ft", tiny_ckpt, shutil.copytree(root, tmp_path / "copy"), cfg,
-                         diagnostic_key="tests-a")  # content, not the path or the files' dates
+    copy = shutil.copytree(root, tmp_path / "copy")
+    assert finetune_done(tmp_path / "ft", tiny_ckpt, copy, cfg, diagnostic_key="tests-a")  # content, not the
+    cache = tmp_path / "ft" / "feature_cache.pt"  # path or the files' dates; the cached features too:
+    written = cache.stat().st_mtime_ns
+    finetune(tiny_ckpt, copy, tmp_path / "ft", cfg, prior=tiny_prior, body_model=body32, diagnostic_key="tests-a")
+    assert cache.stat().st_mtime_ns == written  # reused, not computed again
     assert not finetune_done(tmp_path / "ft", tiny_ckpt, root, cfg, diagnostic_key="tests-b")
     assert not finetune_done(tmp_path / "ft", tiny_ckpt, root, cfg)
     state = load_checkpoint(tiny_ckpt)

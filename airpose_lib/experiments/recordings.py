@@ -34,8 +34,10 @@ bound: a network may read stature from the body's proportions).
 """
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import json
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -69,7 +71,7 @@ from airpose_lib.finetune.predict import (
     regress_features,
     sequence_features,
 )
-from airpose_lib.finetune.train import finetune, finetune_done
+from airpose_lib.finetune.train import finetune
 from airpose_lib.fitting import airpose_plus, fitting_profile
 from airpose_lib.folder_lock import folder_lock
 from airpose_lib.model import posed_joints_and_vertices, to_smplx_params
@@ -82,7 +84,7 @@ from airpose_lib.train.config import load_train_config
 from airpose_lib.train.official import find_official_checkpoint
 
 __all__ = ["METHODS", "RecordingExperiment", "default_experiment_dir", "run_recording_experiment", "runs_field",
-           "body_vertices", "recording_prior", "ground_truth_diagnostic", "scored_frames",
+           "finetune_candidates", "body_vertices", "recording_prior", "ground_truth_diagnostic", "scored_frames",
            "CONTROL_LABEL", "official_recordings", "official_networks", "networks_for", "recordings_for",
            "marker_truth"]
 
@@ -449,18 +451,15 @@ def _finetune_logged(pre: Path, tuning, tests: dict, ft_cfg, run_dir: Path, prio
     network or recordings changed), the ``tests`` recordings' errors logged per checkpoint
     (``tests_key``: their fingerprint, :func:`_tests_key`); returns the result and the summary row
     of :attr:`RecordingExperiment.finetune_info`."""
-    diagnostics = {}
-    if tests and not finetune_done(run_dir, pre, tuning.root, ft_cfg, diagnostic_key=tests_key):
-        net, _, size = load_sized_network(pre)
-        cut = ft_cfg.trainable_from
-        for name, seq in tests.items():  # the frozen part's features, once per network
-            feats = sequence_features(net, seq, input_size=size, cut=cut)
-            diagnostics[name] = ground_truth_diagnostic(net, seq, input_size=size, features=feats, cut=cut)
+    diagnostics: dict = {}
 
     def diagnostic(model, _d=diagnostics):
+        if not _d:  # the frozen part's features, once, from the network being tuned: its BatchNorm
+            for name, seq in tests.items():  # statistics may be the recording's (adapt_bn)
+                _d[name] = ground_truth_diagnostic(model, seq, input_size=model.input_size, cut=ft_cfg.trainable_from)
         return {f"{name}_{k}": v for name, d in _d.items() for k, v in d(model).items()}
 
-    kw = dict(progress=progress, prior=prior, diagnostic=diagnostic if diagnostics else None, diagnostic_key=tests_key)
+    kw = dict(progress=progress, prior=prior, diagnostic=diagnostic if tests else None, diagnostic_key=tests_key)
     try:
         res = finetune(pre, tuning.root, run_dir, ft_cfg, **kw)
     except StaleRunError:
@@ -478,6 +477,41 @@ def _finetune_logged(pre: Path, tuning, tests: dict, ft_cfg, run_dir: Path, prio
 def _tests_key(tests: dict) -> str | None:
     """The content of the recordings a fine-tuning's diagnostic measures (None without any)."""
     return _key(*((name, recording_fingerprint(seq)) for name, seq in sorted(tests.items()))) if tests else None
+
+
+def finetune_candidates(profile: str, candidates: Mapping[str, Mapping], out: str | Path, *,
+                        variants: tuple[str, ...] = ("airpose", "baseline"), field: bool = True) -> list[dict]:
+    """A fine-tuning choice, measured as the profile's recording experiment would make it: each
+    variant's first-seed network tuned on person 1 with each candidate's overrides of the
+    profile's ``finetune:`` settings (``out/<variant>/<candidate>``; finished runs are reused),
+    person 2's errors logged per checkpoint as the diagnostic.
+
+    Returns:
+        one row per variant and candidate: ``network``, ``candidate``, ``kept_step`` (the selection
+        rule's), ``heldout_j2d_step0`` and ``heldout_j2d_kept`` (person 1's held-out 2D error: the
+        choice's criterion), ``person2_mpjpe_step0_m`` and ``person2_mpjpe_kept_m`` (the diagnostic).
+    """
+    out = Path(out)
+    seqs = {n: load_sequence(p) for n, p in ensure_sequences(profile, field=field).items()}
+    tuning, tests = seqs["person1"], {"person2": seqs["person2"]}
+    prior, prior_info = recording_prior(profile, False)
+    seed = load_train_config(profile, "airpose").seed
+    base = dataclasses.replace(finetune_config(profile), prior=prior_info["source"], prior_path=prior_info["file"])
+    key = _tests_key(tests)
+    rows = []
+    for variant in variants:
+        pre = trained_checkpoint(profile, variant, seed)
+        for name, changes in candidates.items():
+            run = out / variant / name
+            _, info = _finetune_logged(pre, tuning, tests, dataclasses.replace(base, **changes), run, prior, False, key)
+            log = {int(r["step"]): r for r in pd.read_csv(run / "selection.csv").to_dict("records")}
+            kept = int(info["selected_step"])
+            rows.append({"network": variant, "candidate": name, "kept_step": kept,
+                         "heldout_j2d_step0": round(float(log[0]["heldout_j2d"]), 2),
+                         "heldout_j2d_kept": round(float(info["heldout_j2d"]), 2),
+                         "person2_mpjpe_step0_m": round(float(log[0]["diag_person2_mpjpe_m"]), 4),
+                         "person2_mpjpe_kept_m": round(float(log[kept]["diag_person2_mpjpe_m"]), 4)})
+    return rows
 
 
 def _kit_networks(profile: str, seed: int, tuning, tests: dict, prior, prior_info: dict, out: Path,

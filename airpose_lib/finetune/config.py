@@ -58,8 +58,15 @@ class FineTuneConfig:
             block's input; None (the paper's fine-tuning here so far): the backbone stays frozen.
             A frozen backbone can only re-weigh features learned on the training renders; the
             last block can adapt them to the recording's pixels. Its BatchNorm statistics stay
-            those of pretraining (one recording's batches are too alike to re-estimate them).
+            fixed while it trains (one recording's batches are too alike to normalise by;
+            ``adapt_bn`` moves them once, towards those of all the training frames).
         backbone_lr_scale: the trainable blocks' rate as a share of ``lr``.
+        adapt_bn: the recording's share of the backbone's BatchNorm statistics: before the
+            features are cached, each layer's mean and variance move this far towards those of the
+            training frames' crops, every view (1: AdaBN;
+            :func:`~airpose_lib.finetune.predict.adapt_batchnorm`; no labels, the held-out frames
+            unseen). 0 (the paper's): pretraining's statistics. The fine-tuned checkpoints carry
+            the adapted statistics, so every later use of the network sees them.
         checkpoint_every, keep_checkpoints, log_every: as ``TrainConfig``.
         prior, prior_path, prior_tag: the pose prior (``airpose_lib.prior.load_prior``).
         body_source: body model of the loss (``open`` or ``smplx``; the predictions' neutral body).
@@ -92,6 +99,7 @@ class FineTuneConfig:
     feature_batch_size: int = 16
     trainable_from: str | None = None
     backbone_lr_scale: float = 0.1
+    adapt_bn: float = 0.0
     checkpoint_every: int = 100
     keep_checkpoints: int = 2
     log_every: int = 10
@@ -109,7 +117,7 @@ class FineTuneConfig:
                    "targets", "reference_width", "holdout_fraction", "selection",
                    "min_confidence", "unmatched", "frames", "input_size", "detector", "box_min_confidence",
                    "margin_px", "prior", "prior_path", "prior_tag", "body_source", "trainable_from",
-                   "backbone_lr_scale")
+                   "backbone_lr_scale", "adapt_bn")
 
     def __post_init__(self) -> None:
         check_fields(self)  # types first (`--set lr=abc`, a profile's `steps: ten`), then ranges
@@ -121,6 +129,7 @@ class FineTuneConfig:
         require(finite(self.lr) and self.lr > 0, "lr", "a finite number > 0", self.lr)
         require(finite(self.backbone_lr_scale) and self.backbone_lr_scale > 0, "backbone_lr_scale",
                 "a finite number > 0", self.backbone_lr_scale)
+        require(finite(self.adapt_bn) and 0 <= self.adapt_bn <= 1, "adapt_bn", "in [0, 1]", self.adapt_bn)
         require(finite(self.weight_decay) and self.weight_decay >= 0, "weight_decay", "a finite number >= 0",
                 self.weight_decay)
         require(finite(self.threshold_px) and self.threshold_px > 0, "threshold_px", "a finite number > 0",

@@ -69,6 +69,7 @@ __all__ = [
     "camera_rule",
     "image_sizes",
     "sequence_features",
+    "adapt_batchnorm",
     "predict_sequence",
     "validate_predictions",
     "save_predictions",
@@ -293,6 +294,90 @@ def sequence_features(model: nn.Module, sequence, *, input_size: int, detector: 
     return {"features": torch.cat(feats).numpy(), "P": torch.cat(Ps).numpy().astype(np.float32),
             "boxes": boxes.astype(np.float32), "valid": valid,
             "frames": np.asarray(sequence.frames, np.int64)[pos], "positions": pos, "margin_px": margins}
+
+
+@torch.no_grad()
+def adapt_batchnorm(model: nn.Module, sequence, *, input_size: int, detector: str = "openpose",
+                    frames=None, batch_size: int = 32, box_min_confidence: float = 0.2,
+                    margin_px: float | None = None, K_net=None, seed: int = 0, weight: float = 1.0,
+                    progress: bool = False) -> int:
+    """Move the backbone's BatchNorm statistics towards a recording's (AdaBN: Li et al., "Adaptive
+    Batch Normalization for practical domain adaptation", Pattern Recognition 80, 2018; the blend:
+    Schneider et al., "Improving robustness against common corruptions by covariate shift
+    adaptation", NeurIPS 2020).
+
+    A network trained on clean renders normalises a field recording's activations with the renders'
+    means and variances; exposure, noise, blur and compression shift them, and a frozen backbone
+    (the paper's fine-tuning) cannot follow. Every BatchNorm layer's running mean and variance
+    become ``(1 - weight) * stored + weight * recording``, the recording's being the averages over
+    its crops, without labels; the learned weights, BatchNorm's affine ones included, are
+    unchanged. ``weight`` 1 is AdaBN; below 1 the training statistics keep a share, as one
+    recording (one person, one scene) has far less variety than the training renders.
+
+    Args: as :func:`sequence_features` (the crops are the drones' crops of ``frames``, every view);
+    ``batch_size`` crops per batch, drawn in an order shuffled with ``seed`` so that a batch mixes
+    frames and views (the recording's statistics are the equal-weight average of the batches');
+    ``weight`` in ``(0, 1]``.
+
+    Returns:
+        the number of crops the statistics come from. Only BatchNorm buffers change; the model's
+        training flags are restored.
+
+    Raises:
+        ConfigError: ``batch_size`` < 2 (a batch's variance needs two crops).
+        ValueError: the backbone has no BatchNorm layer.
+    """
+    if batch_size < 2:
+        raise ConfigError("batch_size must be >= 2 (a batch's variance needs two crops)")
+    if not 0 < weight <= 1:
+        raise ConfigError(f"weight must be in (0, 1], got {weight}")
+    norms = [m for m in model.backbone.modules() if isinstance(m, nn.modules.batchnorm._BatchNorm)]
+    if not norms:
+        raise ValueError("the backbone has no BatchNorm layer to adapt")
+    pos = _positions(sequence, frames)
+    V = sequence.num_views
+    sizes = image_sizes(sequence)
+    K_net = network_camera_of(model, K_net)
+    margins = np.array([box_margin(margin_px, K, K_net) for K in np.asarray(sequence.K)])
+    all_pos = np.arange(len(sequence.frames))  # boxes of the whole recording: hold_boxes as the drones do
+    boxes, _ = detection_boxes(np.asarray(sequence.keypoints[detector])[all_pos], sizes,
+                               min_confidence=box_min_confidence, margin_px=margins,
+                               where=f"{sequence.root} ({detector})")
+    pairs = np.stack(np.meshgrid(pos, np.arange(V), indexing="ij"), -1).reshape(-1, 2)  # (F V, 2) rows, views
+    pairs = pairs[np.random.default_rng(seed).permutation(len(pairs))]
+    was_training = model.training
+    saved = [(m.momentum, m.training) for m in norms]
+    stored = [(m.running_mean.clone(), m.running_var.clone()) for m in norms]
+    device = _model_device(model)
+    dtype = model.init_beta.dtype
+    chunks = range(0, len(pairs), batch_size)
+    if progress:
+        chunks = progress_bar(chunks, desc="BatchNorm statistics", unit="batch")
+    used = 0
+    model.eval()
+    try:
+        for m in norms:
+            m.reset_running_stats()
+            m.momentum = None  # a cumulative average over the batches
+            m.train()
+        for a in chunks:
+            batch = pairs[a:a + batch_size]
+            if len(batch) < 2:
+                break  # one crop's spatial variance alone would weigh as much as a full batch's
+            x = np.stack([crop_input(sequence.image(int(r), int(v)), boxes[int(r), int(v)],
+                                     np.asarray(sequence.K[int(v)], np.float64), input_size, K_net)[0][0]
+                          for r, v in batch])
+            model.features(torch.from_numpy(x).to(device=device, dtype=dtype))
+            used += len(batch)
+        for m, (mean, var) in zip(norms, stored):
+            m.running_mean.mul_(weight).add_(mean, alpha=1 - weight)
+            m.running_var.mul_(weight).add_(var, alpha=1 - weight)
+    finally:
+        for m, (momentum, training) in zip(norms, saved):
+            m.momentum = momentum
+            m.train(training)
+        model.train(was_training)
+    return used
 
 
 @torch.no_grad()

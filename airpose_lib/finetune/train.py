@@ -12,7 +12,9 @@ r"""Fine-tuning a trained network on the 2D detections of a recording (paper Sec
    the drones make them, and caches the features (``<out>/feature_cache.pt``, reused while the
    backbone, crop settings and recording are unchanged). The backbone is never run again and
    never in training mode, so its weights and BatchNorm statistics stay bit-identical; training
-   then costs only the regressor, the joints-only body and the prior -- cheap enough for a CPU;
+   then costs only the regressor, the joints-only body and the prior -- cheap enough for a CPU.
+   With ``adapt_bn`` the BatchNorm statistics first move towards those of the training frames'
+   crops (:func:`~airpose_lib.finetune.predict.adapt_batchnorm`) and then stay fixed;
 4. trains the regressor (fc1, fc2 and the decoder heads; dropout active as in training) with
    Adam (AMSGrad, lr 5e-5, paper) on :class:`~airpose_lib.finetune.loss.FineTuneLoss` with the
    variant's paper weights. A training sample is one frame with all its views (the multi-view
@@ -97,7 +99,7 @@ from .config import FineTuneConfig
 from .keypoints import agreement_masks, agreement_summary, kept_targets, pixel_settings, resolution_scales, true_targets
 from .loss import FineTuneLoss, finetune_loss_config
 from .network import load_sized_network
-from .predict import frames_in_range, image_sizes, regress_features, sequence_features
+from .predict import adapt_batchnorm, frames_in_range, image_sizes, regress_features, sequence_features
 from .selection import select_step
 
 __all__ = ["FineTuneResult", "finetune", "finetune_done", "evaluate_finetune_loss", "heldout_split"]
@@ -181,22 +183,23 @@ def _tensor_digest(tensors: Mapping[str, torch.Tensor]) -> str:
     return h.hexdigest()
 
 
-def _feature_fingerprint(model, seq, cfg: FineTuneConfig, input_size: int, K_net: np.ndarray) -> str:
+def _feature_fingerprint(model, data_fp: str, cfg: FineTuneConfig, input_size: int, K_net: np.ndarray) -> str:
+    """What the cached features depend on: the backbone (weights and BatchNorm statistics), the
+    recording's content (``data_fp``, :func:`recording_fingerprint`: frames, images, keypoints)
+    and the crop settings."""
     backbone = {k: v for k, v in model.state_dict().items() if k.startswith("backbone.")}
     h = hashlib.sha256(_tensor_digest(backbone).encode())
-    files = [(str(p), p.stat().st_size, p.stat().st_mtime_ns) for imgs in seq.images for p in imgs.paths]
     h.update(json.dumps({"input_size": input_size, "detector": cfg.detector, "box": [cfg.box_min_confidence,
-                         cfg.margin_px], "frames": np.asarray(seq.frames).tolist(), "images": files,
+                         cfg.margin_px], "recording": data_fp,
                          "dtype": str(model.init_beta.dtype), **({"cut": cfg.trainable_from} if cfg.trainable_from else {}),
                          "K_net": np.asarray(K_net, np.float64).tolist()}).encode())
-    h.update(np.ascontiguousarray(seq.keypoints[cfg.detector]).tobytes())
     return h.hexdigest()
 
 
-def _feature_cache(model, seq, cfg: FineTuneConfig, input_size: int, K_net: np.ndarray, out_dir: Path,
+def _feature_cache(model, seq, data_fp: str, cfg: FineTuneConfig, input_size: int, K_net: np.ndarray, out_dir: Path,
                    progress: bool) -> dict:
     path = out_dir / "feature_cache.pt"
-    fp = _feature_fingerprint(model, seq, cfg, input_size, K_net)
+    fp = _feature_fingerprint(model, data_fp, cfg, input_size, K_net)
     if path.is_file():
         try:
             cached = torch.load(path, map_location="cpu", weights_only=True)
@@ -264,7 +267,7 @@ def _stream_seed(seed: int) -> int:
 
 def _set_train_mode(model: nn.Module) -> None:
     model.train()
-    # frozen, or only its last blocks training: its BatchNorm keeps pretraining's statistics
+    # frozen, or only its last blocks training: its BatchNorm statistics stay fixed (pretraining's or adapt_bn's)
     model.backbone.eval()
 
 
@@ -526,8 +529,15 @@ def _finetune(inputs: tuple, checkpoint: Path, root: Path, out_dir: Path, cfg: F
     K_net_np = np.asarray(model.camera_K, np.float64)
     base_fp = _tensor_digest(model.state_dict())
     out_dir.mkdir(parents=True, exist_ok=True)
-    cache = _feature_cache(model, seq, cfg, input_size, K_net_np, out_dir, progress)
     train_pos, held_pos = heldout_split(len(seq.frames), cfg.holdout_fraction)
+    adapted = None
+    if cfg.adapt_bn > 0:  # before the cache: its fingerprint hashes the backbone, statistics included
+        adapted = adapt_batchnorm(model, seq, input_size=input_size, detector=cfg.detector,
+                                  frames=np.asarray(seq.frames)[train_pos], box_min_confidence=cfg.box_min_confidence,
+                                  margin_px=cfg.margin_px, K_net=K_net_np, seed=cfg.seed, weight=cfg.adapt_bn,
+                                  progress=progress)
+    data_fp = recording_fingerprint(seq)
+    cache = _feature_cache(model, seq, data_fp, cfg, input_size, K_net_np, out_dir, progress)
     has_targets = targets_np[..., 2].sum(axis=(1, 2)) > 0
     usable = train_pos[has_targets[train_pos]]
     held = held_pos[has_targets[held_pos]]
@@ -574,11 +584,11 @@ def _finetune(inputs: tuple, checkpoint: Path, root: Path, out_dir: Path, cfg: F
                                       cfg.trainable_from)
 
     info = {"config": cfg.to_dict(), "loss": loss_cfg.to_dict(), "base_checkpoint": str(checkpoint),
-            "base_fingerprint": base_fp, "sequence": str(root), "data_fingerprint": recording_fingerprint(seq),
+            "base_fingerprint": base_fp, "sequence": str(root), "data_fingerprint": data_fp,
             "diagnostic_key": diagnostic_key,
             "frames": [int(seq.frames[0]), int(seq.frames[-1])], "num_frames": n,
             "heldout_frames": [int(seq.frames[held_pos[0]]), int(seq.frames[held_pos[-1]])] if len(held_pos) else [],
-            "num_heldout": len(held), "keypoints": keypoints, "pixels": pixels,
+            "num_heldout": len(held), "keypoints": keypoints, "pixels": pixels, "adapted_bn_crops": adapted,
             "camera_K": K_net_np.tolist(), "initial": None,
             "selection": {"rule": cfg.selection, "rows": [], "best_step": None, "best_heldout_j2d": None,
                           "overfit_step": None, "overfit_terms": []}}

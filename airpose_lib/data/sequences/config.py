@@ -16,7 +16,7 @@ from airpose_lib.profiles import profile_section, section_where
 
 from .field import FieldConfig
 from .held_out import HeldOutConfig
-from .markers import MarkerLayout
+from .markers import MarkerLayout, marker_layout
 
 __all__ = [
     "CameraSpec",
@@ -257,8 +257,8 @@ class SequenceConfig:
             d["time_offsets"] = tuple(float(x) for x in d["time_offsets"])
         if isinstance(d.get("field"), Mapping):
             d["field"] = config_from(FieldConfig, d["field"], "field")
-        if isinstance(d.get("markers"), Mapping):
-            d["markers"] = config_from(MarkerLayout, d["markers"], "markers")
+        if "markers" in d:
+            d["markers"] = marker_layout(d["markers"], "markers:", ProfileSettingError)
         if isinstance(d.get("held_out"), Mapping):
             d["held_out"] = config_from(HeldOutConfig, d["held_out"], "held_out")
         return cls(**d)

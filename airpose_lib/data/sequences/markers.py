@@ -25,6 +25,7 @@ import cv2
 import numpy as np
 import torch
 
+from airpose_lib.config_fields import config_from
 from airpose_lib.errors import ConfigError
 from airpose_lib.geometry import relative_camera_pose
 
@@ -32,6 +33,7 @@ from ..official.real import MarkerPoses
 
 __all__ = [
     "MarkerLayout",
+    "marker_layout",
     "R_WORLD_MARKER",
     "marker_image",
     "marker_tile",
@@ -100,6 +102,17 @@ class MarkerLayout:
 
     def aruco_dictionary(self):
         return cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, self.dictionary))
+
+
+def marker_layout(value, where: str, error: type[ConfigError] = ConfigError) -> MarkerLayout | None:
+    """A ``markers:`` / ``field_markers:`` setting as a :class:`MarkerLayout`: None stays None (no
+    markers), a mapping gives the layout's settings (``{}`` the default one), a layout passes.
+    Anything else (``true``, a list) raises ``error`` naming ``where`` and the fix."""
+    if value is None or isinstance(value, MarkerLayout):
+        return value
+    if not isinstance(value, Mapping):
+        raise error(f"{where} takes a marker layout's settings, `{{}}` for the default, not {value!r}")
+    return config_from(MarkerLayout, value, where, error=error)
 
 
 def marker_image(layout: MarkerLayout, marker_id: int, side_px: int) -> np.ndarray:

@@ -7,14 +7,13 @@ from __future__ import annotations
 
 import dataclasses
 
-from airpose_lib.config_fields import config_from
 from airpose_lib.errors import ConfigError, ProfileSettingError
 from airpose_lib.profiles import profile_section, section_where
 
 from .config import SequenceConfig, sequence_configs_from_profile
 from .field import RENDER_GAMMA, FieldConfig
 from .held_out import HeldOutConfig
-from .markers import MarkerLayout
+from .markers import marker_layout
 
 __all__ = ["FIELD_PRESETS", "field_variant", "field_sequence_configs_from_profile", "profile_field_sequences"]
 
@@ -67,11 +66,7 @@ def field_sequence_configs_from_profile(section, where: str = "a `sequences:` pr
     if preset not in FIELD_PRESETS:
         raise ProfileSettingError(f"{where}: field_recordings: unknown preset {preset!r}; "
                                   f"choose from {tuple(FIELD_PRESETS)}")
-    if markers is not None and not isinstance(markers, dict):
-        raise ProfileSettingError(f"{where}: field_markers: takes a marker layout's settings, `{{}}` for the "
-                                  f"default, not {markers!r}")
-    layout = None if markers is None else config_from(MarkerLayout, markers, f"{where} `field_markers:`",
-                                                     error=ProfileSettingError)
+    layout = marker_layout(markers, f"{where}: field_markers:", ProfileSettingError)
     twins = {name: field_variant(c, preset) for name, c in sequence_configs_from_profile(section, where).items()}
     return twins if layout is None else {name: dataclasses.replace(c, markers=layout) for name, c in twins.items()}
 

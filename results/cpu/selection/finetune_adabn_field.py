@@ -31,7 +31,7 @@ def measure(out: Path) -> list[dict]:
     rows = [{"network": r["network"], "adapt_bn": float(r.pop("candidate")[len("adapt_bn_"):]),
              **{k: v for k, v in r.items() if k != "network"}} for r in rows]
     with open(out / "finetune_adabn_field.csv", "w", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=list(rows[0]))
+        w = csv.DictWriter(f, fieldnames=list(rows[0]), lineterminator="\n")
         w.writeheader()
         w.writerows(rows)
     return rows

@@ -21,6 +21,6 @@ rows = [{"network": r["network"], "backbone": r["candidate"], "kept_step": r["ke
         for r in finetune_candidates("cpu", {"frozen": {}, "layer4.1": {"trainable_from": "layer4.1",
                                                                       "backbone_lr_scale": 0.1}}, out)]
 with open(out / "finetune_trainable_field.csv", "w", newline="") as f:
-    w = csv.DictWriter(f, fieldnames=list(rows[0]))
+    w = csv.DictWriter(f, fieldnames=list(rows[0]), lineterminator="\n")
     w.writeheader()
     w.writerows(rows)

@@ -481,6 +481,22 @@ def test_adapt_batchnorm_takes_the_recordings_statistics(tiny_ckpt, smoke_root):
         adapt_batchnorm(model, seq, input_size=S, batch_size=1)
     with pytest.raises(ConfigError, match="weight must be in"):
         adapt_batchnorm(model, seq, input_size=S, weight=0.0)
+    # a pass that fails half-way (an unreadable image) leaves the statistics as they were
+    before = {k: v.clone() for k, v in model.state_dict().items()}
+    image, calls = seq.image, []
+
+    def failing(row, view):
+        calls.append(row)
+        if len(calls) > 3:
+            raise OSError("unreadable image")
+        return image(row, view)
+
+    seq.image = failing
+    with pytest.raises(OSError, match="unreadable"):
+        adapt_batchnorm(model, seq, input_size=S, batch_size=2)
+    seq.image = image
+    for k, v in model.state_dict().items():
+        assert torch.equal(v, before[k]), k
 
 
 def test_finetune_with_adapted_batchnorm(tiny_ckpt, smoke_root, tmp_path, body32, tiny_prior):

@@ -320,8 +320,8 @@ def adapt_batchnorm(model: nn.Module, sequence, *, input_size: int, detector: st
     ``weight`` in ``(0, 1]``.
 
     Returns:
-        the number of crops the statistics come from. Only BatchNorm buffers change; the model's
-        training flags are restored.
+        the number of crops the statistics come from. Only BatchNorm buffers change (and, if the
+        pass fails, not those either); the model's training flags are restored.
 
     Raises:
         ConfigError: ``batch_size`` < 2 (a batch's variance needs two crops).
@@ -347,7 +347,7 @@ def adapt_batchnorm(model: nn.Module, sequence, *, input_size: int, detector: st
     pairs = pairs[np.random.default_rng(seed).permutation(len(pairs))]
     was_training = model.training
     saved = [(m.momentum, m.training) for m in norms]
-    stored = [(m.running_mean.clone(), m.running_var.clone()) for m in norms]
+    stored = [(m.running_mean.clone(), m.running_var.clone(), m.num_batches_tracked.clone()) for m in norms]
     device = _model_device(model)
     dtype = model.init_beta.dtype
     chunks = range(0, len(pairs), batch_size)
@@ -369,9 +369,15 @@ def adapt_batchnorm(model: nn.Module, sequence, *, input_size: int, detector: st
                           for r, v in batch])
             model.features(torch.from_numpy(x).to(device=device, dtype=dtype))
             used += len(batch)
-        for m, (mean, var) in zip(norms, stored):
+        for m, (mean, var, _) in zip(norms, stored):
             m.running_mean.mul_(weight).add_(mean, alpha=1 - weight)
             m.running_var.mul_(weight).add_(var, alpha=1 - weight)
+    except BaseException:  # an unreadable image, an interrupt: the network keeps its statistics
+        for m, (mean, var, count) in zip(norms, stored):
+            m.running_mean.copy_(mean)
+            m.running_var.copy_(var)
+            m.num_batches_tracked.copy_(count)
+        raise
     finally:
         for m, (momentum, training) in zip(norms, saved):
             m.momentum = momentum

@@ -240,6 +240,21 @@ def _resolve_input_size(model: nn.Module, input_size: int | None) -> int:
     return int(size)
 
 
+def _drone_boxes(sequence, rows: np.ndarray, detector: str, box_min_confidence: float, margin_px: float | None,
+                 K_net: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The drones' person boxes of ``rows (F,)`` of a loaded sequence (:func:`detection_boxes`,
+    each view's margin in its own pixels): ``boxes (F, V, 4)``, ``valid (F, V)``, ``margins (V,)``."""
+    sizes = []
+    for v in range(sequence.num_views):
+        h, w = sequence.image(int(rows[0]), v).shape[:2]
+        sizes.append((w, h))
+    margins = np.array([box_margin(margin_px, K, K_net) for K in np.asarray(sequence.K)])
+    boxes, valid = detection_boxes(np.asarray(sequence.keypoints[detector])[rows], sizes,
+                                   min_confidence=box_min_confidence, margin_px=margins,
+                                   where=f"{sequence.root} ({detector})")
+    return boxes, valid, margins
+
+
 # -- the sequence pass ----------------------------------------------------------------------------
 @torch.no_grad()
 def sequence_features(model: nn.Module, sequence, *, input_size: int, detector: str = "openpose",
@@ -263,15 +278,8 @@ def sequence_features(model: nn.Module, sequence, *, input_size: int, detector: 
         raise ConfigError("batch_size must be >= 1")
     pos = _positions(sequence, frames)
     V = sequence.num_views
-    sizes = []
-    for v in range(V):
-        h, w = sequence.image(int(pos[0]), v).shape[:2]
-        sizes.append((w, h))
     K_net = network_camera_of(model, K_net)
-    margins = np.array([box_margin(margin_px, K, K_net) for K in np.asarray(sequence.K)])
-    boxes, valid = detection_boxes(np.asarray(sequence.keypoints[detector])[pos], sizes,
-                                   min_confidence=box_min_confidence, margin_px=margins,
-                                   where=f"{sequence.root} ({detector})")
+    boxes, valid, margins = _drone_boxes(sequence, pos, detector, box_min_confidence, margin_px, K_net)
     was_training = model.training
     model.eval()
     device = _model_device(model)
@@ -336,13 +344,10 @@ def adapt_batchnorm(model: nn.Module, sequence, *, input_size: int, detector: st
         raise ValueError("the backbone has no BatchNorm layer to adapt")
     pos = _positions(sequence, frames)
     V = sequence.num_views
-    sizes = image_sizes(sequence)
     K_net = network_camera_of(model, K_net)
-    margins = np.array([box_margin(margin_px, K, K_net) for K in np.asarray(sequence.K)])
-    all_pos = np.arange(len(sequence.frames))  # boxes of the whole recording: hold_boxes as the drones do
-    boxes, _ = detection_boxes(np.asarray(sequence.keypoints[detector])[all_pos], sizes,
-                               min_confidence=box_min_confidence, margin_px=margins,
-                               where=f"{sequence.root} ({detector})")
+    # boxes of the whole recording: hold_boxes as the drones do
+    boxes, _, _ = _drone_boxes(sequence, np.arange(len(sequence.frames)), detector, box_min_confidence, margin_px,
+                               K_net)
     pairs = np.stack(np.meshgrid(pos, np.arange(V), indexing="ij"), -1).reshape(-1, 2)  # (F V, 2) rows, views
     pairs = pairs[np.random.default_rng(seed).permutation(len(pairs))]
     was_training = model.training

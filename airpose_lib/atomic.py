@@ -1,8 +1,8 @@
 """Writing a file without ever leaving half of one.
 
 :func:`atomic_path` is how every writer of the kit puts a file on disk (shards, manifests,
-checkpoints, predictions, sequence folders, runtime results). Imports nothing of the kit, so any
-layer may use it; its temp files are the ``.NAME.XXXX.tmp`` that :mod:`airpose_lib.folder_lock`
+checkpoints, predictions, sequence folders, runtime results); :func:`atomic_torch_save` is the
+one way a torch file is written. Imports nothing of the kit, so any layer may use it; its temp files are the ``.NAME.XXXX.tmp`` that :mod:`airpose_lib.folder_lock`
 clears after a writer died.
 """
 from __future__ import annotations
@@ -14,7 +14,7 @@ import tempfile
 from collections.abc import Iterator
 from pathlib import Path
 
-__all__ = ["atomic_path"]
+__all__ = ["atomic_path", "atomic_torch_save", "full_disk_error"]
 
 
 @contextlib.contextmanager
@@ -35,11 +35,43 @@ def atomic_path(target: Path) -> Iterator[Path]:
         os.umask(umask)
         os.chmod(tmp_path, 0o666 & ~umask)  # mkstemp makes 0600; give the file normal permissions
         os.replace(tmp_path, target)
-    except OSError as e:
-        if e.errno in (errno.ENOSPC, errno.EDQUOT) and e.filename is None:
+    except Exception as e:
+        full = full_disk_error(e)
+        if full is not None and full.filename is None:
             # The writers (zipfile, torch.save, numpy) do not say which file the full disk stopped.
-            raise OSError(e.errno, os.strerror(e.errno), str(target)) from e
+            raise OSError(full.errno, os.strerror(full.errno), str(target)) from e
         raise
     finally:
         if tmp_path.exists():
             tmp_path.unlink()
+
+
+def full_disk_error(exc: BaseException | None) -> OSError | None:
+    """The ENOSPC / EDQUOT error in the chain of ``exc``, if any: a writer's clean-up often raises
+    again over it (zipfile's close, torch's end-of-archive ``RuntimeError: ... unexpected pos``)."""
+    seen = set()
+    while exc is not None and id(exc) not in seen:
+        seen.add(id(exc))
+        if isinstance(exc, OSError) and exc.errno in (errno.ENOSPC, errno.EDQUOT):
+            return exc
+        exc = exc.__cause__ or exc.__context__
+    return None
+
+
+def atomic_torch_save(obj: object, target: Path) -> Path:
+    """``torch.save(obj)`` to ``target`` through :func:`atomic_path`.
+
+    torch writes through a Python file object here, not a path: given a path, torch's C++ writer
+    turns a full disk into ``RuntimeError: ... unexpected pos`` with no errno anywhere, which reads
+    as a bug; through a file object the ``OSError(ENOSPC)`` stays in the chain, and
+    :func:`atomic_path` raises it naming ``target``, the previous file left in place.
+
+    Returns:
+        ``target`` as a Path.
+    """
+    import torch  # only the writers of torch files pay for it; the helpers stay standard library
+
+    target = Path(target)
+    with atomic_path(target) as tmp, open(tmp, "wb") as f:
+        torch.save(obj, f)
+    return target

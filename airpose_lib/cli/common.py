@@ -11,6 +11,7 @@ import errno
 import typing
 from pathlib import Path
 
+from airpose_lib.atomic import full_disk_error  # standard library only
 from airpose_lib.body.genders import GENDERS  # a leaf of the lazy body package: no torch
 from airpose_lib.errors import UserError  # standard library only
 from airpose_lib.profiles import profile_names  # yaml only
@@ -78,16 +79,13 @@ def user_error_message(exc: BaseException) -> str | None:
 def _no_space(exc: BaseException) -> str | None:
     """A full disk anywhere in the chain of ``exc`` (a writer's ENOSPC often surfaces as another
     error raised while the writer cleans up): the one-line message, else None."""
-    seen = set()
-    while exc is not None and id(exc) not in seen:
-        seen.add(id(exc))
-        if isinstance(exc, OSError) and exc.errno in (errno.ENOSPC, errno.EDQUOT):
-            where = f" while writing {exc.filename}" if exc.filename else ""
-            return (f"no space left on the device{where}; free some space (or point $AIRPOSE_CACHE / "
-                    "$AIRPOSE_RUNS / --out at a larger disk) and run the command again: what was finished is "
-                    "kept and the rerun resumes")
-        exc = exc.__cause__ or exc.__context__
-    return None
+    full = full_disk_error(exc)
+    if full is None:
+        return None
+    where = f" while writing {full.filename}" if full.filename else ""
+    return (f"no space left on the device{where}; free some space (or point $AIRPOSE_CACHE / "
+            "$AIRPOSE_RUNS / --out at a larger disk) and run the command again: what was finished is "
+            "kept and the rerun resumes")
 
 
 def parse_range(text: str | None, what: str = "image numbers",

@@ -28,7 +28,7 @@ import numpy as np
 import torch
 
 from airpose_lib import __version__  # the package root holds only the version
-from airpose_lib.atomic import atomic_path
+from airpose_lib.atomic import atomic_torch_save
 from airpose_lib.errors import DamagedFileError, UserError, reading
 
 __all__ = [
@@ -124,9 +124,7 @@ def write_checkpoint(path: str | Path, state: dict[str, Any]) -> Path:
         ``path``.
     """
     path = Path(path)
-    with atomic_path(path) as tmp:
-        torch.save({"format_version": FORMAT_VERSION, "kit_version": kit_version(), **state}, tmp)
-    return path
+    return atomic_torch_save({"format_version": FORMAT_VERSION, "kit_version": kit_version(), **state}, path)
 
 
 def save_checkpoint(out_dir: str | Path, state: dict[str, Any], keep: int = 2) -> Path:

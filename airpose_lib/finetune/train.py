@@ -68,7 +68,7 @@ import numpy as np
 import torch
 from torch import nn
 
-from airpose_lib.atomic import atomic_path
+from airpose_lib.atomic import atomic_path, atomic_torch_save
 from airpose_lib.body import load_body_model
 from airpose_lib.config_fields import ConfigError
 from airpose_lib.data.sequences.reader import load_sequence, recording_fingerprint
@@ -210,9 +210,8 @@ def _feature_cache(model, seq, data_fp: str, cfg: FineTuneConfig, input_size: in
     arrays = sequence_features(model, seq, input_size=input_size, detector=cfg.detector,
                                batch_size=cfg.feature_batch_size, box_min_confidence=cfg.box_min_confidence,
                                margin_px=cfg.margin_px, K_net=K_net, progress=progress, cut=cfg.trainable_from)
-    with atomic_path(path) as tmp:
-        torch.save({"fingerprint": fp, "arrays": {k: torch.from_numpy(np.asarray(v)) for k, v in arrays.items()}},
-                   tmp)
+    atomic_torch_save({"fingerprint": fp, "arrays": {k: torch.from_numpy(np.asarray(v)) for k, v in arrays.items()}},
+                      path)
     return arrays
 
 

@@ -66,7 +66,7 @@ from typing import Any
 import torch
 from torch import Tensor
 
-from airpose_lib.atomic import atomic_path
+from airpose_lib.atomic import atomic_torch_save
 from airpose_lib.errors import UserError
 from airpose_lib.safe_pickle import torch_pickle_module
 
@@ -409,6 +409,4 @@ def write_official_checkpoint(model: AirPoseNet, path: str | Path, *, epoch: int
             "state_dict": to_official_state_dict(model), "optimizer_states": [], "lr_schedulers": [],
             "hparams_name": "hparams", "hyper_parameters": {"model": OFFICIAL_NAMES[model.variant]}}
     ckpt.update(dict(extra or {}))
-    with atomic_path(path) as tmp:
-        torch.save(ckpt, tmp)
-    return path
+    return atomic_torch_save(ckpt, path)

@@ -28,7 +28,7 @@ from typing import Any
 import torch
 
 from airpose_lib import __version__  # the package root holds only the version
-from airpose_lib.atomic import atomic_path
+from airpose_lib.atomic import atomic_torch_save
 from airpose_lib.body.loader import _located
 from airpose_lib.errors import ConfigError, UserError, reading
 from airpose_lib.paths import cache_dir
@@ -88,9 +88,7 @@ def save_prior(model: VPoser, path: str | Path, provenance: Mapping[str, Any] | 
         "state_dict": {k: v.detach().cpu().clone() for k, v in model.state_dict().items()},
         "provenance": {"kit_version": __version__, "torch": str(torch.__version__), **dict(provenance or {})},
     }
-    with atomic_path(path) as tmp:
-        torch.save(blob, tmp)
-    return path
+    return atomic_torch_save(blob, path)
 
 
 def _load_kit(path: Path) -> tuple[VPoser, dict]:

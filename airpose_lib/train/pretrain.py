@@ -30,7 +30,7 @@ from pathlib import Path
 import torch
 from torch.utils.data import DataLoader
 
-from airpose_lib.atomic import atomic_path
+from airpose_lib.atomic import atomic_path, atomic_torch_save
 from airpose_lib.config_fields import config_from
 from airpose_lib.data.still.dataset import StillFrameDataset
 from airpose_lib.data.still.generate import GenerationConfig, default_root, ensure_still_dataset, profile_config
@@ -206,8 +206,7 @@ def _write_backbone_file(sd: dict, path: str | Path, meta: dict) -> Path:
     and its JSON record beside it."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    with atomic_path(path) as tmp:
-        torch.save({"state_dict": sd, "meta_json": json.dumps(meta, sort_keys=True)}, tmp)
+    atomic_torch_save({"state_dict": sd, "meta_json": json.dumps(meta, sort_keys=True)}, path)
     record = dict(meta, sha256=sha256_file(path), bytes=path.stat().st_size)
     path.with_suffix(".json").write_text(json.dumps(record, indent=2, sort_keys=True) + "\n")
     return path

@@ -239,7 +239,10 @@ def test_ablation_training_workers_die_with_a_killed_parent(tmp_path):
     try:
         while len(workers) < 2:
             line = proc.stdout.readline()  # the parent prints nothing else; EOF if it fails
-            assert line, f"the parent ended before both workers started: {(tmp_path / 'stderr.txt').read_text()}"
+            if not line:  # the parent (and any worker) closed stdout: say how it ended
+                code = proc.wait(30)
+                pytest.fail(f"the parent ended (exit status {code}; negative: killed by that signal) before both "
+                            f"workers started; its stderr: {(tmp_path / 'stderr.txt').read_text()!r}")
             if line.startswith("WORKER"):
                 workers.add(int(line.split()[1]))
         kids = _children(proc.pid)

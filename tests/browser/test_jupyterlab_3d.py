@@ -129,6 +129,19 @@ def _green_fraction(img: np.ndarray, margin: int = 25) -> float:
     return float((g - np.maximum(r, b) > margin).mean())
 
 
+def _trame_frame(page, timeout_s: float = 120.0):
+    """The trame view's frame, once its iframe has loaded: the widget attaches it after the last
+    cell reports done, and Playwright learns of it only while it handles events (hence
+    ``wait_for_timeout``, not ``time.sleep``). None if it never came."""
+    t_end = time.monotonic() + timeout_s
+    while time.monotonic() < t_end:
+        view = next((f for f in page.frames if "index.html?ui=" in f.url), None)
+        if view is not None:
+            return view
+        page.wait_for_timeout(500)
+    return None
+
+
 def test_notebook_07_runs_in_jupyterlab_and_its_3d_view_follows_the_slider(lab):
     sync_playwright = _browser_or_skip()
     base, token = lab
@@ -144,8 +157,8 @@ def test_notebook_07_runs_in_jupyterlab_and_its_3d_view_follows_the_slider(lab):
             assert page.evaluate(_ERRORS) == [], "a cell of notebook 07 raised in JupyterLab"
 
             # The trame view: its own page in an iframe, served by the kernel on another port.
-            view = next((f for f in page.frames if "index.html?ui=" in f.url), None)
-            assert view is not None, "no trame iframe: the notebook fell back to static images"
+            view = _trame_frame(page)
+            assert view is not None, "no trame iframe within 120 s: the notebook fell back to static images?"
             view.wait_for_selector("canvas", state="visible", timeout=120_000)
             iframe = page.locator("iframe").first
             iframe.scroll_into_view_if_needed()

@@ -334,6 +334,22 @@ def test_worker_count_does_not_change_the_bytes(reference, tmp_path):
     assert _shard_bytes(root) == _shard_bytes(reference[0])
 
 
+def test_a_render_worker_that_dies_costs_only_its_shard(reference, tmp_path, monkeypatch, capsys):
+    """A worker killed by SIGSEGV mid-run: the workers start again for the unfinished shards, and
+    the dataset is the one a single process makes, byte for byte."""
+    import crashing_worker
+
+    import airpose_lib.data.still.generate as G
+
+    monkeypatch.setenv("AIRPOSE_TEST_CRASH_FLAG", str(tmp_path / "crashed"))
+    monkeypatch.setattr(G, "_worker_shard", crashing_worker.crash_once)  # the workers are given this one
+    root = tmp_path / "two_workers"
+    manifest = generate_still_dataset(CFG, root, workers=2, progress=False, profile="test")
+    assert (tmp_path / "crashed").exists(), "no worker died: the test tested nothing"
+    assert "a render worker died" in capsys.readouterr().err
+    assert manifest["status"] == "complete" and _shard_bytes(root) == _shard_bytes(reference[0])
+
+
 # -- test crops (the official protocol: jittered like the training crops) --------------------------
 @pytest.fixture(scope="module")
 def crop_protocol(tmp_path_factory):

@@ -203,11 +203,16 @@ def generate_still_dataset(
         _finish_manifest(manifest, config)
         write_manifest(root, manifest)
 
+    def recount() -> None:  # after a worker died mid-shard: its samples are rendered again
+        if bar is not None:
+            bar.n = manifest["totals"]["samples"]
+            bar.refresh()
+
     try:
         if todo and workers <= 1:
             _run_inprocess(config, root, todo, bar, finished)
         elif todo:
-            _run_pool(config, root, todo, min(workers, len(todo)), bar, finished)
+            _run_pool(config, root, todo, min(workers, len(todo)), bar, finished, recount)
     finally:
         if bar is not None:
             bar.close()
@@ -234,7 +239,42 @@ def _run_inprocess(config, root, todo, bar, finished) -> None:
         torch.set_num_threads(threads)
 
 
-def _run_pool(config, root, todo, workers, bar, finished) -> None:
+#: How many times the render workers are started again after one died (a native crash: one
+#: worker of the cpu profile's 35,200-sample run segfaulted in libc, and the rerun rendered the
+#: same shards without one). Only the unfinished shards are rendered again; a shard that keeps
+#: killing its worker raises after that.
+POOL_RESTARTS = 2
+
+
+def _run_pool(config, root, todo, workers, bar, finished, recount=None) -> None:
+    """Render the shards ``todo`` in ``workers`` spawned processes; ``finished(record)`` for each.
+
+    A worker that dies (``BrokenProcessPool``) costs only the shards not yet finished: the pool is
+    started again for them, up to :data:`POOL_RESTARTS` times, with a line on stderr; then
+    ``recount()`` (if given) sets the progress bar back to what is finished.
+    """
+    from concurrent.futures.process import BrokenProcessPool
+
+    todo, done = list(todo), set()
+
+    def record(rec: dict) -> None:
+        done.add(rec["index"])
+        finished(rec)
+
+    for restart in range(POOL_RESTARTS + 1):
+        try:
+            return _pool_once(config, root, [k for k in todo if k not in done], workers, bar, record)
+        except BrokenProcessPool as e:
+            left = [k for k in todo if k not in done]
+            if restart == POOL_RESTARTS:
+                raise
+            print(f"airpose: a render worker died ({e}); starting the workers again for the {len(left)} "
+                  f"unfinished shards of {root}", file=sys.stderr)
+            if recount is not None:
+                recount()
+
+
+def _pool_once(config, root, todo, workers, bar, finished) -> None:
     from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 
     # spawn: a fresh interpreter per worker, so no GL context or torch thread pool is inherited.

@@ -266,3 +266,25 @@ def test_a_command_reads_its_profile_once_and_passes_the_reading_down(monkeypatc
     monkeypatch.setattr(cli, "build_parser", lambda: parser)
     assert cli.main(["data", "generate", "--profile", "smoke"]) == 0
     assert isinstance(seen[0], Profile) and seen[0] == "smoke" and seen[0].sections == read_profile("smoke")
+
+
+def test_a_profile_given_as_a_file_names_its_folders_by_its_stem(tmp_path, monkeypatch):
+    """A profile file outside the kit (e.g. results/cpu/selection/cpu_more.yaml) gets one folder
+    per cache and run kind, named as a kit profile's would be: not a tree under its path."""
+    from airpose_lib.data.sequences.cache import default_sequence_root
+    from airpose_lib.data.still.config import default_root
+    from airpose_lib.experiments.recordings import default_experiment_dir
+    from airpose_lib.profiles import loaded, profile_name
+
+    monkeypatch.setenv("AIRPOSE_CACHE", str(tmp_path / "cache"))
+    monkeypatch.setenv("AIRPOSE_RUNS", str(tmp_path / "runs"))
+    path = tmp_path / "results" / "cpu" / "selection" / "cpu_more.yaml"
+    path.parent.mkdir(parents=True)
+    path.write_text("inherits: smoke\n")
+    for given in (str(path), loaded(str(path))):
+        assert profile_name(given) == "cpu_more"
+        assert default_sequence_root(given) == tmp_path / "cache" / "data" / "sequences_cpu_more"
+        assert default_sequence_root(given, field=True) == tmp_path / "cache" / "data" / "sequences_cpu_more_field"
+        assert default_experiment_dir(given, field=True) == tmp_path / "runs" / "recordings" / "cpu_more_field"
+        assert default_root(given) == tmp_path / "cache" / "data" / "still_cpu_more"
+    assert profile_name("cpu") == "cpu" and default_sequence_root("cpu").name == "sequences_cpu"

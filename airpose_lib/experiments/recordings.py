@@ -79,6 +79,7 @@ from airpose_lib.model.official import load_official_checkpoint
 from airpose_lib.paths import run_path
 from airpose_lib.prior import load_prior
 from airpose_lib.prior.build import ensure_prior
+from airpose_lib.profiles import profile_name
 from airpose_lib.train.ablation import trained_checkpoint
 from airpose_lib.train.config import load_train_config
 from airpose_lib.train.official import find_official_checkpoint
@@ -99,9 +100,11 @@ OFFICIAL_REAL_CHECKPOINTS = {"Baseline": "hmr_real_ckpt", "AirPose": "copenet_tw
 
 
 def default_experiment_dir(profile: str, field: bool = False) -> Path:
-    """``<runs>/recordings/<profile>`` (:func:`airpose_lib.paths.runs_root`, like training runs);
-    on the profile's field recordings ``<runs>/recordings/<profile>_field``."""
-    return run_path("recordings", f"{profile}_field" if field else profile)
+    """``<runs>/recordings/<name>`` (:func:`airpose_lib.paths.runs_root`, like training runs;
+    ``<name>``: :func:`~airpose_lib.profiles.profile_name`); on the profile's field recordings
+    ``<runs>/recordings/<name>_field``."""
+    name = profile_name(profile)
+    return run_path("recordings", f"{name}_field" if field else name)
 
 
 @dataclass

@@ -77,6 +77,7 @@ from airpose_lib.model import build_model, to_smplx_params
 from airpose_lib.model.pretrain import PretrainNet
 from airpose_lib.model.record import NETWORK_KEY, network_record
 from airpose_lib.paths import run_path
+from airpose_lib.profiles import profile_name
 
 from .config import TrainConfig
 from .features import FeatureDataset, ensure_features, load_backbone_file
@@ -287,7 +288,7 @@ class TrainResult:
 def default_out_dir(profile: str | Path | None, variant: str, seed: int) -> Path:
     """``<runs>/train/<profile>/<variant>/seed<seed>``, ``<runs>`` = :func:`airpose_lib.paths.runs_root`
     (the checkout's ``runs/`` or ``$AIRPOSE_RUNS``, whatever the working directory)."""
-    name = Path(str(profile)).stem if profile is not None else "default"
+    name = profile_name(profile) if profile is not None else "default"
     return run_path("train", name, variant, f"seed{seed}")
 
 

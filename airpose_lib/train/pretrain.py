@@ -46,7 +46,7 @@ from airpose_lib.geometry import axis_angle_to_matrix, rot6d_to_matrix
 from airpose_lib.losses.pretrain import heading_bin
 from airpose_lib.model.backbone import build_backbone
 from airpose_lib.paths import cache_dir, run_path
-from airpose_lib.profiles import profile_section, section_where
+from airpose_lib.profiles import profile_name, profile_section, section_where
 
 from .config import TrainConfig
 from .loop import check_data_root, default_model_factory, start_training
@@ -85,7 +85,7 @@ def pretrain_stages(profile: str, **overrides) -> list[TrainConfig]:
             raise ProfileError(f"profile {profile}: `pretrain: continue_from:` must be a mapping of settings "
                                f"(e.g. {{steps: 4000}}), not {earlier!r}")
         chain.append({**chain[-1], **earlier})
-    name = Path(str(profile)).stem
+    name = profile_name(profile)
     where = section_where(profile, "pretrain")
 
     def stage(values: dict, extra: dict) -> TrainConfig:
@@ -153,7 +153,7 @@ def backbone_key(cfg: TrainConfig, data_fingerprint: str, start_key: str | None 
 
 def reference_backbone_path(profile: str) -> Path:
     """Where a profile's committed backbone lives in the repository."""
-    return _REPO / "results" / Path(str(profile)).stem / "pretrained_backbone.pt"
+    return _REPO / "results" / profile_name(profile) / "pretrained_backbone.pt"
 
 
 @torch.no_grad()
@@ -341,7 +341,7 @@ def _train_stage(profile: str, cfg: TrainConfig, key: str, start: Path | None, o
                                  progress=progress)
         options = {k: cfg.data[k] for k in DATA_OPTIONS if k in cfg.data}
         cfg = cfg.replace(pretrained=None if start is None else str(start), data={"root": str(data_root), **options})
-        out = Path(out_root) if out_root is not None else run_path("pretrain", Path(str(profile)).stem)
+        out = Path(out_root) if out_root is not None else run_path("pretrain", profile_name(profile))
         t0 = time.time()
         # One process trains a backbone (the others, torchrun's ranks included, wait on the lock
         # above): a pretraining nested in a distributed training must not join its process group.

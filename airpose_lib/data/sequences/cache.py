@@ -10,7 +10,7 @@ from pathlib import Path
 from airpose_lib.errors import ConfigError
 from airpose_lib.folder_lock import MAKER_WAIT_S, folder_lock
 from airpose_lib.paths import cache_dir
-from airpose_lib.profiles import section_where
+from airpose_lib.profiles import profile_name, section_where
 
 from .config import SEQUENCE_GENERATOR_VERSION, SequenceConfig, profile_sequences
 from .detections import DETECTOR_VERSION
@@ -21,9 +21,11 @@ __all__ = ["default_sequence_root", "ensure_sequences"]
 
 
 def default_sequence_root(profile: str, field: bool = False) -> Path:
-    """Where a profile's recordings live by default: ``<kit cache>/data/sequences_<profile>``,
-    its field recordings (``sequences: field_recordings:``) in ``sequences_<profile>_field``."""
-    return cache_dir() / "data" / (f"sequences_{profile}_field" if field else f"sequences_{profile}")
+    """Where a profile's recordings live by default: ``<kit cache>/data/sequences_<name>``,
+    its field recordings (``sequences: field_recordings:``) in ``sequences_<name>_field``
+    (``<name>``: :func:`~airpose_lib.profiles.profile_name`)."""
+    name = profile_name(profile)
+    return cache_dir() / "data" / (f"sequences_{name}_field" if field else f"sequences_{name}")
 
 
 def _detections_current(root: Path) -> bool:

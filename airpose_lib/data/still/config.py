@@ -11,7 +11,7 @@ from pathlib import Path
 
 from airpose_lib.errors import ConfigError
 from airpose_lib.paths import cache_dir
-from airpose_lib.profiles import ProfileError, profile_path, section_config
+from airpose_lib.profiles import ProfileError, profile_name, profile_path, section_config
 
 from .appearance import AppearanceConfig
 from .manifest import DatasetError
@@ -188,4 +188,4 @@ def profile_config(profile: str) -> GenerationConfig:
 def default_root(profile: str) -> Path:
     """Where a profile's dataset lives by default: ``<kit cache>/data/still_<profile>`` (a profile
     file of one's own: its stem)."""
-    return cache_dir() / "data" / f"still_{Path(str(profile)).stem}"
+    return cache_dir() / "data" / f"still_{profile_name(profile)}"

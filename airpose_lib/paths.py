@@ -15,12 +15,19 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-__all__ = ["CACHE_ENV", "RUNS_ENV", "cache_dir", "repo_root", "runs_root", "run_path", "figures_root"]
+__all__ = ["CACHE_ENV", "RUNS_ENV", "cache_dir", "repo_root", "runs_root", "run_path", "figures_root", "profile_name"]
 
 #: Environment variable naming the runs folder (overrides the checkout's ``runs/``).
 RUNS_ENV = "AIRPOSE_RUNS"
 #: Environment variable naming the cache folder (overrides ``~/.cache/airpose``).
 CACHE_ENV = "AIRPOSE_CACHE"
+
+
+def profile_name(profile: str | os.PathLike) -> str:
+    """The name a profile's folders are made from: ``"cpu"`` for ``"cpu"``, and the file's stem
+    for a profile given as a path (``results/x/cpu_more.yaml`` -> ``"cpu_more"``), so that its
+    runs, caches and results are one folder each, as the kit's own profiles' are."""
+    return Path(str(profile)).stem
 
 
 def cache_dir() -> Path:

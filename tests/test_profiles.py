@@ -273,11 +273,16 @@ def test_a_profile_given_as_a_file_names_its_folders_by_its_stem(tmp_path, monke
     per cache and run kind, named as a kit profile's would be: not a tree under its path."""
     from airpose_lib.data.sequences.cache import default_sequence_root
     from airpose_lib.data.still.config import default_root
+    from airpose_lib.eval.reference import reference_dir
     from airpose_lib.experiments.recordings import default_experiment_dir
-    from airpose_lib.profiles import loaded, profile_name
+    from airpose_lib.paths import profile_name
+    from airpose_lib.prior import build
+    from airpose_lib.prior.checkpoint import kit_prior_path
+    from airpose_lib.profiles import loaded
 
     monkeypatch.setenv("AIRPOSE_CACHE", str(tmp_path / "cache"))
     monkeypatch.setenv("AIRPOSE_RUNS", str(tmp_path / "runs"))
+    monkeypatch.setattr(build, "prior_is_current", lambda path, p: path == kit_prior_path("cpu_more"))  # no training
     path = tmp_path / "results" / "cpu" / "selection" / "cpu_more.yaml"
     path.parent.mkdir(parents=True)
     path.write_text("inherits: smoke\n")
@@ -287,4 +292,6 @@ def test_a_profile_given_as_a_file_names_its_folders_by_its_stem(tmp_path, monke
         assert default_sequence_root(given, field=True) == tmp_path / "cache" / "data" / "sequences_cpu_more_field"
         assert default_experiment_dir(given, field=True) == tmp_path / "runs" / "recordings" / "cpu_more_field"
         assert default_root(given) == tmp_path / "cache" / "data" / "still_cpu_more"
+        assert build.ensure_prior(given) == kit_prior_path("cpu_more")  # it used to raise on the path
+        assert reference_dir(given).name == "cpu_more"
     assert profile_name("cpu") == "cpu" and default_sequence_root("cpu").name == "sequences_cpu"

@@ -39,6 +39,7 @@ import pandas as pd
 from airpose_lib import __version__
 from airpose_lib.atomic import atomic_path
 from airpose_lib.errors import UserError
+from airpose_lib.paths import profile_name
 
 from .ablation import PER_SEED_METRICS, table_to_markdown
 
@@ -58,8 +59,8 @@ COMPARED_METRICS = (*PER_SEED_METRICS, "mpe_tight_m", "mpjpe_tight_m")
 
 
 def reference_dir(profile: str, root: str | Path | None = None) -> Path:
-    """``results/<profile>`` of the checkout (or of ``root``)."""
-    return Path(root if root is not None else RESULTS_ROOT) / profile
+    """``results/<name>`` of the checkout (or of ``root``; ``<name>``: :func:`~airpose_lib.paths.profile_name`)."""
+    return Path(root if root is not None else RESULTS_ROOT) / profile_name(profile)
 
 
 # -- provenance -----------------------------------------------------------------------------------
@@ -111,7 +112,7 @@ def reference_outputs(profile: str) -> tuple[str, ...]:
     dirty for the writers that come after the first (notebook 02's bundle, then notebook 05's
     recordings, then the report). Inputs under ``results/<profile>/`` (the committed backbone) are
     not among them: a change to one is a change to what the results depend on."""
-    base = f"results/{Path(str(profile)).stem}/"
+    base = f"results/{profile_name(profile)}/"
     return (*(base + name for name in REFERENCE_FILES), base + "recordings/", base + "report/")
 
 

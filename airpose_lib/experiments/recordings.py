@@ -76,10 +76,9 @@ from airpose_lib.fitting import airpose_plus, fitting_profile
 from airpose_lib.folder_lock import folder_lock
 from airpose_lib.model import posed_joints_and_vertices, to_smplx_params
 from airpose_lib.model.official import load_official_checkpoint
-from airpose_lib.paths import run_path
+from airpose_lib.paths import profile_name, run_path
 from airpose_lib.prior import load_prior
 from airpose_lib.prior.build import ensure_prior
-from airpose_lib.profiles import profile_name
 from airpose_lib.train.ablation import trained_checkpoint
 from airpose_lib.train.config import load_train_config
 from airpose_lib.train.official import find_official_checkpoint

@@ -20,6 +20,7 @@ from airpose_lib.data.still.poses import sample_body_pose, within_limits
 from airpose_lib.devices import resolve_device
 from airpose_lib.errors import ConfigError
 from airpose_lib.folder_lock import file_lock_for
+from airpose_lib.paths import profile_name
 from airpose_lib.profiles import section_where
 
 from .checkpoint import kit_prior_path, load_prior, save_prior
@@ -94,7 +95,7 @@ def train_and_save_prior(profile: str, out: str | Path | None = None, *, steps: 
         ``steps, seconds, final_train_loss`` and the validation numbers of :func:`evaluate_prior`
         plus ``samples_within_joint_limits`` (share of N(0, I) samples within the joint limits +5 deg).
     """
-    path = Path(out) if out is not None else kit_prior_path(profile)
+    path = Path(out) if out is not None else kit_prior_path(profile_name(profile))
     with file_lock_for(path, "prior checkpoint"):  # one writer per output file
         return _train_and_save_prior(profile, path, steps, seed, device, progress)
 
@@ -149,7 +150,7 @@ def prior_is_current(path: str | Path, profile: str) -> bool:
 def ensure_prior(profile: str, progress: bool = False) -> Path:
     """The profile's kit prior, trained first if it is not cached yet or was trained on another
     corpus than the profile's (:func:`prior_is_current`)."""
-    path = kit_prior_path(profile)
+    path = kit_prior_path(profile_name(profile))
     if not prior_is_current(path, profile):
         path, _ = train_and_save_prior(profile, progress=progress)
     return path

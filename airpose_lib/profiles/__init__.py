@@ -44,7 +44,7 @@ from airpose_lib.config_fields import config_from
 from airpose_lib.errors import ProfileError, ProfileSettingError
 
 __all__ = ["PROFILES_DIR", "INHERITS", "ProfileError", "ProfileSettingError", "Profile", "loaded", "profile_names",
-           "profile_name", "profile_path", "read_profile", "profile_section", "section_where", "section_config"]
+           "profile_path", "read_profile", "profile_section", "section_where", "section_config"]
 
 #: Folder of the kit's ``<name>.yaml`` profile files.
 PROFILES_DIR = Path(__file__).resolve().parent
@@ -54,13 +54,6 @@ def profile_names(folder: str | Path = PROFILES_DIR) -> list[str]:
     """Names of the profiles in ``folder`` (the kit's: ``["cpu", "cpu_paper_layout", "paper", "smoke"]``),
     sorted."""
     return sorted(p.stem for p in Path(folder).glob("*.yaml"))
-
-
-def profile_name(profile: str | Path) -> str:
-    """The name a profile's folders are made from: ``"cpu"`` for ``"cpu"``, and the file's stem
-    for a profile given as a path (``results/x/cpu_more.yaml`` -> ``"cpu_more"``), so that its
-    runs and caches are one folder, as the kit's own profiles' are."""
-    return Path(str(profile)).stem
 
 
 def profile_path(profile: str | Path, folder: str | Path = PROFILES_DIR) -> Path:

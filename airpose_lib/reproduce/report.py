@@ -33,7 +33,7 @@ from pathlib import Path
 
 import nbformat
 
-from airpose_lib.paths import figures_root, runs_root
+from airpose_lib.paths import figures_root, profile_name, runs_root
 
 from .runner import CATALOG_PATH, REPO_ROOT, CatalogEntry, load_catalog
 
@@ -234,8 +234,8 @@ def build_report(profile: str, run_dir: str | Path | None = None, figures_dir: s
     from jinja2 import Environment  # with nbconvert
     from nbconvert.filters import markdown2html  # the README's captions are Markdown
 
-    run_dir = Path(run_dir) if run_dir is not None else runs_root() / profile
-    figures_dir = Path(figures_dir) if figures_dir is not None else figures_root() / profile
+    run_dir = Path(run_dir) if run_dir is not None else runs_root() / profile_name(profile)
+    figures_dir = Path(figures_dir) if figures_dir is not None else figures_root() / profile_name(profile)
     out_dir = Path(out_dir) if out_dir is not None else run_dir / "report"
     notebooks_dir = run_dir / "notebooks"
     if not any(notebooks_dir.glob("*.ipynb")):

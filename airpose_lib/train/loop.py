@@ -76,8 +76,7 @@ from airpose_lib.losses.pretrain import PretrainLoss, PretrainLossConfig
 from airpose_lib.model import build_model, to_smplx_params
 from airpose_lib.model.pretrain import PretrainNet
 from airpose_lib.model.record import NETWORK_KEY, network_record
-from airpose_lib.paths import run_path
-from airpose_lib.profiles import profile_name
+from airpose_lib.paths import profile_name, run_path
 
 from .config import TrainConfig
 from .features import FeatureDataset, ensure_features, load_backbone_file

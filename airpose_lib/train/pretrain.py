@@ -45,8 +45,8 @@ from airpose_lib.folder_lock import file_lock
 from airpose_lib.geometry import axis_angle_to_matrix, rot6d_to_matrix
 from airpose_lib.losses.pretrain import heading_bin
 from airpose_lib.model.backbone import build_backbone
-from airpose_lib.paths import cache_dir, run_path
-from airpose_lib.profiles import profile_name, profile_section, section_where
+from airpose_lib.paths import cache_dir, profile_name, run_path
+from airpose_lib.profiles import profile_section, section_where
 
 from .config import TrainConfig
 from .loop import check_data_root, default_model_factory, start_training

@@ -19,6 +19,7 @@ from pathlib import Path
 import matplotlib as mpl
 
 from airpose_lib import __version__  # the package root holds only the version
+from airpose_lib.paths import profile_name
 
 __all__ = [
     "METHOD_COLORS",
@@ -108,7 +109,7 @@ def figure_footer(params: Mapping | None) -> str:
     if params.get("notebook"):
         parts.append(str(params["notebook"]))
     if params.get("profile") is not None:
-        parts.append(f"profile {Path(str(params['profile'])).stem}")
+        parts.append(f"profile {profile_name(params['profile'])}")
     data = params.get("data_source", params.get("source"))
     if data is not None:
         parts.append(f"data {data}")

@@ -9,8 +9,8 @@ from pathlib import Path
 
 from airpose_lib.errors import ConfigError
 from airpose_lib.folder_lock import MAKER_WAIT_S, folder_lock
-from airpose_lib.paths import cache_dir
-from airpose_lib.profiles import profile_name, section_where
+from airpose_lib.paths import cache_dir, profile_name
+from airpose_lib.profiles import section_where
 
 from .config import SEQUENCE_GENERATOR_VERSION, SequenceConfig, profile_sequences
 from .detections import DETECTOR_VERSION

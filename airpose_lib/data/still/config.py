@@ -10,8 +10,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from airpose_lib.errors import ConfigError
-from airpose_lib.paths import cache_dir
-from airpose_lib.profiles import ProfileError, profile_name, profile_path, section_config
+from airpose_lib.paths import cache_dir, profile_name
+from airpose_lib.profiles import ProfileError, profile_path, section_config
 
 from .appearance import AppearanceConfig
 from .manifest import DatasetError

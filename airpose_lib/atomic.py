@@ -2,8 +2,8 @@
 
 :func:`atomic_path` is how every writer of the kit puts a file on disk (shards, manifests,
 checkpoints, predictions, sequence folders, runtime results); :func:`atomic_torch_save` is the
-one way a torch file is written. Imports nothing of the kit, so any layer may use it; its temp files are the ``.NAME.XXXX.tmp`` that :mod:`airpose_lib.folder_lock`
-clears after a writer died.
+one way a torch file is written. Imports nothing of the kit, so any layer may use it; its temp
+files are the ``.NAME.XXXX.tmp`` that :mod:`airpose_lib.folder_lock` clears after a writer died.
 """
 from __future__ import annotations
 

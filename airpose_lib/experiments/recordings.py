@@ -506,7 +506,8 @@ def finetune_candidates(profile: str, candidates: Mapping[str, Mapping], out: st
         for name, changes in candidates.items():
             run = out / variant / name
             _, info = _finetune_logged(pre, tuning, tests, dataclasses.replace(base, **changes), run, prior, False, key)
-            log = {int(r["step"]): r for r in pd.read_csv(run / "selection.csv").to_dict("records")}
+            sel = info["selection"]  # the selection log's columns (selection.csv)
+            log = {int(step): {k: v[i] for k, v in sel.items()} for i, step in enumerate(sel["step"])}
             kept = int(info["selected_step"])
             rows.append({"network": variant, "candidate": name, "kept_step": kept,
                          "heldout_j2d_step0": round(float(log[0]["heldout_j2d"]), 2),

@@ -244,12 +244,8 @@ def _drone_boxes(sequence, rows: np.ndarray, detector: str, box_min_confidence: 
                  K_net: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The drones' person boxes of ``rows (F,)`` of a loaded sequence (:func:`detection_boxes`,
     each view's margin in its own pixels): ``boxes (F, V, 4)``, ``valid (F, V)``, ``margins (V,)``."""
-    sizes = []
-    for v in range(sequence.num_views):
-        h, w = sequence.image(int(rows[0]), v).shape[:2]
-        sizes.append((w, h))
     margins = np.array([box_margin(margin_px, K, K_net) for K in np.asarray(sequence.K)])
-    boxes, valid = detection_boxes(np.asarray(sequence.keypoints[detector])[rows], sizes,
+    boxes, valid = detection_boxes(np.asarray(sequence.keypoints[detector])[rows], image_sizes(sequence),
                                    min_confidence=box_min_confidence, margin_px=margins,
                                    where=f"{sequence.root} ({detector})")
     return boxes, valid, margins

@@ -100,7 +100,7 @@ OFFICIAL_REAL_CHECKPOINTS = {"Baseline": "hmr_real_ckpt", "AirPose": "copenet_tw
 
 def default_experiment_dir(profile: str, field: bool = False) -> Path:
     """``<runs>/recordings/<name>`` (:func:`airpose_lib.paths.runs_root`, like training runs;
-    ``<name>``: :func:`~airpose_lib.profiles.profile_name`); on the profile's field recordings
+    ``<name>``: :func:`~airpose_lib.paths.profile_name`); on the profile's field recordings
     ``<runs>/recordings/<name>_field``."""
     name = profile_name(profile)
     return run_path("recordings", f"{name}_field" if field else name)

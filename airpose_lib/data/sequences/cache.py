@@ -23,7 +23,7 @@ __all__ = ["default_sequence_root", "ensure_sequences"]
 def default_sequence_root(profile: str, field: bool = False) -> Path:
     """Where a profile's recordings live by default: ``<kit cache>/data/sequences_<name>``,
     its field recordings (``sequences: field_recordings:``) in ``sequences_<name>_field``
-    (``<name>``: :func:`~airpose_lib.profiles.profile_name`)."""
+    (``<name>``: :func:`~airpose_lib.paths.profile_name`)."""
     name = profile_name(profile)
     return cache_dir() / "data" / (f"sequences_{name}_field" if field else f"sequences_{name}")
 

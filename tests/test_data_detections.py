@@ -77,6 +77,18 @@ def test_temporal_correlation():
     assert abs(r - 0.6) < 0.05
 
 
+def test_temporal_correlation_of_a_recording_that_keeps_every_fifth_frame():
+    # AR(1) over video frames: five video frames apart the correlation is 0.8 ** 5 = 0.328
+    det = dataclasses.replace(OPENPOSE, temporal_corr=0.8, **CLEAN)
+    kp, size, wh = _scene(F=4000, sizes=(200.0,))
+    e = (detect_keypoints(kp, size, wh, det, np.random.default_rng(3), frame_step=5).keypoints[..., 0]
+         - kp[..., 0])[:, 0]
+    r = np.mean([np.corrcoef(e[1:, j], e[:-1, j])[0, 1] for j in range(25)])
+    assert abs(r - 0.8 ** 5) < 0.05
+    one = detect_keypoints(kp, size, wh, det, np.random.default_rng(3), frame_step=1)
+    np.testing.assert_array_equal(one.keypoints, detect_keypoints(kp, size, wh, det, np.random.default_rng(3)).keypoints)
+
+
 def test_swap_and_miss_rates():
     det = dataclasses.replace(OPENPOSE, swap_rate=0.1, limb_swap_rate=0.1, miss_rate=0.05,
                               miss_size_ref=200.0, frame_miss_rate=0.05, outlier_rate=0.0,

@@ -238,3 +238,34 @@ def test_renderer_applies_the_option_only_when_on(open_model_files):
         expected = field_frame(clean[v], FieldConfig(enabled=True, exposure_ev=1.0, read_noise=0.01),
                                field_rng(2, 1, v), K=sim.gt["K"][v])
         np.testing.assert_array_equal(on[v], expected)
+
+
+def test_a_recording_that_keeps_some_of_the_video_frames(open_model_files):
+    """``fps: 1, video_fps: 2`` (every second video frame kept): the motion blur is that of one
+    video frame, half the image motion between two kept frames; video_fps unset keeps the settings."""
+    from airpose_lib.data.sequences import SequenceRenderer, simulate_sequence
+    from airpose_lib.errors import ConfigError
+
+    cfg = SequenceConfig(person="person1", n_frames=3, seed=2, render_scale=0.25, anti_aliasing=False,
+                         fps=1.0, video_fps=2.0)
+    assert cfg.frame_step == 2.0 and SequenceConfig().frame_step == 1.0
+    assert cfg.to_dict()["video_fps"] == 2.0 and "video_fps" not in SequenceConfig().to_dict()
+    assert SequenceConfig.from_dict(json.loads(json.dumps(cfg.to_dict()))).to_dict() == cfg.to_dict()
+    with pytest.raises(ConfigError, match="video_fps"):
+        SequenceConfig(fps=30.0, video_fps=6.0)
+    sim = simulate_sequence(cfg)
+    blur = FieldConfig(enabled=True, shutter=1.0)
+
+    def render(field: FieldConfig) -> list[np.ndarray]:
+        s = dataclasses.replace(sim, config=dataclasses.replace(sim.config, field=field))
+        with SequenceRenderer(s) as r:
+            return next(r.render_frames([1]))[1]
+
+    clean, blurred = render(FieldConfig()), render(blur)
+    velocity = person_image_velocity(sim.gt["j2d"])[1]  # (V, 2) pixels per kept frame
+    assert np.hypot(*velocity.T).min() > 2.0  # both blurs a pixel or more: their lengths tell
+    for v in range(2):
+        expected = field_frame(clean[v], blur, field_rng(2, 1, v), K=sim.gt["K"][v], velocity_px=velocity[v] / 2)
+        np.testing.assert_array_equal(blurred[v], expected)
+        assert not np.array_equal(blurred[v], field_frame(clean[v], blur, field_rng(2, 1, v), K=sim.gt["K"][v],
+                                                          velocity_px=velocity[v]))

@@ -174,6 +174,53 @@ def test_field_gap_table_compares_each_method_with_itself_on_the_clean_frames():
     assert np.isclose(mp["value"], 2 * mp["reference_value"])
 
 
+def test_recovery_table_measures_the_share_of_the_rise_fine_tuning_takes_back():
+    # Hand case: the joints are the truth scaled about the pelvis, so a frame's MPJPE is (s - 1)
+    # times that frame's own joint spread a_f. Clean pre-trained s = 1.05, field pre-trained 1.20:
+    # the rise is 3 a_f in every frame. AirPose tuned 1.10 recovers 2 a_f (share 2/3 in every
+    # resample), Baseline tuned 1.25 loses a_f (-1/3), the last pair's 1.18 recovers 0.4 a_f (0.4 / 3).
+    from types import SimpleNamespace
+
+    from airpose_lib.experiments.recording_tables import recovery_table
+    from airpose_lib.experiments.recordings import RecordingExperiment
+
+    rng = np.random.default_rng(1)
+    F, V = 90, 2
+    tau = rng.normal(0.0, 1.0, (F, V, 3)) + np.array([0.0, 0.0, 10.0])
+    j3d = rng.normal(0.0, 0.3, (F, V, 22, 3))
+    j3d -= j3d[:, :, :1]
+    gt = {"tau": tau, "phi": np.broadcast_to(np.eye(3), (F, V, 3, 3)).copy(), "j3d_cam": j3d, "fps": 30.0}
+    seq = SimpleNamespace(ground_truth=gt)
+
+    def experiment(scales, finetune_info=None):
+        est, joints = {}, {}
+        for m, s in scales.items():
+            est[m], joints[m] = _estimate(tau, j3d * s)
+        return RecordingExperiment("smoke", None, {"person1": seq, "person2": seq},
+                                   {p: est for p in ("person1", "person2")},
+                                   {p: joints for p in ("person1", "person2")}, None, {},
+                                   finetune_info=finetune_info or {})
+
+    pre = {"Baseline (pre-trained)": 1.05, "AirPose (pre-trained)": 1.05, "Other (pre-trained)": 1.05}
+    clean = experiment({**pre, "Baseline": 1.05, "AirPose": 1.05, "Other": 1.05})
+    logged = {"AirPose": {"selection": {"step": [0, 100], "diag_person2_mpjpe_m": [0.1, 0.09]}}}
+    field = experiment({**{m: 1.20 for m in pre}, "Baseline": 1.25, "AirPose": 1.10, "Other": 1.18}, logged)
+    networks = (("Baseline", "Baseline (pre-trained)"), ("AirPose", "AirPose (pre-trained)"),
+                ("Other", "Other (pre-trained)"))
+    t = recovery_table(clean, field, networks=networks).set_index(["sequence", "network"])
+    assert len(t) == 6 and set(t["frames"]) == {F}
+    assert list(t.xs("person1")["tuning"]) == [True] * 3 and list(t.xs("person2")["tuning"]) == [False] * 3
+    a, b, o = (t.loc[("person2", n)] for n in ("AirPose", "Baseline", "Other"))
+    assert np.isclose(a["field_pre"], 4 * a["clean_pre"]) and np.isclose(a["field_tuned"], 2 * a["clean_pre"])
+    assert np.isclose(a["rise"], 3 * a["clean_pre"]) and np.isclose(a["recovered"], 2 * a["clean_pre"])
+    for row, share in ((a, 2 / 3), (b, -1 / 3), (o, 0.4 / 3)):
+        assert np.isclose(row["share"], share) and np.isclose(row["share_low"], share)
+        assert np.isclose(row["share_high"], share)
+    assert a["rise_low"] > 0 and a["recovered_low"] > 0 and a["verdict"] == "recovers a third or more"
+    assert b["recovered_high"] < 0 and b["verdict"] == "makes it worse"
+    assert o["recovered_low"] > 0 and o["verdict"] == "recovers less than a third"
+
+
 def test_runs_field_follows_the_profile_and_the_data_source():
     from types import SimpleNamespace
 

@@ -18,11 +18,13 @@ from airpose_lib.eval.recordings import (
     relative_camera_errors_against,
     relative_camera_positions,
 )
+from airpose_lib.eval.significance import paired_bootstrap
 
 from .recordings import RecordingExperiment, body_vertices, scored_frames
 
 __all__ = ["depth_summary", "overlay_inputs", "airpose_plus_checks", "finetune_table", "selection_table",
-           "transfer_table", "COMPARISONS", "comparisons_table", "GAP_METHODS", "field_gap_table", "MARKER_METHODS",
+           "transfer_table", "COMPARISONS", "comparisons_table", "GAP_METHODS", "field_gap_table",
+           "RECOVERY_NETWORKS", "RECOVERY_SHARE", "recovery_table", "MARKER_METHODS",
            "MARKERS_LABEL", "uav2_in_uav1", "marker_table", "claims_table",
            "markdown_table"]
 
@@ -248,6 +250,81 @@ def field_gap_table(clean: RecordingExperiment, field: RecordingExperiment, meth
         part = compare_methods(frames, pairs, block=max(1, round(block_s * fps)))
         parts.append(part.assign(sequence=person)[["sequence", *part.columns]])
     return pd.concat(parts, ignore_index=True) if parts else pd.DataFrame()
+
+
+def _frame_errors(exp: RecordingExperiment, person: str, method: str, keep: np.ndarray, metric: str) -> pd.Series:
+    """frame -> ``metric`` of ``method`` on ``person``'s recording, the mean over the views, on the
+    frames ``keep``."""
+    t = recording_frame_table(exp.estimates[person][method], exp.sequences[person].ground_truth,
+                              exp.joints[person][method], method)
+    return t[t["frame"].isin(keep)].groupby("frame")[metric].mean()
+
+
+#: The networks whose recovery :func:`recovery_table` measures: (fine-tuned, pre-trained).
+RECOVERY_NETWORKS = (("Baseline", "Baseline (pre-trained)"), ("AirPose", "AirPose (pre-trained)"))
+#: The share of the field rise that fine-tuning must recover to count (issue 31's positive control).
+RECOVERY_SHARE = 1 / 3
+
+
+def recovery_table(clean: RecordingExperiment, field: RecordingExperiment, networks=RECOVERY_NETWORKS,
+                   metric: str = "mpjpe_m", block_s: float = 1.0, n_resamples: int = 2000,
+                   seed: int = 0) -> pd.DataFrame:
+    """How much of the field recordings' rise does fine-tuning on the field tuning person take back?
+
+    Per frame of a recording (the mean over its views), with ``e`` the error ``metric``:
+    ``rise = e(pre-trained, field) - e(pre-trained, clean)``, what the field's pixels cost the
+    network before tuning, and ``recovered = e(pre-trained, field) - e(fine-tuned, field)``, what
+    fine-tuning on the field person 1 takes back. The table gives both means with 95 %
+    block-bootstrap intervals (blocks of ``block_s`` seconds, as :func:`field_gap_table`) and the
+    recovered share ``mean(recovered) / mean(rise)``, its interval from the same resamples (so the
+    two means stay paired: :func:`~airpose_lib.eval.significance.paired_bootstrap` with ``base``).
+    Over the frames both experiments scored.
+
+    ``verdict``: ``recovers a third or more`` (share >= :data:`RECOVERY_SHARE` and the recovered
+    interval above zero: issue 31's target), ``recovers less than a third``, ``makes it worse``
+    (recovered interval below zero) or ``not significant``. Rows of the tuning person measure
+    fitting, not transfer (``tuning``).
+
+    Returns:
+        ``sequence``, ``tuning``, ``network``, ``metric``, ``clean_pre``, ``field_pre``,
+        ``field_tuned`` (means), ``rise``, ``rise_low``, ``rise_high``, ``recovered``,
+        ``recovered_low``, ``recovered_high``, ``share``, ``share_low``, ``share_high``,
+        ``frames``, ``verdict``; empty when no network was fine-tuned or nothing has ground truth.
+    """
+    rows = []
+    for person in field.persons:
+        if person not in clean.persons or field.sequences[person].ground_truth is None:
+            continue
+        keep = np.intersect1d(np.flatnonzero(scored_frames(clean.estimates[person])),
+                              np.flatnonzero(scored_frames(field.estimates[person])))
+        tuning = not any(c.startswith(f"diag_{person}_") for info in field.finetune_info.values()
+                         for c in (info.get("selection") or {}))
+        fps = float(field.sequences[person].ground_truth.get("fps", 30.0))
+
+        for tuned, pre in networks:
+            if not all(m in e.estimates[person] for m in (tuned, pre) for e in (clean, field)):
+                continue
+            e = pd.concat({"clean": _frame_errors(clean, person, pre, keep, metric),
+                           "field": _frame_errors(field, person, pre, keep, metric),
+                           "tuned": _frame_errors(field, person, tuned, keep, metric)}, axis=1).dropna().sort_index()
+            if e.empty:
+                continue
+            rise, recovered = (e["field"] - e["clean"]).to_numpy(), (e["field"] - e["tuned"]).to_numpy()
+            block = max(1, round(block_s * fps))
+            r_rise = paired_bootstrap(rise, n_resamples, seed=seed, block=block)
+            r_rec = paired_bootstrap(recovered, n_resamples, seed=seed, block=block, base=rise)
+            share = r_rec.relative
+            if r_rec.low > 0:
+                verdict = "recovers a third or more" if share >= RECOVERY_SHARE else "recovers less than a third"
+            else:
+                verdict = "makes it worse" if r_rec.high < 0 else "not significant"
+            rows.append({"sequence": person, "tuning": tuning, "network": tuned, "metric": metric,
+                         "clean_pre": float(e["clean"].mean()), "field_pre": float(e["field"].mean()),
+                         "field_tuned": float(e["tuned"].mean()), "rise": r_rise.mean, "rise_low": r_rise.low,
+                         "rise_high": r_rise.high, "recovered": r_rec.mean, "recovered_low": r_rec.low,
+                         "recovered_high": r_rec.high, "share": share, "share_low": r_rec.relative_low,
+                         "share_high": r_rec.relative_high, "frames": len(e), "verdict": verdict})
+    return pd.DataFrame(rows)
 
 
 #: Methods whose UAV2-in-UAV1 :func:`marker_table` measures against both references.

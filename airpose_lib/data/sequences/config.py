@@ -159,7 +159,13 @@ class SequenceConfig:
     Attributes:
         person: a key of :data:`PERSONS` or a :class:`PersonSpec`.
         n_frames: frames per camera.
-        fps: frame rate of both cameras.
+        fps: frame rate of the recording: the frames kept, per camera and second.
+        video_fps: the rate the cameras film at when the recording keeps fewer frames than they
+            film (e.g. the paper's 7,000 frames of 30 fps video spanned at 6 fps: ``fps: 6,
+            video_fps: 30``, every fifth frame); what happens within one video frame follows it,
+            not ``fps``: the field pipeline's motion blur (the shutter is open for a share of a
+            video frame) and the detectors' frame-to-frame correlation. None (default): ``fps``,
+            every video frame kept; then absent from :meth:`to_dict` (the cache key).
         time_offsets: (V,) start time of each camera, seconds (camera 2 runs 7 ms behind).
         cameras: (V,) camera specs; default the paper's two DJI cameras.
         render_scale: rendered image size / full size (0.5 -> 960x540).
@@ -186,6 +192,7 @@ class SequenceConfig:
     person: str | PersonSpec = "person1"
     n_frames: int = 120
     fps: float = 30.0
+    video_fps: float | None = None
     time_offsets: tuple[float, ...] = (0.0, 0.007)
     cameras: tuple[CameraSpec, ...] = PAPER_CAMERAS
     render_scale: float = 0.5
@@ -204,6 +211,9 @@ class SequenceConfig:
             raise ConfigError(f"n_frames must be >= 1, got {self.n_frames}")
         if not self.fps > 0:
             raise ConfigError(f"fps must be > 0, got {self.fps}")
+        if self.video_fps is not None and not self.video_fps >= self.fps:
+            raise ConfigError(f"video_fps must be null or >= fps ({self.fps}): the recording keeps some of the "
+                              f"video's frames, got {self.video_fps}")
         if len(self.time_offsets) != len(self.cameras):
             raise ConfigError(f"{len(self.time_offsets)} time offsets for {len(self.cameras)} cameras")
         if min(self.time_offsets) < 0:
@@ -234,7 +244,14 @@ class SequenceConfig:
             del d["markers"]
         if not self.held_out.enabled:
             del d["held_out"]
+        if self.video_fps is None:
+            del d["video_fps"]
         return d
+
+    @property
+    def frame_step(self) -> float:
+        """Video frames from one kept frame to the next: ``video_fps / fps`` (1: every frame kept)."""
+        return 1.0 if self.video_fps is None else float(self.video_fps) / float(self.fps)
 
     @classmethod
     def from_dict(cls, d: Mapping) -> SequenceConfig:

@@ -240,7 +240,7 @@ class Detections:
 
 def detect_keypoints(kp2d: np.ndarray, size_px: np.ndarray, image_size: np.ndarray,
                      model: DetectorModel, rng: np.random.Generator,
-                     depth: np.ndarray | None = None) -> Detections:
+                     depth: np.ndarray | None = None, frame_step: float = 1.0) -> Detections:
     """Simulate a detector on projected ground-truth keypoints.
 
     Args:
@@ -250,6 +250,9 @@ def detect_keypoints(kp2d: np.ndarray, size_px: np.ndarray, image_size: np.ndarr
         model: the detector.
         rng: the random source.
         depth: (F, V, J) keypoint depth; ``<= 0`` (behind the camera) is missed. Optional.
+        frame_step: video frames between consecutive rows of ``kp2d`` (a recording that keeps
+            every k-th frame of its video: k); the noise's correlation from one row to the next
+            is then ``temporal_corr ** frame_step``, that of k video frames.
     Returns:
         :class:`Detections`.
     """
@@ -264,7 +267,7 @@ def detect_keypoints(kp2d: np.ndarray, size_px: np.ndarray, image_size: np.ndarr
     k = model.difficulty
 
     # 1. AR(1) noise over frames, marginal N(0, 1) per coordinate before scaling.
-    rho = model.temporal_corr
+    rho = model.temporal_corr ** float(frame_step)
     white = rng.standard_normal((F, V, J, 2))
     noise = np.empty_like(white)
     noise[0] = white[0]
@@ -329,7 +332,7 @@ def detect_keypoints(kp2d: np.ndarray, size_px: np.ndarray, image_size: np.ndarr
 
 
 def simulate_detections(gt: Mapping[str, np.ndarray], model: DetectorModel,
-                        seed: int | Sequence[int] = 0) -> Detections:
+                        seed: int | Sequence[int] = 0, frame_step: float = 1.0) -> Detections:
     """Run a simulated detector on a sequence's ground truth.
 
     Args:
@@ -337,10 +340,11 @@ def simulate_detections(gt: Mapping[str, np.ndarray], model: DetectorModel,
             (``kp2d_<layout>``, ``kp_depth_<layout>``, ``person_size_px``, ``image_size``).
         model: the detector.
         seed: seed (or seed sequence) of its random stream.
+        frame_step: video frames from one recorded frame to the next (:func:`detect_keypoints`).
     """
     rng = np.random.default_rng(seed)
     return detect_keypoints(gt[f"kp2d_{model.keypoints}"], gt["person_size_px"], gt["image_size"],
-                            model, rng, depth=gt.get(f"kp_depth_{model.keypoints}"))
+                            model, rng, depth=gt.get(f"kp_depth_{model.keypoints}"), frame_step=frame_step)
 
 
 def detection_summary(det: Detections) -> dict[str, int]:

@@ -65,7 +65,7 @@ def recording_detections(gt: Mapping[str, np.ndarray], config: SequenceConfig) -
     :class:`~airpose_lib.data.sequences.detections.Detections`, seeded by ``config.detector_seed`` (default
     ``seed + 1``) and the detector's position."""
     det_seed = config.detector_seed if config.detector_seed is not None else config.seed + 1
-    return {name: simulate_detections(gt, det, seed=[det_seed, k])
+    return {name: simulate_detections(gt, det, seed=[det_seed, k], frame_step=config.frame_step)
             for k, (name, det) in enumerate(DEFAULT_DETECTORS.items())}
 
 

@@ -155,7 +155,10 @@ class SequenceRenderer:
         # The field pipeline's motion blur follows the person's image motion (the drone's and
         # the person's together); computed only when the option is on.
         self._field = sim.config.field
-        self._velocity = person_image_velocity(sim.gt["j2d"]) if self._field.enabled else None
+        # per video frame: the shutter is open for a share of one (a recording that keeps every
+        # k-th video frame moves k times as far between its frames)
+        self._velocity = (person_image_velocity(sim.gt["j2d"]) / sim.config.frame_step
+                          if self._field.enabled else None)
 
     def render_frames(self, frames=None, chunk: int = 32) -> Iterator[tuple[int, list[np.ndarray]]]:
         """Yield ``(frame_index, [image (H, W, 3) uint8 RGB per view])`` in order (after the field

@@ -194,6 +194,22 @@ def test_reproduce_report_compares_and_writes_only_when_asked(tmp_path, clean_ch
     assert "differ in seeds / test images" in reference_report(other, "smoke", root=root)
 
 
+def test_reproduce_report_says_when_the_reference_came_from_another_cpu(tmp_path, clean_checkout):
+    root = tmp_path / "results"
+    bundle = _bundle(tmp_path, _runs())
+    reference_report(bundle, "smoke", write=True, command="airpose reproduce --write-reference", root=root)
+    assert "made on" not in reference_report(bundle, "smoke", root=root)  # the same machine: no note
+    prov_path = root / "smoke" / "provenance.json"
+    prov = json.loads(prov_path.read_text())
+    prov["machine"].update(cpu="AMD EPYC", vector_extensions=["avx2", "avx512f", "avx512_bf16"])
+    prov_path.write_text(json.dumps(prov))
+    msg = reference_report(bundle, "smoke", root=root)
+    assert "reference was made on AMD EPYC (avx2, avx512f, avx512_bf16), this run on" in msg
+    assert "0 differ" in msg.splitlines()[0]
+    prov_path.write_text("{}")  # a record without a machine: nothing to say
+    assert "made on" not in reference_report(bundle, "smoke", root=root)
+
+
 def test_training_wall_time_is_read_from_result_json_when_present(tmp_path):
     class Run:
         def __init__(self, folder):

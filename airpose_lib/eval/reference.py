@@ -47,7 +47,7 @@ __all__ = ["REFERENCE_FILES", "RESULTS_ROOT", "ProvenanceError", "reference_dir"
            "require_clean_checkout", "reference_outputs", "provenance_problems", "provenance_record",
            "train_settings", "train_wall_s", "mean_body_summary", "write_reference", "read_reference_table", "side_by_side",
            "compare_to_reference", "check_against_reference", "install_reference", "reference_report",
-           "RECORDING_FILES", "FIELD_RECORDING_FILES", "MARKER_RECORDING_FILES", "install_recordings_reference", "recordings_report"]
+           "machine_note", "RECORDING_FILES", "FIELD_RECORDING_FILES", "MARKER_RECORDING_FILES", "install_recordings_reference", "recordings_report"]
 
 #: The files of a results bundle.
 REFERENCE_FILES = ("table1.csv", "table1.md", "per_seed.csv", "claims.csv", "claims.md", "mean_body.csv",
@@ -441,6 +441,31 @@ def _setup(per_seed: pd.DataFrame) -> tuple[list, list]:
     return sorted(per_seed["seed"].unique().tolist()), sorted(per_seed["images"].unique().tolist())
 
 
+def _machine(provenance: Path) -> tuple[str | None, tuple[str, ...]] | None:
+    """The CPU model and vector extensions a provenance file records (None: unreadable or absent)."""
+    try:
+        m = json.loads(provenance.read_text()).get("machine")
+    except (OSError, ValueError, AttributeError):
+        return None
+    return (m.get("cpu"), tuple(m.get("vector_extensions") or ())) if isinstance(m, dict) and m else None
+
+
+def machine_note(new_provenance: str | Path, reference_provenance: str | Path) -> str:
+    """A line saying that two runs come from CPUs of another model or other vector extensions
+    ("" when both record the same, or either record is missing). Such runs can differ beyond the
+    seeds' spread without any change of code: bf16 autocast and the matrix kernels take other
+    paths (AVX-512 BF16, AMX tiles) and round differently, and training amplifies it."""
+    new, old = _machine(Path(new_provenance)), _machine(Path(reference_provenance))
+    if new is None or old is None or new == old:
+        return ""
+
+    def say(m):
+        return f"{m[0] or 'an unnamed CPU'} ({', '.join(m[1]) or 'no vector extensions recorded'})"
+
+    return (f"reference: note the reference was made on {say(old)}, this run on {say(new)}; other CPU kernels "
+            "round differently, so a mean may differ by more than the seeds' spread without any change of code")
+
+
 def reference_report(bundle: str | Path, profile: str, write: bool = False, command: str | None = None,
                      root: str | Path | None = None) -> str:
     """What ``airpose reproduce`` prints after notebook 02: the new run against ``results/<profile>/``.
@@ -466,6 +491,8 @@ def reference_report(bundle: str | Path, profile: str, write: bool = False, comm
     if _setup(new) != _setup(old):
         head += (f"\nreference: note the runs differ in seeds / test images per run: reference {_setup(old)}, "
                  f"this run {_setup(new)}")
+    if note := machine_note(bundle / "provenance.json", ref / "provenance.json"):
+        head += "\n" + note
     if moved.empty:
         return head
     return head + "\n" + moved.drop(columns=["reference_std"]).to_string(index=False, float_format="%.4f")

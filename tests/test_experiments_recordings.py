@@ -137,23 +137,29 @@ def _estimate(tau, joints):
             "beta": np.zeros((F, V, 10)), "valid": np.ones((F, V), bool)}, joints
 
 
+def _recording_truth(F: int, seed: int, V: int = 2):
+    """A recording's ground truth without images: ``tau (F, V, 3)`` about 10 m ahead, pelvis-centred
+    joints ``(F, V, 22, 3)`` and a sequence stand-in holding them."""
+    from types import SimpleNamespace
+
+    rng = np.random.default_rng(seed)
+    tau = rng.normal(0.0, 1.0, (F, V, 3)) + np.array([0.0, 0.0, 10.0])
+    j3d = rng.normal(0.0, 0.3, (F, V, 22, 3))
+    j3d -= j3d[:, :, :1]
+    gt = {"tau": tau, "phi": np.broadcast_to(np.eye(3), (F, V, 3, 3)).copy(), "j3d_cam": j3d, "fps": 30.0}
+    return tau, j3d, SimpleNamespace(ground_truth=gt)
+
+
 def test_field_gap_table_compares_each_method_with_itself_on_the_clean_frames():
     # Hand case: every field estimate sits 0.3 m deeper than the truth, every clean one 0.1 m, so
     # the field costs exactly 0.2 m of MPE in every frame (interval [0.2, 0.2]); the joints are the
     # truth scaled about the pelvis by 1.1 (field) and 1.05 (clean), so the field's MPJPE is twice
     # the clean one's.
-    from types import SimpleNamespace
-
     from airpose_lib.experiments.recording_tables import field_gap_table
     from airpose_lib.experiments.recordings import RecordingExperiment
 
-    rng = np.random.default_rng(0)
-    F, V = 60, 2
-    tau = rng.normal(0.0, 1.0, (F, V, 3)) + np.array([0.0, 0.0, 10.0])
-    j3d = rng.normal(0.0, 0.3, (F, V, 22, 3))
-    j3d -= j3d[:, :, :1]
-    gt = {"tau": tau, "phi": np.broadcast_to(np.eye(3), (F, V, 3, 3)).copy(), "j3d_cam": j3d, "fps": 30.0}
-    seq = SimpleNamespace(ground_truth=gt)
+    F = 60
+    tau, j3d, seq = _recording_truth(F, seed=0)
 
     def experiment(depth, scale):
         est, joints = {}, {}
@@ -179,18 +185,11 @@ def test_recovery_table_measures_the_share_of_the_rise_fine_tuning_takes_back():
     # times that frame's own joint spread a_f. Clean pre-trained s = 1.05, field pre-trained 1.20:
     # the rise is 3 a_f in every frame. AirPose tuned 1.10 recovers 2 a_f (share 2/3 in every
     # resample), Baseline tuned 1.25 loses a_f (-1/3), the last pair's 1.18 recovers 0.4 a_f (0.4 / 3).
-    from types import SimpleNamespace
-
     from airpose_lib.experiments.recording_tables import recovery_table
     from airpose_lib.experiments.recordings import RecordingExperiment
 
-    rng = np.random.default_rng(1)
-    F, V = 90, 2
-    tau = rng.normal(0.0, 1.0, (F, V, 3)) + np.array([0.0, 0.0, 10.0])
-    j3d = rng.normal(0.0, 0.3, (F, V, 22, 3))
-    j3d -= j3d[:, :, :1]
-    gt = {"tau": tau, "phi": np.broadcast_to(np.eye(3), (F, V, 3, 3)).copy(), "j3d_cam": j3d, "fps": 30.0}
-    seq = SimpleNamespace(ground_truth=gt)
+    F = 90
+    tau, j3d, seq = _recording_truth(F, seed=1)
 
     def experiment(scales, finetune_info=None):
         est, joints = {}, {}

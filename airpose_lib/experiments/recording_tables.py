@@ -216,6 +216,15 @@ def comparisons_table(exp: RecordingExperiment, pairs=COMPARISONS, block_s: floa
 GAP_METHODS = ("Baseline (pre-trained)", "AirPose (pre-trained)", "Baseline", "AirPose", "AirPose+")
 
 
+def _field_and_clean_frames(clean: RecordingExperiment, field: RecordingExperiment):
+    """``(person, frames)`` for each field recording with ground truth and a clean twin: the
+    frames both experiments scored (``(n,)`` frame positions)."""
+    for person in field.persons:
+        if person in clean.persons and field.sequences[person].ground_truth is not None:
+            yield person, np.intersect1d(np.flatnonzero(scored_frames(clean.estimates[person])),
+                                         np.flatnonzero(scored_frames(field.estimates[person])))
+
+
 def field_gap_table(clean: RecordingExperiment, field: RecordingExperiment, methods=GAP_METHODS,
                     block_s: float = 1.0) -> pd.DataFrame:
     """Each method's error on the field recordings against the clean ones, frame by frame.
@@ -232,11 +241,7 @@ def field_gap_table(clean: RecordingExperiment, field: RecordingExperiment, meth
         ``reference`` "AirPose [clean]", ...); empty when no recording has ground truth.
     """
     parts = []
-    for person in field.persons:
-        if person not in clean.persons or field.sequences[person].ground_truth is None:
-            continue
-        keep = np.intersect1d(np.flatnonzero(scored_frames(clean.estimates[person])),
-                              np.flatnonzero(scored_frames(field.estimates[person])))
+    for person, keep in _field_and_clean_frames(clean, field):
         frames, pairs = {}, []
         for m in methods:
             if m not in clean.estimates[person] or m not in field.estimates[person]:
@@ -292,11 +297,7 @@ def recovery_table(clean: RecordingExperiment, field: RecordingExperiment, netwo
         ``frames``, ``verdict``; empty when no network was fine-tuned or nothing has ground truth.
     """
     rows = []
-    for person in field.persons:
-        if person not in clean.persons or field.sequences[person].ground_truth is None:
-            continue
-        keep = np.intersect1d(np.flatnonzero(scored_frames(clean.estimates[person])),
-                              np.flatnonzero(scored_frames(field.estimates[person])))
+    for person, keep in _field_and_clean_frames(clean, field):
         tuning = not any(c.startswith(f"diag_{person}_") for info in field.finetune_info.values()
                          for c in (info.get("selection") or {}))
         fps = float(field.sequences[person].ground_truth.get("fps", 30.0))

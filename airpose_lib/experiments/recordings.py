@@ -482,11 +482,14 @@ def _tests_key(tests: dict) -> str | None:
 
 
 def finetune_candidates(profile: str, candidates: Mapping[str, Mapping], out: str | Path, *,
-                        variants: tuple[str, ...] = ("airpose", "baseline"), field: bool = True) -> list[dict]:
+                        variants: tuple[str, ...] = ("airpose", "baseline"), field: bool = True,
+                        sequences: Mapping[str, str | Path] | None = None) -> list[dict]:
     """A fine-tuning choice, measured as the profile's recording experiment would make it: each
     variant's first-seed network tuned on person 1 with each candidate's overrides of the
     profile's ``finetune:`` settings (``out/<variant>/<candidate>``; finished runs are reused),
-    person 2's errors logged per checkpoint as the diagnostic.
+    person 2's errors logged per checkpoint as the diagnostic. ``sequences`` (``person1``,
+    ``person2`` -> recording folder) replaces the profile's recordings, e.g. another tuning
+    recording of person 1 for the same networks.
 
     Returns:
         one row per variant and candidate: ``network``, ``candidate``, ``kept_step`` (the selection
@@ -494,7 +497,8 @@ def finetune_candidates(profile: str, candidates: Mapping[str, Mapping], out: st
         choice's criterion), ``person2_mpjpe_step0_m`` and ``person2_mpjpe_kept_m`` (the diagnostic).
     """
     out = Path(out)
-    seqs = {n: load_sequence(p) for n, p in ensure_sequences(profile, field=field).items()}
+    roots = sequences if sequences is not None else ensure_sequences(profile, field=field)
+    seqs = {n: load_sequence(p) for n, p in roots.items()}
     tuning, tests = seqs["person1"], {"person2": seqs["person2"]}
     prior, prior_info = recording_prior(profile, False)
     seed = load_train_config(profile, "airpose").seed

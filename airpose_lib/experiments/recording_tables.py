@@ -273,7 +273,7 @@ RECOVERY_SHARE = 1 / 3
 
 def recovery_table(clean: RecordingExperiment, field: RecordingExperiment, networks=RECOVERY_NETWORKS,
                    metric: str = "mpjpe_m", block_s: float = 1.0, n_resamples: int = 2000,
-                   seed: int = 0) -> pd.DataFrame:
+                   seed: int = 0, frames: dict[str, np.ndarray] | None = None) -> pd.DataFrame:
     """How much of the field recordings' rise does fine-tuning on the field tuning person take back?
 
     Per frame of a recording (the mean over its views), with ``e`` the error ``metric``:
@@ -283,7 +283,8 @@ def recovery_table(clean: RecordingExperiment, field: RecordingExperiment, netwo
     block-bootstrap intervals (blocks of ``block_s`` seconds, as :func:`field_gap_table`) and the
     recovered share ``mean(recovered) / mean(rise)``, its interval from the same resamples (so the
     two means stay paired: :func:`~airpose_lib.eval.significance.paired_bootstrap` with ``base``).
-    Over the frames both experiments scored.
+    Over the frames both experiments scored; ``frames`` (person -> ``(n,)`` frame positions)
+    restricts a recording to some of them, e.g. those a fine-tuning on that person never saw.
 
     ``verdict``: ``recovers a third or more`` (share >= :data:`RECOVERY_SHARE` and the recovered
     interval above zero: issue 31's target), ``recovers less than a third``, ``makes it worse``
@@ -298,6 +299,10 @@ def recovery_table(clean: RecordingExperiment, field: RecordingExperiment, netwo
     """
     rows = []
     for person, keep in _field_and_clean_frames(clean, field):
+        if frames is not None:
+            if person not in frames:
+                continue
+            keep = np.intersect1d(keep, np.asarray(frames[person]))
         tuning = not any(c.startswith(f"diag_{person}_") for info in field.finetune_info.values()
                          for c in (info.get("selection") or {}))
         fps = float(field.sequences[person].ground_truth.get("fps", 30.0))

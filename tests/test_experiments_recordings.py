@@ -218,6 +218,12 @@ def test_recovery_table_measures_the_share_of_the_rise_fine_tuning_takes_back():
     assert a["rise_low"] > 0 and a["recovered_low"] > 0 and a["verdict"] == "recovers a third or more"
     assert b["recovered_high"] < 0 and b["verdict"] == "makes it worse"
     assert o["recovered_low"] > 0 and o["verdict"] == "recovers less than a third"
+    # no gap to close (the field frames no worse than the clean ones): no share, whatever fine-tuning did
+    same = recovery_table(clean, experiment({**pre, "Baseline": 1.02, "AirPose": 1.10, "Other": 1.05}, logged),
+                          networks=networks)
+    assert (same["verdict"] == "no significant rise").all() and same["share"].isna().all()
+    assert np.isclose(same.set_index(["sequence", "network"]).loc[("person2", "AirPose"), "recovered"],
+                      -a["clean_pre"])
     part = recovery_table(clean, field, networks=networks, frames={"person2": np.arange(30, 60)})
     assert set(part["sequence"]) == {"person2"} and set(part["frames"]) == {30}
     assert np.allclose(part["share"], [-1 / 3, 2 / 3, 0.4 / 3])

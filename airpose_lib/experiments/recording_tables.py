@@ -286,10 +286,11 @@ def recovery_table(clean: RecordingExperiment, field: RecordingExperiment, netwo
     Over the frames both experiments scored; ``frames`` (person -> ``(n,)`` frame positions)
     restricts a recording to some of them, e.g. those a fine-tuning on that person never saw.
 
-    ``verdict``: ``recovers a third or more`` (share >= :data:`RECOVERY_SHARE` and the recovered
-    interval above zero: issue 31's target), ``recovers less than a third``, ``makes it worse``
-    (recovered interval below zero) or ``not significant``. Rows of the tuning person measure
-    fitting, not transfer (``tuning``).
+    ``verdict``: ``no significant rise`` (the rise's interval reaches zero: nothing to take back,
+    and the share columns are NaN), else ``recovers a third or more`` (share >=
+    :data:`RECOVERY_SHARE` and the recovered interval above zero: issue 31's target),
+    ``recovers less than a third``, ``makes it worse`` (recovered interval below zero) or ``not
+    significant``. Rows of the tuning person measure fitting, not transfer (``tuning``).
 
     Returns:
         ``sequence``, ``tuning``, ``network``, ``metric``, ``clean_pre``, ``field_pre``,
@@ -318,9 +319,12 @@ def recovery_table(clean: RecordingExperiment, field: RecordingExperiment, netwo
             rise, recovered = (e["field"] - e["clean"]).to_numpy(), (e["field"] - e["tuned"]).to_numpy()
             block = max(1, round(block_s * fps))
             r_rise = paired_bootstrap(rise, n_resamples, seed=seed, block=block)
-            r_rec = paired_bootstrap(recovered, n_resamples, seed=seed, block=block, base=rise)
-            share = r_rec.relative
-            if r_rec.low > 0:
+            gap = r_rise.low > 0  # without a gap to close, a share of it is not a number to read (NaN)
+            r_rec = paired_bootstrap(recovered, n_resamples, seed=seed, block=block, base=rise if gap else None)
+            share, share_low, share_high = r_rec.relative, r_rec.relative_low, r_rec.relative_high
+            if not gap:
+                verdict = "no significant rise"
+            elif r_rec.low > 0:
                 verdict = "recovers a third or more" if share >= RECOVERY_SHARE else "recovers less than a third"
             else:
                 verdict = "makes it worse" if r_rec.high < 0 else "not significant"
@@ -328,8 +332,8 @@ def recovery_table(clean: RecordingExperiment, field: RecordingExperiment, netwo
                          "clean_pre": float(e["clean"].mean()), "field_pre": float(e["field"].mean()),
                          "field_tuned": float(e["tuned"].mean()), "rise": r_rise.mean, "rise_low": r_rise.low,
                          "rise_high": r_rise.high, "recovered": r_rec.mean, "recovered_low": r_rec.low,
-                         "recovered_high": r_rec.high, "share": share, "share_low": r_rec.relative_low,
-                         "share_high": r_rec.relative_high, "frames": len(e), "verdict": verdict})
+                         "recovered_high": r_rec.high, "share": share, "share_low": share_low,
+                         "share_high": share_high, "frames": len(e), "verdict": verdict})
     return pd.DataFrame(rows)
 
 

@@ -181,6 +181,12 @@ def transfer_table(exp: RecordingExperiment) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
+def _block_frames(sequence, block_s: float) -> int:
+    """Frames in ``block_s`` seconds of a recording with ground truth (its ``fps``, default 30),
+    at least 1: the block length of the recordings' block bootstraps."""
+    return max(1, round(block_s * float(sequence.ground_truth.get("fps", 30.0))))
+
+
 #: The method comparisons of :func:`comparisons_table` (method, reference): what fine-tuning on
 #: person 1 changes for each network, and what AirPose+ adds to AirPose.
 COMPARISONS = (("AirPose", "AirPose (pre-trained)"), ("Baseline", "Baseline (pre-trained)"), ("AirPose+", "AirPose"))
@@ -204,9 +210,8 @@ def comparisons_table(exp: RecordingExperiment, pairs=COMPARISONS, block_s: floa
         for m in methods:
             t = recording_frame_table(est[m], seq.ground_truth, exp.joints[person][m], m)
             frames[m] = t[t["frame"].isin(keep)]
-        fps = float(seq.ground_truth.get("fps", 30.0))
         usable = [(a, b) for a, b in pairs if a in frames and b in frames]
-        part = compare_methods(frames, usable, block=max(1, round(block_s * fps)))
+        part = compare_methods(frames, usable, block=_block_frames(seq, block_s))
         parts.append(part.assign(sequence=person)[["sequence", *part.columns]])
     return pd.concat(parts, ignore_index=True) if parts else pd.DataFrame()
 
@@ -251,8 +256,7 @@ def field_gap_table(clean: RecordingExperiment, field: RecordingExperiment, meth
                                           exp.joints[person][m], m)
                 frames[f"{m} [{tag}]"] = t[t["frame"].isin(keep)]
             pairs.append((f"{m} [field]", f"{m} [clean]"))
-        fps = float(field.sequences[person].ground_truth.get("fps", 30.0))
-        part = compare_methods(frames, pairs, block=max(1, round(block_s * fps)))
+        part = compare_methods(frames, pairs, block=_block_frames(field.sequences[person], block_s))
         parts.append(part.assign(sequence=person)[["sequence", *part.columns]])
     return pd.concat(parts, ignore_index=True) if parts else pd.DataFrame()
 
@@ -306,8 +310,7 @@ def recovery_table(clean: RecordingExperiment, field: RecordingExperiment, netwo
             keep = np.intersect1d(keep, np.asarray(frames[person]))
         tuning = not any(c.startswith(f"diag_{person}_") for info in field.finetune_info.values()
                          for c in (info.get("selection") or {}))
-        fps = float(field.sequences[person].ground_truth.get("fps", 30.0))
-
+        block = _block_frames(field.sequences[person], block_s)
         for tuned, pre in networks:
             if not all(m in e.estimates[person] for m in (tuned, pre) for e in (clean, field)):
                 continue
@@ -317,7 +320,6 @@ def recovery_table(clean: RecordingExperiment, field: RecordingExperiment, netwo
             if e.empty:
                 continue
             rise, recovered = (e["field"] - e["clean"]).to_numpy(), (e["field"] - e["tuned"]).to_numpy()
-            block = max(1, round(block_s * fps))
             r_rise = paired_bootstrap(rise, n_resamples, seed=seed, block=block)
             gap = r_rise.low > 0  # without a gap to close, a share of it is not a number to read (NaN)
             r_rec = paired_bootstrap(recovered, n_resamples, seed=seed, block=block, base=rise if gap else None)

@@ -67,6 +67,23 @@ def test_regressor_is_affine_without_dropout():
     assert not torch.equal(reg(x)[0], reg(x)[0])
 
 
+def test_relu_regressor_matches_hand_forward_and_keeps_the_keys():
+    """activation="relu": ReLU after fc1 and after fc2 (eval mode: dropout off), the same state
+    dict keys as the paper's trunk, so official checkpoints and the record load either way."""
+    torch.manual_seed(0)
+    plain = build_model("airpose", "resnet18").regressor.double().eval()
+    relu = build_model("airpose", "resnet18", activation="relu").regressor.double().eval()
+    assert plain.state_dict().keys() == relu.state_dict().keys()
+    relu.load_state_dict(plain.state_dict())
+    x = torch.randn(3, relu.in_features, dtype=torch.float64)
+    h = torch.relu(relu.fc2(torch.relu(relu.fc1(x))))
+    for got, head in zip(relu(x), (relu.decpose, relu.decshape)):
+        torch.testing.assert_close(got, head(h), rtol=1e-12, atol=1e-12)
+    assert not torch.allclose(relu(x)[0], plain(x)[0])  # the nonlinearity acts
+    with pytest.raises(ValueError, match="relu"):
+        build_model("airpose", "resnet18", activation="tanh")
+
+
 @pytest.mark.parametrize("variant", ["baseline", "airpose"])
 def test_decoder_init_xavier_gain(variant):
     torch.manual_seed(0)

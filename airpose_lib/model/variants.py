@@ -227,11 +227,13 @@ class AirPoseNet(nn.Module):
         num_iterations: regressor iterations (3 in the paper; stage k of a drone is iteration k).
         dropout: dropout after fc1 and fc2.
         channels_last: NHWC backbone (faster CPU training).
+        activation: the regressor trunk's nonlinearity, ``"none"`` (the paper's) or ``"relu"``
+            (:class:`~airpose_lib.model.regressor.IterativeRegressor`).
     """
 
     def __init__(self, variant: str = "airpose", backbone: str | ResNet = "resnet50",
                  mean_params: str | Path | MeanParams | None = None, num_iterations: int = 3,
-                 dropout: float = 0.5, channels_last: bool = False):
+                 dropout: float = 0.5, channels_last: bool = False, activation: str = "none"):
         super().__init__()
         self.spec = _spec(variant)
         if num_iterations < 1:
@@ -244,6 +246,7 @@ class AirPoseNet(nn.Module):
             shape_dim=BETA_DIM,
             cam_dim=0 if self.spec.fullcam else 3,
             dropout=dropout,
+            activation=activation,
         )
         if mean_params is None:
             mean = default_mean_params()

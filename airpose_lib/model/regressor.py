@@ -54,7 +54,6 @@ class IterativeRegressor(nn.Module):
         if activation not in ACTIVATIONS:
             raise ConfigError(f"model.activation must be one of {', '.join(ACTIVATIONS)}, got {activation!r}")
         self.in_features = in_features
-        self.activation = activation
         # parameter-free: the state dict (and the official checkpoints' keys) stay the same
         self.act = nn.ReLU() if activation == "relu" else nn.Identity()
         self.fc1 = nn.Linear(in_features, hidden)

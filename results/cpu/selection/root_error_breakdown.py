@@ -24,7 +24,7 @@ import torch
 
 from airpose_lib.data.still.dataset import StillFrameDataset
 from airpose_lib.experiments.recording_tables import markdown_table
-from airpose_lib.geometry import axis_angle_to_matrix, matrix_to_axis_angle
+from airpose_lib.geometry import axis_angle_to_matrix, full_to_crop_pixels, matrix_to_axis_angle
 from airpose_lib.train import evaluate_checkpoint, load_trained_model
 from airpose_lib.train.run import prepare_data
 
@@ -36,9 +36,8 @@ SPINE = (2, 5, 8)  # spine1, spine2, spine3 in theta's 21 body joints
 def view_covariates(ds: StillFrameDataset) -> pd.DataFrame:
     """One row per (sample index, view): the person's span in the crop [px] and the spine's bend [deg]."""
     a = ds.arrays
-    box = a["bbox"]  # (N, V, 4)
-    side = np.maximum(box[..., 2] - box[..., 0], box[..., 3] - box[..., 1])
-    span = (a["j2d"].max(-2) - a["j2d"].min(-2)).max(-1) / side * ds.crop_size  # (N, V)
+    uv = full_to_crop_pixels(torch.as_tensor(a["j2d"]), torch.as_tensor(a["bbox"]), ds.crop_size).numpy()
+    span = (uv.max(-2) - uv.min(-2)).max(-1)  # (N, V)
     spine = torch.eye(3, dtype=torch.float64).expand(len(span), 3, 3)
     for j in SPINE:
         spine = spine @ axis_angle_to_matrix(torch.as_tensor(a["theta"][:, j], dtype=torch.float64))

@@ -34,6 +34,7 @@ from torch import nn
 from airpose_lib.data.still.config import default_root
 from airpose_lib.data.still.dataset import StillFrameDataset
 from airpose_lib.eval.metrics import root_yaw_tilt, rotation_error
+from airpose_lib.geometry import full_to_crop_pixels
 from airpose_lib.geometry.rotations import rot6d_to_matrix
 from airpose_lib.train.features import ensure_features
 from airpose_lib.train.pretrain import profile_backbone
@@ -47,10 +48,8 @@ def view_arrays(ds: StillFrameDataset) -> dict[str, torch.Tensor]:
     """Per view (``N V`` rows): ``joints (., 22, 2)`` in crop units (centre 0, longer side 1),
     ``P (., 3)``, ``phi (., 3, 3)``."""
     a = ds.arrays
-    box = a["bbox"]
-    centre = (box[..., :2] + box[..., 2:]) / 2
-    side = np.maximum(box[..., 2] - box[..., 0], box[..., 3] - box[..., 1])
-    joints = (a["j2d"] - centre[..., None, :]) / side[..., None, None]
+    # crop pixels at a crop side of 1, centred on 0
+    joints = full_to_crop_pixels(torch.as_tensor(a["j2d"]), torch.as_tensor(a["bbox"]), 1.0).numpy() - 0.5
     return {"joints": torch.as_tensor(joints.reshape(-1, 22, 2), dtype=torch.float32),
             "P": torch.as_tensor(a["P"].reshape(-1, 3), dtype=torch.float32),
             "phi": torch.as_tensor(a["phi"].reshape(-1, 3, 3), dtype=torch.float32)}

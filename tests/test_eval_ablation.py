@@ -11,7 +11,7 @@ from airpose_lib.eval.ablation import (
     table_to_latex,
     table_to_markdown,
 )
-from airpose_lib.eval.mean_body import GENDERED_LABEL, NEUTRAL_LABEL
+from airpose_lib.eval.mean_body import GENDERED_LABEL, NEUTRAL_LABEL, PROPORTION_LABEL
 
 
 def _per_view(mpe, mpjpe, n=4):
@@ -156,6 +156,11 @@ def test_paper_gaps_are_ratios_to_the_paper_and_the_references():
     assert g.loc["AirPose", "MPE kit / true-gender mean body"] == pytest.approx(2.0)
     assert list(paper_gaps(ablation_table({("airpose", 1): _per_view(0.3, 0.1)}))) == ["MPE kit / paper",
                                                                                        "MPJPE kit / paper"]
+    with_prop = ablation_table({("airpose", 1): _per_view(0.3, 0.144)},
+                               references=pd.DataFrame({"method": [PROPORTION_LABEL, NEUTRAL_LABEL],
+                                                        "mpe_m": [0.06, 0.2]}))
+    assert list(with_prop.index) == ["AirPose", NEUTRAL_LABEL, PROPORTION_LABEL]  # table order
+    assert paper_gaps(with_prop).loc["AirPose", "MPE kit / body at its proportions' stature"] == pytest.approx(5.0)
 
 
 def test_findings_are_written_from_the_tables():
@@ -172,8 +177,12 @@ def test_findings_are_written_from_the_tables():
             "0.500 m with the true-gender mean body on this data, so AirPose's MPE is 1.25 x the neutral mean "
             "body's and 1.50 x the true-gender mean body's, and the paper's below the neutral mean body's and "
             "below the true-gender mean body's.") in text
-    assert "floor" not in text
+    assert "floor" not in text and "proportions" not in text  # no such row: nothing said about it
     assert "1 of the paper's 2 orderings hold" in text
+    with_prop = pd.concat([references, pd.DataFrame({"method": [PROPORTION_LABEL] * 2, "mpe_m": [0.04, 0.06]})])
+    assert ("below the true-gender mean body's; the subject's own body at the stature a linear model reads from "
+            "its proportions gets 0.050 m, so an estimate that read the body's proportions could come that "
+            "close.") in ablation_findings(ablation_table(runs, references=with_prop), claims)
     assert "Not significant: MPJPE: Baseline > AirPose (-2.0 mm)" in text and "Reversed: none" in text
     assert "PA-MPJPE, which aligns rotation and scale away, is 0.050 m" in text
     assert "One seed" in text

@@ -156,3 +156,109 @@ def test_a_wrong_gender_is_not_exact(gendered_models):
     male, female = gendered_models["male"], gendered_models["female"]
     arrays = _arrays([male, female, male], 1.0, gender=[2, 1, 2])
     assert mean_body_per_view(arrays, gendered=True, body_models=gendered_models)["mpe_m"].min() > 0.05
+
+
+def _smplx_body(model, beta, theta):
+    """smplx's own forward pass (independent of the kit's BodyForward): ``(joints (22, 3), vertices)``."""
+    import torch
+
+    z = lambda k: torch.zeros(1, k, dtype=torch.float64)  # noqa: E731
+    with torch.no_grad():
+        out = model(betas=torch.as_tensor(beta, dtype=torch.float64).reshape(1, -1),
+                    body_pose=torch.as_tensor(theta, dtype=torch.float64).reshape(1, 63), global_orient=z(3),
+                    transl=z(3), jaw_pose=z(3), leye_pose=z(3), reye_pose=z(3), left_hand_pose=z(45),
+                    right_hand_pose=z(45), expression=z(model.num_expression_coeffs))
+    return out.joints[0, :22].numpy(), out.vertices[0].numpy()
+
+
+def _shaped_arrays(models, gender, seed=5, V=2):
+    """A split of subjects with their own shapes (beta ~ N(0, 1)), posed by smplx's forward."""
+    rng = np.random.default_rng(seed)
+    n = len(gender)
+    beta, theta = rng.normal(0, 1, size=(n, 10)), rng.normal(0, 0.25, size=(n, 21, 3))
+    J0 = np.stack([_smplx_body(models[i], beta[i], theta[i])[0] for i in range(n)])
+    phi = np.stack([[_rotation(rng) for _ in range(V)] for _ in range(n)])
+    tau = rng.uniform([-2, -1, 8], [2, 1, 14], size=(n, V, 3))
+    jc = np.einsum("nvij,nkj->nvki", phi, J0) + tau[:, :, None]
+    return {"theta": theta, "phi": phi, "tau": tau, "j2d": _project(jc, K), "K": np.broadcast_to(K, (n, V, 3, 3)),
+            "index": np.arange(n), "beta": beta, "gender": np.asarray(gender, np.int64)}
+
+
+def test_bone_ratios_by_hand_and_free_of_scale():
+    from airpose_lib.body.joint_sets import SMPLX_PARENTS
+    from airpose_lib.eval.mean_body import bone_ratios
+
+    J = np.random.default_rng(6).normal(size=(22, 3))
+    r = bone_ratios(J)
+    lengths = np.array([np.sqrt(((J[k] - J[SMPLX_PARENTS[k]]) ** 2).sum()) for k in range(1, 22)])
+    np.testing.assert_allclose(r, lengths / lengths.sum(), rtol=1e-12)
+    np.testing.assert_allclose(bone_ratios(np.stack([J, 2.5 * J])), np.stack([r, r]), rtol=1e-12)
+    assert SMPLX_PARENTS[1:4] == (0, 0, 0) and r.shape == (21,)  # hips and spine leave the pelvis
+
+
+def test_stature_fit_recovers_an_exact_linear_rule_per_gender():
+    from airpose_lib.eval.mean_body import fit_stature_from_proportions
+
+    rng = np.random.default_rng(7)
+    ratios = rng.dirichlet(np.ones(21), size=200)
+    gender = np.repeat([1, 2], 100)
+    w = {1: rng.normal(size=21), 2: rng.normal(size=21)}
+    height = np.where(gender == 1, 1.2 + ratios @ w[1], 0.9 + ratios @ w[2])
+    fit = fit_stature_from_proportions(ratios, height, gender)
+    np.testing.assert_allclose(fit.predict(ratios, gender), height, atol=1e-10)
+    assert min(fit.r2.values()) > 1 - 1e-12 and max(fit.residual_sd.values()) < 1e-10
+    new = rng.dirichlet(np.ones(21), size=5)  # subjects the fit never saw
+    np.testing.assert_allclose(fit.predict(new, np.full(5, 2)), 0.9 + new @ w[2], atol=1e-10)
+
+
+def test_rest_statures_match_smplx_forward(gendered_models):
+    from airpose_lib.body.loader import stature
+    from airpose_lib.eval.mean_body import bone_ratios, rest_statures
+
+    male, female = gendered_models["male"], gendered_models["female"]
+    rng = np.random.default_rng(8)
+    beta, gender = rng.normal(0, 1, size=(3, 10)), np.array([1, 2, 1])
+    height, ratios = rest_statures(beta, gender, body_models=gendered_models)
+    for i, m in enumerate([male, female, male]):
+        J, verts = _smplx_body(m, beta[i], np.zeros((21, 3)))
+        assert height[i] == pytest.approx(stature(verts), abs=1e-9)
+        np.testing.assert_allclose(ratios[i], bone_ratios(J), atol=1e-9)
+    assert 1.3 < height.min() and height.max() < 2.2  # adults, in metres
+
+
+def test_proportion_reference_is_off_by_its_stature_ratio(gendered_models):
+    """A stature model that always says c: each subject's body is scaled by c / (its stature) and
+    lands that many times too far, exactly; with c its own stature it lands on tau."""
+    from airpose_lib.eval.mean_body import PROPORTION_LABEL, StatureModel, proportion_body_per_view, rest_statures
+
+    male, female = gendered_models["male"], gendered_models["female"]
+    gender = [1, 2, 1]
+    arrays = _shaped_arrays([male, female, male], gender)
+    height, _ = rest_statures(arrays["beta"], arrays["gender"], body_models=gendered_models)
+    c = 1.75
+    const = StatureModel({1: np.r_[c, np.zeros(21)], 2: np.r_[c, np.zeros(21)]}, {}, {})
+    t = proportion_body_per_view(arrays, const, body_models=gendered_models)
+    assert (t["method"] == PROPORTION_LABEL).all() and t["reproj_px"].max() < 1e-6
+    k = np.repeat(c / height, 2)  # per view
+    np.testing.assert_allclose(t["mpe_m"], np.abs(k - 1) * np.linalg.norm(arrays["tau"], axis=-1).reshape(-1),
+                               atol=1e-6)
+    own = StatureModel({1: np.r_[height[0], np.zeros(21)], 2: np.r_[height[1], np.zeros(21)]}, {}, {})
+    exact = proportion_body_per_view({k_: v[:2] for k_, v in arrays.items()}, own, body_models=gendered_models)
+    assert exact["mpe_m"].max() < 1e-6
+
+
+def test_references_add_the_proportion_rows_with_a_training_split(open_model, gendered_models):
+    from airpose_lib.eval.mean_body import MEAN_BODY_LABELS
+
+    male, female = gendered_models["male"], gendered_models["female"]
+    test = _shaped_arrays([male, female, male], [1, 2, 1], seed=9)
+    train = _shaped_arrays([male, female] * 40, [1, 2] * 40, seed=10)
+    models = {"neutral": open_model, **gendered_models}
+    both = mean_body_references(test, body_models=models)
+    three = mean_body_references(test, body_models=models, train_arrays=train)
+    assert list(three["method"].unique()) == list(MEAN_BODY_LABELS)
+    np.testing.assert_allclose(three["mpe_m"][: len(both)], both["mpe_m"])
+    # 40 subjects per gender fit the open body's stature from its proportions to centimetres, so
+    # this reference lands far closer than the true-gender mean body
+    per = three.groupby("method", sort=False)["mpe_m"].mean()
+    assert per[MEAN_BODY_LABELS[2]] < 0.5 * per[GENDERED_LABEL]

@@ -8,7 +8,12 @@ import pandas as pd  # noqa: E402
 from matplotlib.colors import to_hex  # noqa: E402
 
 from airpose_lib.eval.ablation import ablation_table  # noqa: E402
-from airpose_lib.eval.mean_body import GENDERED_LABEL, MEAN_BODY_LABELS, NEUTRAL_LABEL  # noqa: E402
+from airpose_lib.eval.mean_body import (  # noqa: E402
+    GENDERED_LABEL,
+    MEAN_BODY_LABELS,
+    NEUTRAL_LABEL,
+    PROPORTION_LABEL,
+)
 from airpose_lib.viz.ablation import SOURCE_COLORS, plot_table1  # noqa: E402
 
 
@@ -19,8 +24,8 @@ def _table():
                               ("airpose", 1.2 + 0.1 * s, 0.26)):
             runs[v, s] = pd.DataFrame({"sample": [0], "view": [0], "mpe_m": [mpe], "mpjpe_m": [mpjpe],
                                        "pa_mpjpe_m": [mpjpe / 2]})
-    return ablation_table(runs, references=pd.DataFrame({"method": [NEUTRAL_LABEL, GENDERED_LABEL],
-                                                         "mpe_m": [0.55, 0.45]}))
+    return ablation_table(runs, references=pd.DataFrame({"method": [NEUTRAL_LABEL, GENDERED_LABEL, PROPORTION_LABEL],
+                                                         "mpe_m": [0.55, 0.45, 0.05]}))
 
 
 def test_table1_figure_is_readable():
@@ -43,10 +48,11 @@ def test_table1_figure_is_readable():
                 if hasattr(h, "get_facecolor")}
     assert swatches["kit (smoke)"] == to_hex(SOURCE_COLORS["kit"])
     assert swatches["paper"] == to_hex(SOURCE_COLORS["paper"])
-    assert {NEUTRAL_LABEL, GENDERED_LABEL} <= {t.get_text() for t in legend.get_texts()}
-    # the two reference lines (MPE only), one dash style each
-    assert [(ln.get_ydata()[0], ln.get_linestyle()) for ln in fig.axes[0].lines[-2:]] == [(0.55, "--"), (0.45, ":")]
-    assert not [ln for ln in fig.axes[1].lines if ln.get_linestyle() in ("--", ":")]
+    assert set(MEAN_BODY_LABELS) <= {t.get_text() for t in legend.get_texts()}
+    # the three reference lines (MPE only), one dash style each
+    assert [(ln.get_ydata()[0], ln.get_linestyle()) for ln in fig.axes[0].lines[-3:]] == [
+        (0.55, "--"), (0.45, ":"), (0.05, "-.")]
+    assert not [ln for ln in fig.axes[1].lines if ln.get_linestyle() in ("--", ":", "-.")]
 
 
 def test_without_reference_two_bars_per_method():

@@ -14,7 +14,7 @@ from collections.abc import Mapping
 import numpy as np
 import pandas as pd
 
-from .mean_body import GENDERED_LABEL, MEAN_BODY_LABELS, NEUTRAL_LABEL
+from .mean_body import GENDERED_LABEL, MEAN_BODY_LABELS, NEUTRAL_LABEL, PROPORTION_LABEL
 
 __all__ = ["VARIANT_LABELS", "PAPER_TABLE_I", "ROOT_FLIP_DEG", "PER_SEED_METRICS", "TABLE_COLUMNS", "per_seed_table",
            "ablation_table", "paper_gaps", "ablation_findings", "table_to_markdown", "table_to_latex"]
@@ -174,8 +174,10 @@ def ablation_table(per_view: Mapping[tuple[str, int], pd.DataFrame],
     return out
 
 
-#: Mean-body reference row -> its ratio column in :func:`paper_gaps` and its name in the findings.
+#: Stature-blind reference row -> its ratio column in :func:`paper_gaps` and its name in the findings.
 _REFERENCE_NAMES = {NEUTRAL_LABEL: "neutral mean body", GENDERED_LABEL: "true-gender mean body"}
+#: The reference that reads stature from the body's proportions, named the same way.
+_PROPORTION_NAME = "body at its proportions' stature"
 
 
 def _variant_rows(table: pd.DataFrame) -> list[str]:
@@ -189,12 +191,14 @@ def paper_gaps(table: pd.DataFrame) -> pd.DataFrame:
     Returns:
         one row per variant of :func:`ablation_table`: ``MPE kit / paper``, ``MPJPE kit / paper``
         and, per reference row, ``MPE kit / neutral mean body`` and ``MPE kit / true-gender mean
-        body`` (how many times what a stature-blind estimate with the ground-truth pose gets).
+        body`` (how many times what a stature-blind estimate with the ground-truth pose gets) and
+        ``MPE kit / body at its proportions' stature`` (what one that reads stature from the
+        body's proportions gets).
     """
     rows = _variant_rows(table)
     out = pd.DataFrame({"MPE kit / paper": table.loc[rows, "MPE [m]"] / table.loc[rows, "MPE paper [m]"],
                         "MPJPE kit / paper": table.loc[rows, "MPJPE [m]"] / table.loc[rows, "MPJPE paper [m]"]})
-    for label, name in _REFERENCE_NAMES.items():
+    for label, name in {**_REFERENCE_NAMES, PROPORTION_LABEL: _PROPORTION_NAME}.items():
         if label in table.index:
             out[f"MPE kit / {name}"] = table.loc[rows, "MPE [m]"] / table.loc[label, "MPE [m]"]
     return out
@@ -256,6 +260,10 @@ def ablation_findings(table: pd.DataFrame, claims: pd.DataFrame | None = None) -
                  + " and ".join(f"{r['MPE [m]'] / v:.2f} x the {name}'s" for name, v in refs.items())
                  + ", and the paper's " + " and ".join(
                      f"{'below' if r['MPE paper [m]'] < v else 'above'} the {name}'s" for name, v in refs.items()))
+    if PROPORTION_LABEL in table.index:
+        v = float(table.loc[PROPORTION_LABEL, "MPE [m]"])
+        head += (f"; the subject's own body at the stature a linear model reads from its proportions "
+                 f"gets {v:.3f} m, so an estimate that read the body's proportions could come that close")
     lines = [head + "."]
     if claims is not None and len(claims):
         claims = claims if "claim" in claims.columns else claims.reset_index()  # claims_table's index

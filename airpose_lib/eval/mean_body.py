@@ -13,8 +13,19 @@ test subjects costs an estimate that reads everything but stature exactly. Two r
   visible in an image, so this is the nearer mark for a network.
 
 Neither is a bound: within a gender, the body's proportions predict stature closely (issue 28),
-so a network may read stature from the pixels and beat both. They are references for scale, not
-limits.
+so a network may read stature from the pixels and beat both. A third reference measures how far
+that can go:
+
+* **stature from proportions** (:data:`PROPORTION_LABEL`): the subject's own body (true gender,
+  true shape) scaled to the stature a linear model reads from its proportions alone, the 21
+  scale-free bone-length ratios of its T-posed skeleton (:func:`bone_ratios`), fitted per gender
+  on the training split's subjects (:func:`fit_stature_from_proportions`). Its only error is that
+  model's residual: what an estimate gets that reads the pose, the gender and the proportions
+  exactly and the stature no better than the proportions tell it. How well proportions tell
+  stature is a property of the body model's shape space (the open body's or SMPL-X's), not
+  necessarily of real people.
+
+They are references for scale, not limits.
 
 On a two-drone recording (:func:`mean_body_recording_estimate`) the neutral reference, frame by
 frame and view by view, gives UAV2's position in UAV1 as well: two views do not fix the scale
@@ -28,25 +39,32 @@ tau, then a few Gauss-Newton steps on the pixel reprojection error.
 from __future__ import annotations
 
 from collections.abc import Mapping
+from dataclasses import dataclass
 
 import numpy as np
 import pandas as pd
 import torch
 
 from airpose_lib.body import load_body_model
-from airpose_lib.body.forward import BodyForward, axis_angle_rotations
+from airpose_lib.body.forward import BodyForward, axis_angle_rotations, rest_body
 from airpose_lib.body.genders import GENDER_NAMES
+from airpose_lib.body.joint_sets import NUM_BODY_JOINTS, SMPLX_PARENTS
+from airpose_lib.body.loader import stature
 from airpose_lib.geometry import axis_angle_to_matrix
 
-__all__ = ["NEUTRAL_LABEL", "GENDERED_LABEL", "MEAN_BODY_LABELS", "solve_translation", "mean_body_joints",
-           "mean_body_per_view", "mean_body_references", "mean_body_recording_estimate"]
+__all__ = ["NEUTRAL_LABEL", "GENDERED_LABEL", "PROPORTION_LABEL", "MEAN_BODY_LABELS", "solve_translation",
+           "mean_body_joints", "mean_body_per_view", "bone_ratios", "rest_statures", "StatureModel",
+           "fit_stature_from_proportions", "proportion_body_per_view", "mean_body_references",
+           "mean_body_recording_estimate"]
 
 #: Row name of the neutral mean-body reference (Table I, the recordings' error tables).
 NEUTRAL_LABEL = "Reference: neutral mean body (GT pose)"
 #: Row name of the mean body of the subject's true gender.
 GENDERED_LABEL = "Reference: true-gender mean body (GT pose)"
-#: Both, in table order.
-MEAN_BODY_LABELS = (NEUTRAL_LABEL, GENDERED_LABEL)
+#: Row name of the subject's own body scaled to the stature its proportions predict.
+PROPORTION_LABEL = "Reference: true body, stature from proportions (GT pose)"
+#: The reference rows, in table order (the name is historical: the third is not a mean body).
+MEAN_BODY_LABELS = (NEUTRAL_LABEL, GENDERED_LABEL, PROPORTION_LABEL)
 
 
 def _project(P: np.ndarray, K: np.ndarray) -> np.ndarray:
@@ -149,12 +167,19 @@ def mean_body_per_view(arrays: Mapping[str, np.ndarray], body_model=None, body_s
         residual of the fit), one row per (sample, view), like :func:`airpose_lib.eval.per_view_table`.
     """
     arrays = {k: np.asarray(v)[:max_samples] for k, v in arrays.items()}
-    phi = np.asarray(arrays["phi"], dtype=np.float64)
-    N, V = phi.shape[:2]
     if gendered:
         X0 = _gendered_joints(arrays["theta"], np.asarray(arrays["gender"]), body_models, body_source)
     else:
         X0 = mean_body_joints(arrays["theta"], body_model, body_source)  # (N, 22, 3)
+    return _placed_rows(arrays, X0, GENDERED_LABEL if gendered else NEUTRAL_LABEL, gauss_newton_steps)
+
+
+def _placed_rows(arrays: Mapping[str, np.ndarray], X0: np.ndarray, label: str,
+                 gauss_newton_steps: int) -> pd.DataFrame:
+    """Per-view rows of a reference that poses the model-frame joints ``X0 (N, 22, 3)`` with the
+    ground-truth root rotation and solves tau from the ground-truth 2D joints."""
+    phi = np.asarray(arrays["phi"], dtype=np.float64)
+    N, V = phi.shape[:2]
     X = np.einsum("nvij,nkj->nvki", phi, X0)  # phi X0, (N, V, 22, 3)
     uv = np.asarray(arrays["j2d"], dtype=np.float64)
     K = np.asarray(arrays["K"], dtype=np.float64)
@@ -163,7 +188,7 @@ def mean_body_per_view(arrays: Mapping[str, np.ndarray], body_model=None, body_s
     reproj = np.sqrt(((_project(X + tau[..., None, :], K) - uv) ** 2).sum(-1).mean(-1))
     ids = np.asarray(arrays["index"]) if "index" in arrays else np.arange(N)
     return pd.DataFrame({
-        "method": GENDERED_LABEL if gendered else NEUTRAL_LABEL, "sample": np.repeat(ids, V),
+        "method": label, "sample": np.repeat(ids, V),
         "view": np.tile(np.arange(V), N),
         "mpe_m": np.linalg.norm(err, axis=-1).reshape(-1),
         "err_x_m": err[..., 0].reshape(-1), "err_y_m": err[..., 1].reshape(-1), "err_z_m": err[..., 2].reshape(-1),
@@ -171,17 +196,157 @@ def mean_body_per_view(arrays: Mapping[str, np.ndarray], body_model=None, body_s
     })
 
 
+def bone_ratios(joints: np.ndarray) -> np.ndarray:
+    """Scale-free proportions of a skeleton: its 21 bone lengths over their sum.
+
+    Args:
+        joints: ``(..., 22, 3)`` the body joints (SMPL-X order; bone k joins joint k + 1 to its
+            parent in ``body.joint_sets.SMPLX_PARENTS``).
+    Returns:
+        ``(..., 21)``, summing to 1; unchanged by a uniform scaling of the body.
+    """
+    joints = np.asarray(joints, dtype=np.float64)
+    parents = list(SMPLX_PARENTS[1:NUM_BODY_JOINTS])
+    lengths = np.linalg.norm(joints[..., 1:NUM_BODY_JOINTS, :] - joints[..., parents, :], axis=-1)
+    return lengths / lengths.sum(-1, keepdims=True)
+
+
+def _gender_model(code: int, body_models: Mapping | None, body_source: str, cache: dict):
+    name = GENDER_NAMES[int(code)]
+    if name not in cache:
+        model = (body_models or {}).get(name)
+        cache[name] = model if model is not None else load_body_model(body_source, name, dtype=torch.float64)
+    return cache[name]
+
+
+def rest_statures(beta: np.ndarray, gender: np.ndarray, body_models: Mapping | None = None,
+                  body_source: str = "open", chunk: int = 256) -> tuple[np.ndarray, np.ndarray]:
+    """Stature and proportions of each subject's T-posed body (its gender's model, its beta).
+
+    Args:
+        beta: ``(N, S)`` shape coefficients. gender: ``(N,)`` codes (``body.genders``).
+        body_models: gender name -> ``smplx.SMPLX`` (a missing one is loaded from ``body_source``).
+        chunk: bodies per forward pass (each holds a whole mesh).
+    Returns:
+        ``stature (N,)`` in metres (``body.loader.stature``) and ``ratios (N, 21)``
+        (:func:`bone_ratios`), float64.
+    """
+    beta, gender = np.asarray(beta, dtype=np.float64), np.asarray(gender)
+    height, ratios = np.empty(len(beta)), np.empty((len(beta), NUM_BODY_JOINTS - 1))
+    models: dict = {}
+    for code in np.unique(gender):
+        rows = np.flatnonzero(gender == code)
+        model = _gender_model(code, body_models, body_source, models)
+        for start in range(0, len(rows), chunk):
+            r = rows[start:start + chunk]
+            vertices, joints = rest_body(model, beta[r], np.zeros((len(r), 21, 3)))
+            height[r], ratios[r] = stature(vertices), bone_ratios(joints[:, :NUM_BODY_JOINTS])
+    return height, ratios
+
+
+@dataclass(frozen=True)
+class StatureModel:
+    """Per gender, stature = ``coef[0] + coef[1:] . ratios`` (:func:`fit_stature_from_proportions`).
+
+    Attributes:
+        coef: gender code -> ``(22,)`` intercept and weights of the 21 bone ratios.
+        r2: gender code -> R^2 of the fit on its training subjects.
+        residual_sd: gender code -> standard deviation of the fit's residual (metres).
+    """
+
+    coef: dict
+    r2: dict
+    residual_sd: dict
+
+    def predict(self, ratios: np.ndarray, gender: np.ndarray) -> np.ndarray:
+        """``ratios (N, 21)``, ``gender (N,)`` codes -> statures ``(N,)``; a gender the fit never
+        saw raises KeyError (a bug in the caller's split, not a user's input)."""
+        ratios, gender = np.asarray(ratios, dtype=np.float64), np.asarray(gender)
+        out = np.empty(len(ratios))
+        for code in np.unique(gender):
+            rows = gender == code
+            c = self.coef[int(code)]
+            out[rows] = c[0] + ratios[rows] @ c[1:]
+        return out
+
+
+def fit_stature_from_proportions(ratios: np.ndarray, height: np.ndarray, gender: np.ndarray) -> StatureModel:
+    """Least squares of stature on the bone ratios, one linear model per gender.
+
+    The ratios sum to 1, so with the intercept the system is rank deficient by one;
+    ``np.linalg.lstsq`` returns its minimum-norm solution, whose predictions are the same.
+
+    Args:
+        ratios: ``(N, 21)`` (:func:`bone_ratios`). height: ``(N,)`` metres. gender: ``(N,)`` codes.
+    """
+    ratios, height, gender = np.asarray(ratios, np.float64), np.asarray(height, np.float64), np.asarray(gender)
+    coef, r2, sd = {}, {}, {}
+    for code in np.unique(gender):
+        rows = gender == code
+        A = np.concatenate([np.ones((int(rows.sum()), 1)), ratios[rows]], axis=1)
+        c = np.linalg.lstsq(A, height[rows], rcond=None)[0]
+        resid = height[rows] - A @ c
+        coef[int(code)] = c
+        spread = height[rows].var()
+        r2[int(code)] = float(1.0 - resid.var() / spread) if spread > 0 else float("nan")  # one subject
+        sd[int(code)] = float(resid.std())
+    return StatureModel(coef, r2, sd)
+
+
+def proportion_body_per_view(arrays: Mapping[str, np.ndarray], stature_model: StatureModel,
+                             body_models: Mapping | None = None, body_source: str = "open",
+                             gauss_newton_steps: int = 5, max_samples: int | None = None) -> pd.DataFrame:
+    """Per-view MPE of the stature-from-proportions reference (:data:`PROPORTION_LABEL`).
+
+    Each subject's own body (gender, beta, theta of the ground truth), scaled by
+    ``predicted stature / true stature``, posed with the ground-truth root rotation and placed on
+    the ground-truth 2D joints (:func:`solve_translation`). A body k times too tall lands k times
+    too far: the error is the stature model's residual times the distance.
+
+    Args:
+        arrays: as :func:`mean_body_per_view`, with ``beta (N, S)`` and ``gender (N,)``.
+        stature_model: :func:`fit_stature_from_proportions` on *other* subjects (the training split).
+    Returns:
+        :func:`mean_body_per_view`'s columns.
+    """
+    arrays = {k: np.asarray(v)[:max_samples] for k, v in arrays.items()}
+    beta, gender = np.asarray(arrays["beta"], np.float64), np.asarray(arrays["gender"])
+    height, ratios = rest_statures(beta, gender, body_models, body_source)
+    scale = stature_model.predict(ratios, gender) / height  # (N,)
+    theta = torch.as_tensor(np.asarray(arrays["theta"], dtype=np.float64))
+    X0 = np.empty((len(beta), NUM_BODY_JOINTS, 3))
+    models: dict = {}
+    for code in np.unique(gender):
+        rows = gender == code
+        body = BodyForward(_gender_model(code, body_models, body_source, models), vertices=None).double()
+        with torch.no_grad():
+            b = torch.as_tensor(beta[rows][:, :body.num_betas])
+            X0[rows] = body(axis_angle_rotations(theta[torch.as_tensor(rows)]), b)[0].numpy()
+    return _placed_rows(arrays, scale[:, None, None] * X0, PROPORTION_LABEL, gauss_newton_steps)
+
+
 def mean_body_references(arrays: Mapping[str, np.ndarray], body_source: str = "open", gauss_newton_steps: int = 5,
-                         max_samples: int | None = None, body_models: Mapping | None = None) -> pd.DataFrame:
-    """Both references of a still-frame split, neutral rows first (:func:`mean_body_per_view`).
+                         max_samples: int | None = None, body_models: Mapping | None = None,
+                         train_arrays: Mapping[str, np.ndarray] | None = None,
+                         max_train: int = 4000) -> pd.DataFrame:
+    """The references of a still-frame split in table order (:data:`MEAN_BODY_LABELS`).
 
     Args:
         body_models: gender name -> ``smplx.SMPLX`` (a missing one is loaded from ``body_source``).
+        train_arrays: the training split's ``beta`` and ``gender``: with them the stature-from-
+            proportions rows are added, the stature model fitted on its first ``max_train``
+            subjects (None: the two mean-body references only).
     """
     models = dict(body_models or {})
-    return pd.concat([mean_body_per_view(arrays, models.get("neutral"), body_source, gauss_newton_steps, max_samples),
-                      mean_body_per_view(arrays, None, body_source, gauss_newton_steps, max_samples, gendered=True,
-                                         body_models=models)], ignore_index=True)
+    parts = [mean_body_per_view(arrays, models.get("neutral"), body_source, gauss_newton_steps, max_samples),
+             mean_body_per_view(arrays, None, body_source, gauss_newton_steps, max_samples, gendered=True,
+                                body_models=models)]
+    if train_arrays is not None:
+        height, ratios = rest_statures(np.asarray(train_arrays["beta"])[:max_train],
+                                       np.asarray(train_arrays["gender"])[:max_train], models, body_source)
+        fit = fit_stature_from_proportions(ratios, height, np.asarray(train_arrays["gender"])[:max_train])
+        parts.append(proportion_body_per_view(arrays, fit, models, body_source, gauss_newton_steps, max_samples))
+    return pd.concat(parts, ignore_index=True)
 
 
 def mean_body_recording_estimate(ground_truth: Mapping[str, np.ndarray], body_model=None, body_source: str = "open",

@@ -141,10 +141,15 @@ def run_ablation_experiment(profile: str, source: DataSource, variants: Sequence
 
 
 def ablation_references(exp: AblationExperiment, max_samples: int | None = None) -> pd.DataFrame | None:
-    """:func:`~airpose_lib.eval.mean_body.mean_body_references` on the kit's test split, neutral
-    and of the true gender (None on the official data, whose arrays they do not read)."""
+    """:func:`~airpose_lib.eval.mean_body.mean_body_references` on the kit's test split: the
+    neutral and the true-gender mean body, and the subject's body at the stature its proportions
+    predict, the stature model fitted on the training split's subjects (None on the official data,
+    whose arrays they do not read)."""
     t0 = time.perf_counter()
-    references = None if exp.official else mean_body_references(exp.test.arrays, max_samples=max_samples)
+    references = None
+    if not exp.official:
+        train = StillFrameDataset(default_root(exp.profile), "train").arrays
+        references = mean_body_references(exp.test.arrays, max_samples=max_samples, train_arrays=train)
     exp.wall["mean-body references"] = time.perf_counter() - t0
     return references
 

@@ -7,8 +7,9 @@ Notebook 02 writes a results bundle into its output folder with :func:`write_ref
   mean-body reference rows);
 * ``per_seed.csv``: one row per variant x seed with the metric means (what the check compares);
 * ``claims.csv`` / ``claims.md``: the six ordering claims with difference, interval and verdict;
-* ``mean_body.csv``: the MPE summary of the mean-body references, neutral and of the true gender
-  (what a stature-blind estimate with the ground-truth pose gets on the data);
+* ``mean_body.csv``: the MPE summary of the references: the neutral and the true-gender mean body
+  (what a stature-blind estimate with the ground-truth pose gets on the data) and, where the run
+  made it, the subject's body at the stature its proportions predict;
 * ``provenance.json``: kit version, git commit, machine, command and the wall time of each step
   (notebook 02 adds the device and precision each network trained with, :func:`train_settings`).
 

@@ -262,3 +262,20 @@ def test_references_add_the_proportion_rows_with_a_training_split(open_model, ge
     # this reference lands far closer than the true-gender mean body
     per = three.groupby("method", sort=False)["mpe_m"].mean()
     assert per[MEAN_BODY_LABELS[2]] < 0.5 * per[GENDERED_LABEL]
+
+
+def test_references_load_each_body_model_once(monkeypatch, open_model, gendered_models):
+    """With no models given, the three references share one load per gender (a load builds a whole
+    mesh's blend shapes); the rows are those of the given models."""
+    import airpose_lib.eval.mean_body as mb
+
+    models = {"neutral": open_model, **gendered_models}
+    loads = []
+    monkeypatch.setattr(mb, "load_body_model", lambda source, gender, dtype=None: loads.append(gender) or models[gender])
+    male, female = gendered_models["male"], gendered_models["female"]
+    test = _shaped_arrays([male, female, male], [1, 2, 1], seed=9)
+    train = _shaped_arrays([male, female] * 20, [1, 2] * 20, seed=10)
+    loaded = mb.mean_body_references(test, train_arrays=train)
+    assert sorted(loads) == ["female", "male", "neutral"]
+    np.testing.assert_allclose(loaded["mpe_m"],
+                               mb.mean_body_references(test, body_models=models, train_arrays=train)["mpe_m"])

@@ -47,16 +47,18 @@ import torch
 
 from airpose_lib.body import load_body_model
 from airpose_lib.body.forward import BodyForward, axis_angle_rotations, rest_body
-from airpose_lib.body.genders import GENDER_NAMES
+from airpose_lib.body.genders import GENDER_CODES, GENDER_NAMES
 from airpose_lib.body.joint_sets import NUM_BODY_JOINTS, SMPLX_PARENTS
 from airpose_lib.body.loader import stature
 from airpose_lib.geometry import axis_angle_to_matrix
 
-__all__ = ["NEUTRAL_LABEL", "GENDERED_LABEL", "PROPORTION_LABEL", "MEAN_BODY_LABELS", "solve_translation",
-           "mean_body_joints", "mean_body_per_view", "bone_ratios", "rest_statures", "StatureModel",
+__all__ = ["NEUTRAL_LABEL", "GENDERED_LABEL", "PROPORTION_LABEL", "MEAN_BODY_LABELS", "STATURE_FIT_SUBJECTS",
+           "solve_translation", "mean_body_joints", "mean_body_per_view", "bone_ratios", "rest_statures", "StatureModel",
            "fit_stature_from_proportions", "proportion_body_per_view", "mean_body_references",
            "mean_body_recording_estimate"]
 
+#: Training subjects the stature-from-proportions model is fitted on (:func:`mean_body_references`).
+STATURE_FIT_SUBJECTS = 4000
 #: Row name of the neutral mean-body reference (Table I, the recordings' error tables).
 NEUTRAL_LABEL = "Reference: neutral mean body (GT pose)"
 #: Row name of the mean body of the subject's true gender.
@@ -140,10 +142,10 @@ def _gendered_joints(theta: np.ndarray, gender: np.ndarray, body_models: Mapping
     """:func:`mean_body_joints` of each sample's own gender: ``theta (N, 21, 3)``, ``gender (N,)``
     codes (``body.genders``) -> ``(N, 22, 3)``."""
     X0 = np.empty((len(theta), 22, 3))
+    models: dict = {}
     for code in np.unique(gender):
-        name = GENDER_NAMES[int(code)]
         rows = gender == code
-        X0[rows] = mean_body_joints(theta[rows], (body_models or {}).get(name), body_source, name)
+        X0[rows] = mean_body_joints(theta[rows], _gender_model(code, body_models, body_source, models))
     return X0
 
 
@@ -212,6 +214,7 @@ def bone_ratios(joints: np.ndarray) -> np.ndarray:
 
 
 def _gender_model(code: int, body_models: Mapping | None, body_source: str, cache: dict):
+    """The body model of gender ``code``: ``body_models``' own, else loaded once into ``cache``."""
     name = GENDER_NAMES[int(code)]
     if name not in cache:
         model = (body_models or {}).get(name)
@@ -328,7 +331,7 @@ def proportion_body_per_view(arrays: Mapping[str, np.ndarray], stature_model: St
 def mean_body_references(arrays: Mapping[str, np.ndarray], body_source: str = "open", gauss_newton_steps: int = 5,
                          max_samples: int | None = None, body_models: Mapping | None = None,
                          train_arrays: Mapping[str, np.ndarray] | None = None,
-                         max_train: int = 4000) -> pd.DataFrame:
+                         max_train: int = STATURE_FIT_SUBJECTS) -> pd.DataFrame:
     """The references of a still-frame split in table order (:data:`MEAN_BODY_LABELS`).
 
     Args:
@@ -337,7 +340,13 @@ def mean_body_references(arrays: Mapping[str, np.ndarray], body_source: str = "o
             proportions rows are added, the stature model fitted on its first ``max_train``
             subjects (None: the two mean-body references only).
     """
+    # each model once for all three references (a load builds a whole mesh's blend shapes)
     models = dict(body_models or {})
+    genders = [GENDER_CODES["neutral"], *np.asarray(arrays["gender"])]
+    if train_arrays is not None:
+        genders += list(np.asarray(train_arrays["gender"])[:max_train])
+    for code in np.unique(genders):
+        _gender_model(code, models, body_source, models)
     parts = [mean_body_per_view(arrays, models.get("neutral"), body_source, gauss_newton_steps, max_samples),
              mean_body_per_view(arrays, None, body_source, gauss_newton_steps, max_samples, gendered=True,
                                 body_models=models)]

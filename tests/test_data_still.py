@@ -371,6 +371,25 @@ def test_test_crops_are_jittered_like_training_crops(crop_protocol):
     assert np.all(s_tight >= s_test - 1e-6)  # a tight box is never larger than its enlargement
 
 
+def test_split_arrays_reads_only_the_shards_of_the_first_samples(crop_protocol, monkeypatch):
+    """The first 13 training samples' arrays, as the dataset types them, from 2 of the 3 training
+    shards (10 samples each); a name that is not a stored array is refused."""
+    import airpose_lib.data.still.dataset as ds
+
+    full = StillFrameDataset(crop_protocol, "train").arrays
+    read = []
+    monkeypatch.setattr(ds, "read_shard", lambda path, names=None: read.append(path) or read_shard(path, names))
+    part = ds.split_arrays(crop_protocol, "train", ("beta", "gender", "P"), 13)
+    assert len(read) == 2
+    for k in ("beta", "gender", "P"):
+        assert part[k].dtype == full[k].dtype
+        np.testing.assert_array_equal(part[k], full[k][:13])
+    whole = ds.split_arrays(crop_protocol, "test", ["index"])
+    np.testing.assert_array_equal(whole["index"], StillFrameDataset(crop_protocol, "test").arrays["index"])
+    with pytest.raises(ConfigError, match="images"):
+        ds.split_arrays(crop_protocol, "train", ("beta", "images"))
+
+
 def test_tight_crops_are_the_same_samples(crop_protocol):
     test = StillFrameDataset(crop_protocol, "test")
     tight = StillFrameDataset(crop_protocol, "test", crops="tight")

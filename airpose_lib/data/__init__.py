@@ -30,7 +30,7 @@ _EXPORTS = {
     **dict.fromkeys(("GENERATOR_VERSION", "GenerationConfig", "profile_config", "default_root"), "still.config"),
     "StillFrameGenerator": "still.frames",
     **dict.fromkeys(("generate_still_dataset", "ensure_still_dataset"), "still.generate"),
-    **dict.fromkeys(("StillFrameDataset", "denormalize_images"), "still.dataset"),
+    **dict.fromkeys(("StillFrameDataset", "split_arrays", "denormalize_images"), "still.dataset"),
     # recordings
     **dict.fromkeys(("SequenceConfig", "profile_sequences"), "sequences.config"),
     **dict.fromkeys(("default_sequence_root", "ensure_sequences"), "sequences.cache"),

@@ -31,9 +31,9 @@ from airpose_lib.body import load_body_model
 from airpose_lib.body.genders import GENDER_NAMES
 from airpose_lib.data.official.synthetic import OfficialSyntheticDataset
 from airpose_lib.data.still.config import default_root
-from airpose_lib.data.still.dataset import StillFrameDataset
+from airpose_lib.data.still.dataset import StillFrameDataset, split_arrays
 from airpose_lib.eval.ablation import per_seed_table
-from airpose_lib.eval.mean_body import mean_body_references
+from airpose_lib.eval.mean_body import STATURE_FIT_SUBJECTS, mean_body_references
 from airpose_lib.eval.reference import train_settings, train_wall_s, write_reference
 from airpose_lib.eval.significance import claims_table
 from airpose_lib.geometry import axis_angle_to_matrix, crop_intrinsics, full_to_crop_pixels, project_points
@@ -148,7 +148,7 @@ def ablation_references(exp: AblationExperiment, max_samples: int | None = None)
     t0 = time.perf_counter()
     references = None
     if not exp.official:
-        train = StillFrameDataset(default_root(exp.profile), "train").arrays
+        train = split_arrays(default_root(exp.profile), "train", ("beta", "gender"), STATURE_FIT_SUBJECTS)
         references = mean_body_references(exp.test.arrays, max_samples=max_samples, train_arrays=train)
     exp.wall["mean-body references"] = time.perf_counter() - t0
     return references

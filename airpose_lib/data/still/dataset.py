@@ -104,6 +104,22 @@ def denormalize_images(x: torch.Tensor) -> np.ndarray:
     return rgb.movedim(-3, -1).numpy()
 
 
+def _check_split(split: str) -> None:
+    if split not in (*SPLITS, "all"):
+        raise ConfigError(f"split must be one of {', '.join(SPLITS)} or 'all', got {split!r}")
+
+
+def _split_records(manifest: dict, split: str) -> list[dict]:
+    """The manifest's shard records of ``split`` (``"all"``: every one), in shard order."""
+    return [r for r in manifest["shards"] if split == "all" or r["split"] == split]
+
+
+def _joined(key: str, parts: list[np.ndarray]) -> np.ndarray:
+    """One array of a split from its shards' parts; the float keys as float32, the items' dtype."""
+    a = np.concatenate(parts)
+    return a.astype(np.float32) if key in _FLOAT_KEYS else a
+
+
 def split_arrays(root: Path | str, split: str, names: tuple[str, ...] | list[str],
                  max_samples: int | None = None, *, verify: bool = True) -> dict[str, np.ndarray]:
     """Some arrays of a split's first samples, reading (and verifying) only the shards that hold them.
@@ -123,17 +139,14 @@ def split_arrays(root: Path | str, split: str, names: tuple[str, ...] | list[str
     unknown = sorted(n for n in names if n not in _LOADED or n == "image_offsets")
     if unknown:
         raise ConfigError(f"not arrays of a still-frame split: {', '.join(unknown)}")
-    if split not in (*SPLITS, "all"):
-        raise ConfigError(f"split must be one of {', '.join(SPLITS)} or 'all', got {split!r}")
+    _check_split(split)
     root = Path(root)
     manifest = check_complete(root)
     parts: dict[str, list[np.ndarray]] = {k: [] for k in names}
     n = 0
-    for rec in manifest["shards"]:
+    for rec in _split_records(manifest, split):
         if max_samples is not None and n >= max_samples:
             break
-        if split != "all" and rec["split"] != split:
-            continue
         path = verify_shard(root, rec, manifest) if verify else root / rec["file"]
         arrays = read_shard(path, list(names))
         for k in names:
@@ -141,8 +154,7 @@ def split_arrays(root: Path | str, split: str, names: tuple[str, ...] | list[str
         n += len(arrays[names[0]])
     if not n:
         raise ConfigError(f"{root}: the {split!r} split is empty")
-    return {k: (np.concatenate(v).astype(np.float32) if k in _FLOAT_KEYS else np.concatenate(v))[:max_samples]
-            for k, v in parts.items()}
+    return {k: _joined(k, v)[:max_samples] for k, v in parts.items()}
 
 
 class StillFrameDataset(Dataset):
@@ -167,8 +179,7 @@ class StillFrameDataset(Dataset):
 
     def __init__(self, root: Path | str, split: str = "train", augment: bool | None = None, *,
                  verify: bool = True, crops: str = "jittered", mirror: bool = False) -> None:
-        if split not in (*SPLITS, "all"):
-            raise ConfigError(f"split must be one of {', '.join(SPLITS)} or 'all', got {split!r}")
+        _check_split(split)
         if crops not in ("jittered", "tight"):
             raise ConfigError(f"crops must be 'jittered' or 'tight', got {crops!r}")
         self.crops = crops
@@ -177,7 +188,7 @@ class StillFrameDataset(Dataset):
         self.augment = (split == "train") if augment is None else bool(augment)
         self.mirror = bool(mirror)
         self.manifest = check_complete(self.root)
-        records = [r for r in self.manifest["shards"] if split == "all" or r["split"] == split]
+        records = _split_records(self.manifest, split)
         self.num_views = int(self.manifest["num_views"])
         self.crop_size = int(self.manifest["crop_size"])
         parts: dict[str, list[np.ndarray]] = {k: [] for k in _LOADED}
@@ -205,12 +216,7 @@ class StillFrameDataset(Dataset):
         if not loc:
             raise ConfigError(f"{self.root}: the {split!r} split is empty")
         self._loc = np.concatenate(loc).astype(np.int64)
-        self._arrays = {}
-        for k in _LOADED:
-            if k == "image_offsets":
-                continue
-            a = np.concatenate(parts[k])
-            self._arrays[k] = a.astype(np.float32) if k in _FLOAT_KEYS else a
+        self._arrays = {k: _joined(k, parts[k]) for k in _LOADED if k != "image_offsets"}
 
     def __len__(self) -> int:
         return len(self._loc)

@@ -68,6 +68,18 @@ def test_parse_reproduce():
                                                                             "python3", False)
     with pytest.raises(SystemExit):
         p.parse_args(["reproduce", "--profile", "huge"])
+    with pytest.raises(SystemExit):
+        p.parse_args(["reproduce", "--profile", "not_here.yaml"])
+
+
+def test_reproduce_takes_an_own_profile_file(tmp_path, monkeypatch, capsys):
+    (tmp_path / "mine.yaml").write_text("inherits: smoke\ndescription: smoke with my changes\n")
+    monkeypatch.chdir(tmp_path)
+    a = cli.build_parser().parse_args(["reproduce", "--profile", "mine.yaml"])
+    assert a.profile == str(tmp_path / "mine.yaml")
+    assert cli.main(["reproduce", "--profile", "mine.yaml", "--list"]) == 0
+    out = capsys.readouterr().out
+    assert out.startswith("profile mine: smoke with my changes") and "image_size" in out
 
 
 def test_parse_body():

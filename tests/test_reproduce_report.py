@@ -127,6 +127,20 @@ def test_cli_exit_status_and_messages(run, capsys, monkeypatch):
     assert "holds no report" in capsys.readouterr().err and (run["figures"] / "a.png").is_file()
 
 
+def test_cli_reads_the_run_of_an_own_profile_file_by_its_name(run, capsys, monkeypatch, tmp_path):
+    import airpose_lib.reproduce.report as report
+
+    monkeypatch.setattr(report, "CATALOG_PATH", run["kw"]["catalog_path"])
+    monkeypatch.setattr(report, "FIGURES_README", run["kw"]["readme"])
+    run["run_dir"].rename(run["run_dir"].with_name("mine"))  # what `reproduce --profile mine.yaml` makes
+    own = tmp_path / "elsewhere" / "mine.yaml"
+    own.parent.mkdir()
+    own.write_text("inherits: smoke\n")
+    assert main(["report", "--profile", str(own), "--runs", str(run["run_dir"].parent), "--figures",
+                 str(run["figures"]), "--out", str(run["out"])]) == 0
+    assert "2 notebook pages" in capsys.readouterr().out
+
+
 def test_shrink_keeps_line_art_png_and_small_images_as_they_are():
     data, mime = shrink_image(_png((100, 50)), 400)
     assert mime == "image/png" and Image.open(io.BytesIO(data)).size == (100, 50)

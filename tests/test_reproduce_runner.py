@@ -119,6 +119,21 @@ def test_success_failure_and_stop(kit):
     assert "00_ok" in report.table() and "FAILED" in report.table()
 
 
+def test_an_own_profile_file_reaches_the_kernels_as_its_absolute_path(kit, monkeypatch):
+    root, run = kit
+    own = root / "mine" / "own.yaml"
+    own.parent.mkdir()
+    own.write_text("inherits: ../profiles/tiny.yaml\ndescription: my changes\nnotebooks: {00_ok: {size: 9}}\n")
+    monkeypatch.chdir(root)  # a relative path: the kernels run in the notebooks' folder
+    report = run("mine/own.yaml", only=["00_ok"])
+    assert report.ok and report.profile == "own"
+    seen = json.loads((root / "runs" / "own" / "00_ok" / "seen.json").read_text())
+    assert seen["profile"] == str(own.resolve()) and seen["size"] == 9
+    # a kit profile (here the fixture's) is still passed by its name
+    run(only=["00_ok"])
+    assert json.loads((root / "runs" / "tiny" / "00_ok" / "seen.json").read_text())["profile"] == "tiny"
+
+
 def test_missing_figure_and_missing_parameters_cell(kit):
     root, run = kit
     # A figure left over from an earlier run must not hide the missing one.

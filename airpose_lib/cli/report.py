@@ -6,7 +6,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from .common import PROFILES, CLIError
+from .common import CLIError, parse_profile
 
 __all__ = ["add_report", "print_report_result"]
 
@@ -28,15 +28,16 @@ def print_report_result(result) -> int:
 
 
 def _cmd_report(args: argparse.Namespace) -> int:
-    from airpose_lib.paths import runs_root
+    from airpose_lib.paths import profile_name, runs_root
     from airpose_lib.reproduce.report import DEFAULT_MAX_IMAGE_PX, build_report
 
-    run_dir = (args.runs if args.runs is not None else runs_root()) / args.profile
+    name = profile_name(args.profile)  # an own profile file's run is named after the file
+    run_dir = (args.runs if args.runs is not None else runs_root()) / name
     max_px = args.max_image_px if args.max_image_px is not None else DEFAULT_MAX_IMAGE_PX
     if max_px < 64:
         raise CLIError(f"--max-image-px {max_px}: give at least 64 pixels")
     try:
-        result = build_report(args.profile, run_dir=run_dir, figures_dir=args.figures, out_dir=args.out,
+        result = build_report(name, run_dir=run_dir, figures_dir=args.figures, out_dir=args.out,
                               max_image_px=max_px)
     except (FileNotFoundError, FileExistsError) as e:
         raise CLIError(str(e)) from None
@@ -53,7 +54,8 @@ def add_report(sub) -> None:
                     "notebook in the paper's order (nbconvert). Fails (exit 1) if a notebook is missing or "
                     "has an error output, or a figure of the catalogue is missing; the report is written "
                     "all the same.")
-    rep.add_argument("--profile", choices=PROFILES, default="smoke", help="the reproduction's profile (default: smoke)")
+    rep.add_argument("--profile", type=parse_profile, default="smoke",
+                     help="the reproduction's profile, a name or your own profile YAML (default: smoke)")
     rep.add_argument("--runs", type=Path, default=None,
                      help="run root of `airpose reproduce --out` (default: $AIRPOSE_RUNS, else runs/ at the "
                           "checkout root)")

@@ -6,7 +6,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from .common import PROFILES, CLIError
+from .common import CLIError, parse_profile
 
 __all__ = ['add_reproduce']
 
@@ -96,9 +96,11 @@ def add_reproduce(sub) -> None:
                     "with the sizes of a profile, write the executed notebooks to "
                     "<out>/<profile>/notebooks/ and collect the figures into <figures>. Fails "
                     "(exit 1) if a notebook raises or an expected figure is missing.")
-    rep.add_argument("--profile", choices=PROFILES, default="smoke",
+    rep.add_argument("--profile", type=parse_profile, default="smoke",
                      help="smoke: minutes on a CPU; cpu: hours on a CPU; paper: the paper's sizes "
-                          "(GPU); the sizes are in airpose_lib/profiles/ (default: smoke)")
+                          "(GPU); the sizes are in airpose_lib/profiles/; or the path of your own profile "
+                          "YAML (e.g. `inherits: cpu` and changes; its folders and results/<name>/ are "
+                          "named after the file) (default: smoke)")
     rep.add_argument("--only", nargs="+", metavar="NAME",
                      help="run only these notebooks (names or unique prefixes, e.g. 00_body_model or 00)")
     rep.add_argument("--out", type=Path, default=None,

@@ -223,6 +223,13 @@ def load_profile(profile: str | Path, profiles_dir: Path = PROFILES_DIR) -> dict
             "notebooks": {k: dict(v or {}) for k, v in notebooks.items()}, "profile": prof}
 
 
+def _kernel_profile(prof: dict) -> str:
+    """The ``profile`` parameter a notebook receives: a kit profile's name, or the absolute path
+    of a profile file of one's own (each kernel reads the profile again, from its own folder)."""
+    given = str(prof["profile"])
+    return given if given == prof["name"] else str(Path(prof["path"]).resolve())
+
+
 def check_profile_unchanged(prof, before: str) -> None:
     """Raise :class:`ReproductionError` if the file of ``prof`` (a
     :class:`~airpose_lib.profiles.Profile`) now reads differently.
@@ -473,7 +480,7 @@ def run_profile(
         t_start = time.perf_counter()
         stop = False
         for i, entry in enumerate(selected):
-            params = {"profile": prof["name"], "output_dir": str(run_dir / entry.name),
+            params = {"profile": _kernel_profile(prof), "output_dir": str(run_dir / entry.name),
                       **_data_source_parameter(notebooks_dir / entry.file, data_source),
                       **prof["notebooks"].get(entry.name, {})}
             if stop:

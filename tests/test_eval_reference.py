@@ -23,6 +23,7 @@ from airpose_lib.eval.reference import (
     install_recordings_reference,
     machine_description,
     provenance_problems,
+    provenance_record,
     read_reference_table,
     recordings_report,
     reference_outputs,
@@ -443,3 +444,11 @@ def test_committed_reference_results_come_from_clean_commits_of_this_history():
             assert problems, f"{rel} is clean now: remove it from STALE_REFERENCES"
         else:
             assert not problems, f"{rel}: {problems}"
+
+
+def test_provenance_names_an_own_profile_file_by_its_place_in_the_checkout(tmp_path):
+    inside = RESULTS_ROOT / "cpu_backbone_seed1" / "cpu_backbone_seed1.yaml"
+    assert provenance_record(str(inside), "cmd")["profile"] == "results/cpu_backbone_seed1/cpu_backbone_seed1.yaml"
+    outside = tmp_path / "mine.yaml"
+    assert provenance_record(str(outside), "cmd")["profile"] == str(outside)
+    assert provenance_record("cpu", "cmd")["profile"] == "cpu"

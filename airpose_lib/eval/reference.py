@@ -262,11 +262,24 @@ def _write_text(path: Path, text: str) -> None:
         tmp.write_text(text)
 
 
+def _portable(profile: str) -> str:
+    """A profile file inside the checkout as its path from the checkout's root (what another
+    clone finds it by); a kit profile's name, or a file elsewhere, as it is."""
+    path = Path(str(profile))
+    if path.suffix in (".yaml", ".yml") and path.is_absolute():
+        try:
+            return path.resolve().relative_to(RESULTS_ROOT.parent).as_posix()
+        except ValueError:
+            pass
+    return str(profile)
+
+
 def provenance_record(profile: str, command: str) -> dict:
     """What every results bundle records about how it was made: profile, kit version, git commit
     (clean but for the profile's own reference outputs, :func:`reference_outputs`), time (UTC),
     machine and the command."""
-    return {"profile": profile, "kit_version": __version__, "git": git_commit(outputs=reference_outputs(profile)),
+    return {"profile": _portable(profile), "kit_version": __version__,
+            "git": git_commit(outputs=reference_outputs(profile)),
             "created_at": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
             "machine": machine_description(), "command": command}
 

@@ -24,9 +24,9 @@ METRICS = {"mpe_m": "MPE [m]", "mpjpe_m": "MPJPE [m]", "mpjpe_true_root_m": "MPJ
            "root_rot_median_deg": "root median [deg]", "root_above90_pct": "root > 90 deg [%]"}
 
 
-def variant_table(first: pd.DataFrame, second: pd.DataFrame) -> pd.DataFrame:
-    """Per variant and metric: each backbone's mean and SD over its seeds, the difference of the
-    means (second - first), and that difference over the larger of the two seed SDs."""
+def differences(first: pd.DataFrame, second: pd.DataFrame) -> pd.DataFrame:
+    """Per variant and metric (one row each): each backbone's mean and SD over its seeds, the
+    difference of the means (second - first) and that difference over the larger seed SD."""
     rows = []
     for variant, a in first.groupby("variant", sort=False):
         b = second[second["variant"] == variant]
@@ -35,12 +35,43 @@ def variant_table(first: pd.DataFrame, second: pd.DataFrame) -> pd.DataFrame:
         for col, label in METRICS.items():
             sd = max(a[col].std(ddof=1), b[col].std(ddof=1))
             diff = b[col].mean() - a[col].mean()
-            rows.append({"method": a["method"].iloc[0], "metric": label,
-                         "backbone 0": f"{a[col].mean():.4f} ± {a[col].std(ddof=1):.4f}",
-                         "backbone 1": f"{b[col].mean():.4f} ± {b[col].std(ddof=1):.4f}",
-                         "difference": f"{diff:+.4f}", "difference / seed SD": f"{diff / sd:+.1f}" if sd > 0 else "-",
+            rows.append({"method": a["method"].iloc[0], "metric": label, "mean 0": a[col].mean(),
+                         "sd 0": a[col].std(ddof=1), "mean 1": b[col].mean(), "sd 1": b[col].std(ddof=1),
+                         "difference": diff, "ratio": diff / sd if sd > 0 else float("nan"),
                          "seeds": f"{len(a)} / {len(b)}"})
     return pd.DataFrame(rows)
+
+
+def variant_table(diffs: pd.DataFrame) -> pd.DataFrame:
+    """:func:`differences` as printed: mean ± seed SD per backbone, the difference, its ratio."""
+    return pd.DataFrame({
+        "method": diffs["method"], "metric": diffs["metric"],
+        "backbone 0": [f"{m:.4f} ± {s:.4f}" for m, s in zip(diffs["mean 0"], diffs["sd 0"])],
+        "backbone 1": [f"{m:.4f} ± {s:.4f}" for m, s in zip(diffs["mean 1"], diffs["sd 1"])],
+        "difference": [f"{d:+.4f}" for d in diffs["difference"]],
+        "difference / seed SD": ["-" if pd.isna(r) else f"{r:+.1f}" for r in diffs["ratio"]],
+        "seeds": diffs["seeds"]})
+
+
+def summary(diffs: pd.DataFrame, first: pd.DataFrame, second: pd.DataFrame) -> str:
+    """What the two tables say, in numbers: per metric the range of the difference over the
+    variants and of its ratio to the seed SD, whether all variants move the same way, and how
+    many claims keep their verdict and have overlapping gain intervals."""
+    lines = []
+    for label, d in diffs.groupby("metric", sort=False):
+        same = "all variants the same way" if (d["difference"] > 0).all() or (d["difference"] < 0).all() \
+            else "the variants differ in sign"
+        lines.append(f"- {label}: backbone 1 - backbone 0 from {d['difference'].min():+.4f} to "
+                     f"{d['difference'].max():+.4f} ({same}); |difference| / seed SD "
+                     f"{d['ratio'].abs().min():.1f} to {d['ratio'].abs().max():.1f}.")
+    b = second.set_index("claim")
+    both = first[first["claim"].isin(b.index)]
+    same_verdict = sum(r["verdict"] == b.loc[r["claim"], "verdict"] for _, r in both.iterrows())
+    overlap = sum(r["gain CI low [%]"] <= b.loc[r["claim"], "gain CI high [%]"]
+                  and b.loc[r["claim"], "gain CI low [%]"] <= r["gain CI high [%]"] for _, r in both.iterrows())
+    lines.append(f"- Claims: {same_verdict} of {len(both)} keep their verdict on the second backbone; "
+                 f"the two gain intervals overlap for {overlap} of {len(both)}.")
+    return "\n".join(lines)
 
 
 def claims_table(first: pd.DataFrame, second: pd.DataFrame) -> pd.DataFrame:
@@ -63,9 +94,12 @@ def main() -> None:
     claims = [pd.read_csv(d / "claims.csv") for d in (args.first, args.second)]
     print(f"Backbone 0: `{args.first}`; backbone 1: `{args.second}`. Mean ± SD over the regressor seeds "
           "(the same seeds on both).\n")
-    print(table_to_markdown(variant_table(*per_seed).set_index("method")))
+    diffs = differences(*per_seed)
+    print(table_to_markdown(variant_table(diffs).set_index("method")))
     print("\nThe claims (pair bootstrap over two-view test samples pooled over the seeds, 95 %):\n")
     print(table_to_markdown(claims_table(*claims).set_index("claim")))
+    print("\nIn numbers (from the two tables above):\n")
+    print(summary(diffs, *claims))
 
 
 if __name__ == "__main__":

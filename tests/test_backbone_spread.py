@@ -17,7 +17,7 @@ def spread():
 
 
 def _per_seed(offset: float, scale: float = 1.0) -> pd.DataFrame:
-    """Two variants x two seeds; every metric column is one value plus a seed term of +-scale*d."""
+    """Two variants x two seeds; each metric is the variant's base + offset, -+0.01*scale by seed."""
     rows = []
     for variant, method, base in (("baseline", "Baseline", 1.0), ("airpose", "AirPose", 0.5)):
         for seed, sign in ((123, -1), (124, 1)):

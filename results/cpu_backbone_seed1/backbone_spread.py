@@ -33,11 +33,11 @@ def differences(first: pd.DataFrame, second: pd.DataFrame) -> pd.DataFrame:
         if b.empty:
             continue
         for col, label in METRICS.items():
-            sd = max(a[col].std(ddof=1), b[col].std(ddof=1))
+            sd0, sd1 = a[col].std(ddof=1), b[col].std(ddof=1)
             diff = b[col].mean() - a[col].mean()
-            rows.append({"method": a["method"].iloc[0], "metric": label, "mean 0": a[col].mean(),
-                         "sd 0": a[col].std(ddof=1), "mean 1": b[col].mean(), "sd 1": b[col].std(ddof=1),
-                         "difference": diff, "ratio": diff / sd if sd > 0 else float("nan"),
+            rows.append({"method": a["method"].iloc[0], "metric": label, "mean 0": a[col].mean(), "sd 0": sd0,
+                         "mean 1": b[col].mean(), "sd 1": sd1, "difference": diff,
+                         "ratio": diff / max(sd0, sd1) if max(sd0, sd1) > 0 else float("nan"),
                          "seeds": f"{len(a)} / {len(b)}"})
     return pd.DataFrame(rows)
 
@@ -53,6 +53,12 @@ def variant_table(diffs: pd.DataFrame) -> pd.DataFrame:
         "seeds": diffs["seeds"]})
 
 
+def paired_claims(first: pd.DataFrame, second: pd.DataFrame) -> pd.DataFrame:
+    """``first``'s claims in its order, each with the second backbone's columns suffixed `` 1``
+    (NaN where the second has no such claim)."""
+    return first.merge(second, on="claim", how="left", suffixes=("", " 1"), validate="one_to_one")
+
+
 def summary(diffs: pd.DataFrame, first: pd.DataFrame, second: pd.DataFrame) -> str:
     """What the two tables say, in numbers: per metric the range of the difference over the
     variants and of its ratio to the seed SD, whether all variants move the same way, and how
@@ -64,11 +70,10 @@ def summary(diffs: pd.DataFrame, first: pd.DataFrame, second: pd.DataFrame) -> s
         lines.append(f"- {label}: backbone 1 - backbone 0 from {d['difference'].min():+.4f} to "
                      f"{d['difference'].max():+.4f} ({same}); |difference| / seed SD "
                      f"{d['ratio'].abs().min():.1f} to {d['ratio'].abs().max():.1f}.")
-    b = second.set_index("claim")
-    both = first[first["claim"].isin(b.index)]
-    same_verdict = sum(r["verdict"] == b.loc[r["claim"], "verdict"] for _, r in both.iterrows())
-    overlap = sum(r["gain CI low [%]"] <= b.loc[r["claim"], "gain CI high [%]"]
-                  and b.loc[r["claim"], "gain CI low [%]"] <= r["gain CI high [%]"] for _, r in both.iterrows())
+    both = paired_claims(first, second).dropna(subset=["verdict 1"])
+    same_verdict = int((both["verdict"] == both["verdict 1"]).sum())
+    overlap = int(((both["gain CI low [%]"] <= both["gain CI high [%] 1"])
+                   & (both["gain CI low [%] 1"] <= both["gain CI high [%]"])).sum())
     lines.append(f"- Claims: {same_verdict} of {len(both)} keep their verdict on the second backbone; "
                  f"the two gain intervals overlap for {overlap} of {len(both)}.")
     return "\n".join(lines)
@@ -76,13 +81,15 @@ def summary(diffs: pd.DataFrame, first: pd.DataFrame, second: pd.DataFrame) -> s
 
 def claims_table(first: pd.DataFrame, second: pd.DataFrame) -> pd.DataFrame:
     """Each claim's relative gain with its pair-bootstrap interval and verdict on both backbones."""
-    def gain(r):
-        return f"{r['gain [%]']:.1f} ({r['gain CI low [%]']:.1f} to {r['gain CI high [%]']:.1f}), {r['verdict']}"
+    def gain(r, k=""):
+        if pd.isna(r[f"verdict{k}"]):
+            return "-"
+        return (f"{r[f'gain [%]{k}']:.1f} ({r[f'gain CI low [%]{k}']:.1f} to {r[f'gain CI high [%]{k}']:.1f}), "
+                f"{r[f'verdict{k}']}")
 
-    b = second.set_index("claim")
-    return pd.DataFrame([{"claim": r["claim"], "backbone 0 gain [%]": gain(r),
-                          "backbone 1 gain [%]": gain(b.loc[r["claim"]]) if r["claim"] in b.index else "-",
-                          "paper gain [%]": f"{r['paper gain [%]']:.1f}"} for _, r in first.iterrows()])
+    return pd.DataFrame([{"claim": r["claim"], "backbone 0 gain [%]": gain(r), "backbone 1 gain [%]": gain(r, " 1"),
+                          "paper gain [%]": f"{r['paper gain [%]']:.1f}"}
+                         for _, r in paired_claims(first, second).iterrows()])
 
 
 def main() -> None:

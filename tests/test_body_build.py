@@ -57,3 +57,23 @@ def test_failed_write_keeps_the_previous_file(tmp_path):
             raise RuntimeError("interrupted")
     assert target.read_bytes() == b"old"
     assert [p.name for p in tmp_path.iterdir()] == ["model.npz"]
+
+
+def test_anny_cache_follows_the_kit_cache_and_leaves_the_environment_alone(tmp_path, monkeypatch):
+    """anny's cache is <$AIRPOSE_CACHE>/anny at every load, or $ANNY_CACHE_DIR when the user set it;
+    the kit never writes it into os.environ (once it did, and a process that moved $AIRPOSE_CACHE
+    kept building anny's ~0.8 GB into the first folder, after that folder was deleted)."""
+    import anny
+    import anny.paths
+
+    monkeypatch.setattr(anny.paths, "_ANNY_CACHE_DIR", [anny.paths.get_anny_cache_path()])  # restored after
+    monkeypatch.setattr(anny, "Anny", lambda: None)  # the cache path is set before anny builds anything
+    monkeypatch.delenv("ANNY_CACHE_DIR", raising=False)
+    for name in ("first", "second"):
+        monkeypatch.setenv("AIRPOSE_CACHE", str(tmp_path / name))
+        om._load_anny()
+        assert anny.paths.get_anny_cache_path() == tmp_path / name / "anny"
+        assert "ANNY_CACHE_DIR" not in os.environ
+    monkeypatch.setenv("ANNY_CACHE_DIR", str(tmp_path / "mine"))
+    om._load_anny()
+    assert anny.paths.get_anny_cache_path() == tmp_path / "mine"

@@ -166,13 +166,14 @@ def _init_warp_quietly() -> None:
 
 
 def _load_anny():
-    # anny's cache goes under ours unless the user chose another place.
-    os.environ.setdefault("ANNY_CACHE_DIR", str(cache_dir() / "anny"))
     _init_warp_quietly()
     import anny
     import anny.paths
 
-    anny.paths.set_anny_cache_path(os.environ["ANNY_CACHE_DIR"])
+    # anny's cache goes under ours unless the user chose another place. Set at every load and never
+    # written to os.environ: a process that moves $AIRPOSE_CACHE (a notebook, a test) kept building
+    # anny's ~0.8 GB into the first cache folder, even after that folder was deleted.
+    anny.paths.set_anny_cache_path(os.environ.get("ANNY_CACHE_DIR") or cache_dir() / "anny")
     return anny, anny.Anny()
 
 

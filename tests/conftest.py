@@ -27,3 +27,40 @@ def open_model(open_model_files):
     from airpose_lib.body import load_body_model
 
     return load_body_model("open", "neutral", dtype=torch.float64)
+
+
+@pytest.fixture(scope="module")
+def module_tmp(tmp_path_factory, request):
+    """``mktemp(name) -> Path``: folders that one module's tests share, removed when the module
+    ends without a failure (kept for a look otherwise). ``tmp_path_factory``'s own folders stay
+    until the session ends: the modules' checkpoints and datasets added up to ~0.85 GB there, on
+    top of the running test's, and a CI machine's disk ran out."""
+    import shutil
+
+    made = []
+    failed_before = request.session.testsfailed
+
+    def mktemp(name: str):
+        made.append(tmp_path_factory.mktemp(name))
+        return made[-1]
+
+    yield mktemp
+    if request.session.testsfailed == failed_before:
+        for path in made:
+            shutil.rmtree(path, ignore_errors=True)
+
+
+@pytest.fixture
+def private_cache(tmp_path, monkeypatch, open_model_files):
+    """``$AIRPOSE_CACHE`` in the test's own folder, for the datasets, backbones and features a test
+    makes, with the session's open body model linked in and anny's cache left shared: otherwise
+    each such test rebuilt the body (~25 s) and anny's ~0.8 GB cache in its folder."""
+    from airpose_lib.paths import cache_dir
+
+    shared = cache_dir()
+    cache = tmp_path / "cache"
+    cache.mkdir()
+    (cache / "body").symlink_to(shared / "body", target_is_directory=True)
+    monkeypatch.setenv("ANNY_CACHE_DIR", os.environ.get("ANNY_CACHE_DIR") or str(shared / "anny"))
+    monkeypatch.setenv("AIRPOSE_CACHE", str(cache))
+    return cache

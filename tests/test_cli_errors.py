@@ -25,12 +25,12 @@ def _truncate(path: Path) -> Path:
 
 
 @pytest.fixture(scope="module")
-def inputs(tmp_path_factory) -> dict[str, Path]:
+def inputs(module_tmp) -> dict[str, Path]:
     """A tiny recording, a truncated copy of it, a truncated checkpoint and .npz, and paths that
     do not exist or cannot be created."""
     from airpose_lib.data.sequences.writer import OfficialLayoutWriter
 
-    tmp = tmp_path_factory.mktemp("inputs")
+    tmp = module_tmp("inputs")
     seq = tmp / "seq"
     w = OfficialLayoutWriter(seq, num_views=2)
     for i in range(3):

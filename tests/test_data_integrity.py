@@ -29,8 +29,8 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 @pytest.fixture(scope="module")
-def intact(tmp_path_factory) -> Path:
-    root = tmp_path_factory.mktemp("integrity") / "data"
+def intact(module_tmp) -> Path:
+    root = module_tmp("integrity") / "data"
     generate_still_dataset(CFG, root, workers=1, progress=False, profile="test")
     return root
 

@@ -19,8 +19,8 @@ M = np.diag([-1.0, 1.0, 1.0])
 
 
 @pytest.fixture(scope="module")
-def dataset(tmp_path_factory):
-    root = tmp_path_factory.mktemp("mirror") / "still"
+def dataset(module_tmp):
+    root = module_tmp("mirror") / "still"
     generate_still_dataset(CFG, root, workers=1, progress=False, profile="test")
     return StillFrameDataset(root, "train", augment=False)  # one shard: all training data
 

@@ -43,8 +43,8 @@ def _shard_bytes(root, n=CFG.num_shards):
 
 
 @pytest.fixture(scope="module")
-def reference(tmp_path_factory):
-    root = tmp_path_factory.mktemp("still") / "ref"
+def reference(module_tmp):
+    root = module_tmp("still") / "ref"
     manifest = _generate(root)
     return root, manifest
 
@@ -352,9 +352,9 @@ def test_a_render_worker_that_dies_costs_only_its_shard(reference, tmp_path, mon
 
 # -- test crops (the official protocol: jittered like the training crops) --------------------------
 @pytest.fixture(scope="module")
-def crop_protocol(tmp_path_factory):
+def crop_protocol(module_tmp):
     cfg = GenerationConfig(num_samples=40, shard_size=10, crop_size=16, seed=3)
-    root = tmp_path_factory.mktemp("crops") / "ds"
+    root = module_tmp("crops") / "ds"
     generate_still_dataset(cfg, root, workers=1, progress=False, profile="test")
     return root
 

@@ -80,8 +80,8 @@ def _same_weights(a: nn.Module, b: nn.Module) -> None:
 
 
 @pytest.fixture(scope="module")
-def straight(tmp_path_factory):
-    out = tmp_path_factory.mktemp("straight")
+def straight(module_tmp):
+    out = module_tmp("straight")
     task = ToyTask()
     result = run_engine(task, SCHEDULE, out)
     return out, task, result

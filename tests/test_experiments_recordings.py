@@ -8,14 +8,14 @@ import torch
 
 
 @pytest.fixture(scope="module")
-def official(tmp_path_factory, open_model_files):
+def official(module_tmp, open_model_files):
     from official_fixtures import write_official_real_fixture
 
     from airpose_lib.experiments.recordings import OFFICIAL_REAL_CHECKPOINTS
     from airpose_lib.model import build_model, write_official_checkpoint
     from airpose_lib.train.official import OFFICIAL_CHECKPOINT_FOLDERS
 
-    root = tmp_path_factory.mktemp("official")
+    root = module_tmp("official")
     write_official_real_fixture(root / "real", frames=[0, 1, 2, 8000, 8001, 8002], image_size=(192, 108))
     folders = {"baseline": [OFFICIAL_CHECKPOINT_FOLDERS["baseline"], OFFICIAL_REAL_CHECKPOINTS["Baseline"]],
                "airpose": [OFFICIAL_CHECKPOINT_FOLDERS["airpose"], OFFICIAL_REAL_CHECKPOINTS["AirPose"]]}

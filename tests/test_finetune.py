@@ -63,13 +63,13 @@ def _save_tiny(folder, variant: str):
 
 
 @pytest.fixture(scope="module")
-def tiny_ckpt(tmp_path_factory):
-    return _save_tiny(tmp_path_factory.mktemp("airpose"), "airpose")
+def tiny_ckpt(module_tmp):
+    return _save_tiny(module_tmp("airpose"), "airpose")
 
 
 @pytest.fixture(scope="module")
-def baseline_ckpt(tmp_path_factory):
-    return _save_tiny(tmp_path_factory.mktemp("baseline"), "baseline")
+def baseline_ckpt(module_tmp):
+    return _save_tiny(module_tmp("baseline"), "baseline")
 
 
 @pytest.fixture(scope="module")

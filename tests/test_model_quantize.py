@@ -33,18 +33,18 @@ OUTPUT_ATOL = 0.02
 
 
 @pytest.fixture(scope="module")
-def tiny_still(tmp_path_factory, open_model_files):
+def tiny_still(module_tmp, open_model_files):
     from airpose_lib.data.still.generate import GenerationConfig, generate_still_dataset
 
-    root = tmp_path_factory.mktemp("tiny_still")
+    root = module_tmp("tiny_still")
     generate_still_dataset(GenerationConfig(num_samples=8, shard_size=4, crop_size=32, seed=0), root,
                            workers=1, progress=False, record=False)
     return root
 
 
 @pytest.fixture(scope="module")
-def exported(tiny_still, tmp_path_factory):
-    cache = tmp_path_factory.mktemp("onnx_cache")
+def exported(tiny_still, module_tmp):
+    cache = module_tmp("onnx_cache")
     folder = ensure_export(SPEC, calibration_root=tiny_still, calibration_samples=8, root=cache)
     return folder, cache
 

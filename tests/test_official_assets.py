@@ -73,8 +73,8 @@ def _tree_state(root: Path) -> dict:
 
 
 @pytest.fixture(scope="module")
-def synth(tmp_path_factory, open_model_files):
-    root = tmp_path_factory.mktemp("official_synth")
+def synth(module_tmp, open_model_files):
+    root = module_tmp("official_synth")
     # 5 subjects: 2 training, 2 validation (the last training subjects), 1 test
     info = write_official_synthetic_fixture(root, n_subjects=5, n_positions=2, n_cameras=2, seed=0)
     return info

@@ -8,13 +8,13 @@ import yaml
 
 
 @pytest.fixture(scope="module")
-def tiny_profile(tmp_path_factory, open_model_files):
+def tiny_profile(module_tmp, open_model_files):
     from airpose_lib.data.still.generate import GenerationConfig, generate_still_dataset
 
-    root = tmp_path_factory.mktemp("tiny_still")
+    root = module_tmp("tiny_still")
     generate_still_dataset(GenerationConfig(num_samples=16, shard_size=4, crop_size=32, seed=0), root,
                            workers=1, progress=False, record=False)
-    profile = tmp_path_factory.mktemp("profile") / "tiny.yaml"
+    profile = module_tmp("profile") / "tiny.yaml"
     profile.write_text(yaml.safe_dump({"description": "test", "train": {
         "steps": 3, "batch_size": 2, "backbone": "resnet18", "seed": 1, "checkpoint_every": 3,
         "val_every": 100, "log_every": 1, "num_workers": 0, "data": {"root": str(root)},

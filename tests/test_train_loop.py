@@ -138,8 +138,8 @@ def _assert_same_state(a: dict, b: dict) -> None:
 
 
 @pytest.fixture(scope="module")
-def straight_run(tmp_path_factory, open_model_files):
-    out = tmp_path_factory.mktemp("straight")
+def straight_run(module_tmp, open_model_files):
+    out = module_tmp("straight")
     res = train("airpose", config=tiny_config(keep_checkpoints=2), out_dir=out, **FAKES)
     return out, res
 

@@ -7,15 +7,15 @@ import torch
 
 
 @pytest.fixture(scope="module")
-def official_assets(tmp_path_factory, open_model_files):
+def official_assets(module_tmp, open_model_files):
     from official_fixtures import write_official_synthetic_fixture
 
     from airpose_lib.model import build_model, write_official_checkpoint
     from airpose_lib.train.official import OFFICIAL_CHECKPOINT_FOLDERS
 
-    data = tmp_path_factory.mktemp("official_synthetic")
+    data = module_tmp("official_synthetic")
     write_official_synthetic_fixture(data, n_subjects=2, n_positions=2, num_test_subjects=1)
-    ckpts = tmp_path_factory.mktemp("official_checkpoints")
+    ckpts = module_tmp("official_checkpoints")
     models = {}
     for variant, folder in OFFICIAL_CHECKPOINT_FOLDERS.items():
         torch.manual_seed(0)

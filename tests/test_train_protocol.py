@@ -216,7 +216,7 @@ def test_feature_key_changes_with_the_backbone_and_the_data(tmp_path):
     assert feature_key(b1, data, "train", "jittered") != k
 
 
-def test_a_second_pretraining_stage_starts_from_the_first(tmp_path, monkeypatch, open_model_files):
+def test_a_second_pretraining_stage_starts_from_the_first(tmp_path, monkeypatch, private_cache):
     """`continue_from:` trains the earlier stage first (or finds it), then starts the later one from
     its backbone; the later key depends on the earlier one; a second call trains nothing."""
     import yaml
@@ -227,7 +227,6 @@ def test_a_second_pretraining_stage_starts_from_the_first(tmp_path, monkeypatch,
     from airpose_lib.train.features import load_backbone_file
     from airpose_lib.train.pretrain import ensure_backbone, pretrain_stages, stage_keys
 
-    monkeypatch.setenv("AIRPOSE_CACHE", str(tmp_path / "cache"))
     root = tmp_path / "data"
     generate_still_dataset(GenerationConfig(num_samples=16, shard_size=4, crop_size=32, seed=0), root,
                            workers=1, progress=False, record=False)
@@ -263,7 +262,7 @@ def test_a_second_pretraining_stage_starts_from_the_first(tmp_path, monkeypatch,
     assert ensure_backbone(str(profile), root, fp, out_root=tmp_path / "runs") == path
 
 
-def test_earlier_stages_keep_their_dataset_when_the_profile_data_grow(tmp_path, monkeypatch, open_model_files):
+def test_earlier_stages_keep_their_dataset_when_the_profile_data_grow(tmp_path, private_cache):
     """Three stages; the first two pinned to a smaller dataset (`data: still:` changes) keep the
     keys they had when that was the profile's dataset, and are trained on it (generated in the
     cache when needed); the last stage trains on the dataset it is given."""
@@ -273,7 +272,6 @@ def test_earlier_stages_keep_their_dataset_when_the_profile_data_grow(tmp_path, 
     from airpose_lib.data.still.manifest import load_manifest
     from airpose_lib.train.pretrain import ensure_backbone, pretrain_stages, stage_keys
 
-    monkeypatch.setenv("AIRPOSE_CACHE", str(tmp_path / "cache"))
     small = {"num_samples": 8, "shard_size": 2, "crop_size": 32, "seed": 0}  # 2 train, 1 val, 1 test shards
     section = {"steps": 1, "batch_size": 2, "backbone": "resnet18", "lr": 1e-3, "seed": 0, "checkpoint_every": 1,
                "val_every": None, "log_every": 1, "num_workers": 0, "model": {"n_heading_bins": 12}}
@@ -308,7 +306,7 @@ def test_earlier_stages_keep_their_dataset_when_the_profile_data_grow(tmp_path, 
     assert load_manifest(Path(stages[0].data["root"]))["totals"]["samples"] == 8  # generated for them
 
 
-def test_regressor_with_its_last_backbone_block_trainable(tmp_path, monkeypatch, open_model_files):
+def test_regressor_with_its_last_backbone_block_trainable(tmp_path, private_cache):
     """trainable_from: the features are the cut's input; the step on them equals the whole network
     on the crops; only the blocks from the cut and the regressor move, at their own rates."""
     import airpose_lib.train.loop as loop
@@ -316,7 +314,6 @@ def test_regressor_with_its_last_backbone_block_trainable(tmp_path, monkeypatch,
     from airpose_lib.train.config import TrainConfig
     from airpose_lib.train.features import FeatureDataset, ensure_features
 
-    monkeypatch.setenv("AIRPOSE_CACHE", str(tmp_path / "cache"))
     root = tmp_path / "data"
     generate_still_dataset(GenerationConfig(num_samples=16, shard_size=4, crop_size=32, seed=0), root,
                            workers=1, progress=False, record=False)
@@ -378,7 +375,7 @@ def test_the_committed_cpu_backbone_keeps_its_key():
     assert keys == chain[::-1]
 
 
-def test_training_and_pretraining_never_read_the_test_split(tmp_path, monkeypatch, open_model_files):
+def test_training_and_pretraining_never_read_the_test_split(tmp_path, monkeypatch, private_cache):
     """Never choose on the test split: a pretraining (its validation and gate) and a regressor
     training (its features and validation) open the train and val splits only, every profile's
     training and pretraining settings name no test split, and a config that does is refused."""
@@ -409,7 +406,6 @@ def test_training_and_pretraining_never_read_the_test_split(tmp_path, monkeypatc
         init(self, root, split, *args, **kwargs)
 
     monkeypatch.setattr(dataset_module.StillFrameDataset, "__init__", recording)
-    monkeypatch.setenv("AIRPOSE_CACHE", str(tmp_path / "cache"))
     root = tmp_path / "data"
     generate_still_dataset(GenerationConfig(num_samples=6, shard_size=2, crop_size=32, seed=0, val_fraction=0.3),
                            root, workers=1, progress=False, record=False)

@@ -14,10 +14,10 @@ pytestmark = pytest.mark.slow
 
 
 @pytest.fixture(scope="module")
-def tiny_root(tmp_path_factory, open_model_files):
+def tiny_root(module_tmp, open_model_files):
     from airpose_lib.data.still.generate import GenerationConfig, generate_still_dataset
 
-    root = tmp_path_factory.mktemp("still")
+    root = module_tmp("still")
     cfg = GenerationConfig(num_samples=8, shard_size=4, crop_size=32, seed=0)
     manifest = generate_still_dataset(cfg, root, workers=1, progress=False, record=False)
     assert manifest["status"] == "complete"

@@ -51,16 +51,23 @@ def module_tmp(tmp_path_factory, request):
 
 
 @pytest.fixture
-def private_cache(tmp_path, monkeypatch, open_model_files):
-    """``$AIRPOSE_CACHE`` in the test's own folder, for the datasets, backbones and features a test
-    makes, with the session's open body model linked in and anny's cache left shared: otherwise
-    each such test rebuilt the body (~25 s) and anny's ~0.8 GB cache in its folder."""
+def shared_anny_cache(monkeypatch):
+    """Keep anny's build cache (~0.8 GB) the shared one, ``$ANNY_CACHE_DIR`` or ``<cache>/anny``,
+    for a test that then moves ``$AIRPOSE_CACHE``: anny is never rebuilt in a test's folder."""
     from airpose_lib.paths import cache_dir
 
-    shared = cache_dir()
+    monkeypatch.setenv("ANNY_CACHE_DIR", os.environ.get("ANNY_CACHE_DIR") or str(cache_dir() / "anny"))
+
+
+@pytest.fixture
+def private_cache(tmp_path, monkeypatch, open_model_files, shared_anny_cache):
+    """``$AIRPOSE_CACHE`` in the test's own folder, for the datasets, backbones and features a test
+    makes, with the session's open body model linked in: otherwise each such test rebuilt the body
+    (~25 s) in its folder."""
+    from airpose_lib.paths import cache_dir
+
     cache = tmp_path / "cache"
     cache.mkdir()
-    (cache / "body").symlink_to(shared / "body", target_is_directory=True)
-    monkeypatch.setenv("ANNY_CACHE_DIR", os.environ.get("ANNY_CACHE_DIR") or str(shared / "anny"))
+    (cache / "body").symlink_to(cache_dir() / "body", target_is_directory=True)
     monkeypatch.setenv("AIRPOSE_CACHE", str(cache))
     return cache

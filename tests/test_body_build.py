@@ -11,11 +11,8 @@ from airpose_lib.body import open_model as om
 
 
 @pytest.fixture
-def small_build(tmp_path, monkeypatch, open_model_files):
+def small_build(tmp_path, monkeypatch, open_model_files, shared_anny_cache):
     # a private kit cache, but anny's own (expensive) cache stays shared
-    from airpose_lib.paths import cache_dir
-
-    monkeypatch.setenv("ANNY_CACHE_DIR", os.environ.get("ANNY_CACHE_DIR", str(cache_dir() / "anny")))
     monkeypatch.setenv("AIRPOSE_CACHE", str(tmp_path))
     return om.OpenModelConfig(num_samples=60, seed=7)
 

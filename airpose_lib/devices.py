@@ -12,7 +12,10 @@ from __future__ import annotations
 
 from airpose_lib.errors import ConfigError
 
-__all__ = ["is_device_name", "resolve_device", "worker_device"]
+__all__ = ["PRECISION_CHOICES", "is_device_name", "resolve_device", "worker_device"]
+
+#: What a training config may say for its precision (resolved by ``engine.launch.resolve_precision``).
+PRECISION_CHOICES = ("auto", "fp32", "bf16", "fp16")
 
 
 def is_device_name(device: str) -> bool:

@@ -3,6 +3,8 @@ pretraining, every tensor on the run's device, one-line errors for a bad device 
 the RNG restore with another number of GPUs."""
 from __future__ import annotations
 
+import json
+import os
 import sys
 from pathlib import Path
 
@@ -139,3 +141,57 @@ def test_evaluation_and_features_take_the_device(tmp_path, open_model_files):
     a = compute_features(net, Crops(), batch_size=2)
     b = compute_features(net, Crops(), batch_size=2, device="cpu")
     assert a.shape == (3, 2, 512) and np.array_equal(a, b)
+
+
+@pytest.mark.parametrize("machine, flags, isa, aten, native", [
+    ("x86_64", {"avx2", "avx512f", "avx512_bf16"}, None, "AVX512", True),
+    ("x86_64", {"avx2", "amx_bf16", "amx_tile"}, None, "AVX512", True),
+    ("x86_64", {"avx2", "fma"}, None, "AVX2", False),  # an AVX2-only laptop: emulated bf16
+    ("x86_64", {"avx2", "avx512f"}, None, "AVX512", False),  # AVX-512 without its bf16 extension
+    ("x86_64", {"avx512_bf16"}, "AVX2", "AVX512", False),  # oneDNN limited below its bf16 kernels
+    ("x86_64", {"avx512_bf16"}, "avx512_core_amx", "AVX512", True),  # the limit still includes them
+    ("x86_64", {"avx512_bf16"}, None, "AVX2", False),  # ATen limited to its AVX2 kernels
+    ("aarch64", {"fp", "asimd", "bf16"}, None, "DEFAULT", True),
+    ("aarch64", {"fp", "asimd"}, None, "DEFAULT", False),
+])
+def test_native_bf16_reads_the_cpu_flags_and_the_kernel_limits(machine, flags, isa, aten, native):
+    from airpose_lib.engine.launch import native_bf16
+
+    got, reason = native_bf16(machine, flags, isa, aten)
+    assert got is native and reason
+
+
+def test_auto_precision_is_bf16_only_with_native_bf16(monkeypatch):
+    from airpose_lib.engine import launch
+
+    for native, expected in ((True, "bf16"), (False, "fp32")):
+        monkeypatch.setattr(launch, "cpu_bf16", lambda n=native: (n, "a CPU"))
+        assert launch.resolve_precision("auto", "cpu") == (expected, "auto: a CPU")
+    assert launch.resolve_precision("bf16", "cpu") == ("bf16", "set in the config")  # forced either way
+    assert launch.resolve_precision("fp32", "cpu")[0] == "fp32"
+    with pytest.raises(ValueError, match="precision must be"):
+        launch.resolve_precision("fast", "cpu")
+
+
+def test_auto_precision_under_an_avx2_limit_picks_fp32():
+    """The kernel path an AVX2-only machine runs, on whatever CPU runs the test."""
+    import subprocess
+
+    env = {**os.environ, "ONEDNN_MAX_CPU_ISA": "AVX2", "ATEN_CPU_CAPABILITY": "avx2"}
+    out = subprocess.run([sys.executable, "-c", "from airpose_lib.engine.launch import resolve_precision; "
+                          "print(resolve_precision('auto', 'cpu')[0])"], env=env, capture_output=True, text=True,
+                         check=True)
+    assert out.stdout.strip() == "fp32"
+
+
+def test_a_backbone_of_auto_precision_is_found_whichever_precision_made_it():
+    """The committed cpu backbone was trained in bf16: auto finds it on a CPU that would pick fp32."""
+    from airpose_lib.train.pretrain import own_backbone_keys, stage_key_options
+
+    keys = own_backbone_keys("cpu")
+    committed = json.loads((Path(__file__).resolve().parents[1] / "results/cpu/pretrained_backbone.json").read_text())
+    assert committed["key"] in keys and len(keys) == 2
+    from airpose_lib.train.pretrain import pretrain_stages
+
+    fixed = [c.replace(precision="fp32") for c in pretrain_stages("cpu")]
+    assert len(stage_key_options(fixed, "fp")) == 1  # a forced precision has one key

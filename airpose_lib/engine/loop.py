@@ -60,7 +60,7 @@ from .checkpoint import (
     restore_rng_state,
     save_checkpoint,
 )
-from .launch import autocast, check_precision, grad_scaler, is_distributed, process_rank
+from .launch import autocast, grad_scaler, is_distributed, process_rank, resolve_precision
 from .logger import RunLogger
 
 __all__ = ["Schedule", "TrainingTask", "EngineRun", "EngineResult", "run_engine", "run_folder", "process_rank"]
@@ -88,8 +88,8 @@ class Schedule:
         progress: show a progress bar (rank 0 only).
         progress_kwargs: extra ``progress_bar`` arguments (``unit``).
         tensorboard: also write TensorBoard events next to the CSV when available.
-        precision: ``fp32``, ``bf16`` or ``fp16`` (:data:`.launch.PRECISIONS`): the autocast of
-            ``train_step`` on the task's ``device`` (validation is the task's own business).
+        precision: ``auto``, ``fp32``, ``bf16`` or ``fp16`` (:func:`.launch.resolve_precision`): the
+            autocast of ``train_step`` on the task's ``device`` (validation is the task's own business).
     """
 
     steps: int
@@ -185,6 +185,7 @@ class EngineResult:
     stopped_early: bool
     resumed: bool
     tensorboard: bool
+    precision: dict | None = None  # ``used`` (fp32, bf16, fp16) and the ``reason`` it was chosen
 
 
 def run_folder(out_dir: str | Path | None):
@@ -204,8 +205,8 @@ class EngineRun:
         self.distributed = is_distributed()
         self.step = self.epoch = self.batch_in_epoch = 0
         self.device = torch.device(getattr(task, "device", "cpu"))
-        check_precision(schedule.precision, self.device)
-        self.scaler = grad_scaler(schedule.precision, self.device)
+        self.precision, self.precision_reason = resolve_precision(schedule.precision, self.device)
+        self.scaler = grad_scaler(self.precision, self.device)
 
     def checkpoint_state(self) -> dict[str, Any]:
         """The checkpoint of now: ``model, optimizer, rng`` (one entry per process), ``step,
@@ -318,6 +319,8 @@ def _run(task: TrainingTask, schedule: Schedule, out: Path | None, resume: bool,
             (out / "config.json").write_text(json.dumps(config, indent=2, sort_keys=True))
         logger = RunLogger(out, resume_step=run.step if resumed_from is not None else None,
                            tensorboard=schedule.tensorboard)
+    if run.rank == 0 and out is not None:  # what auto picked, in the run's output
+        print(f"{schedule.what}: precision {run.precision} ({run.precision_reason})", flush=True)
     bar = progress_bar(total=schedule.steps, initial=run.step, enabled=schedule.progress and run.rank == 0,
                        desc=schedule.what, **dict(schedule.progress_kwargs or {}))
     t_start = time.time() if started is None else started
@@ -330,7 +333,7 @@ def _run(task: TrainingTask, schedule: Schedule, out: Path | None, resume: bool,
         task.begin(run)
         while run.step < schedule.steps and not stopped:
             for batch in task.batches(run.epoch, run.batch_in_epoch):
-                with autocast(schedule.precision, run.device):
+                with autocast(run.precision, run.device):
                     terms = task.train_step(batch, run.step)
                 task.optimizer.zero_grad(set_to_none=True)
                 _update(task.optimizer, task.model, terms["total"], schedule.grad_clip, run.scaler)
@@ -374,4 +377,5 @@ def _run(task: TrainingTask, schedule: Schedule, out: Path | None, resume: bool,
             logger.close()
     return EngineResult(step=run.step, epoch=run.epoch, checkpoint=checkpoint, values=values, val=val,
                         stopped_early=stopped, resumed=resumed_from is not None,
-                        tensorboard=bool(logger and logger.tensorboard))
+                        tensorboard=bool(logger and logger.tensorboard),
+                        precision={"used": run.precision, "reason": run.precision_reason})

@@ -16,7 +16,7 @@ from airpose_lib.process_guard import die_with_parent
 from .config import load_train_config
 from .evaluate import evaluate_checkpoint
 from .loop import TrainResult, default_out_dir
-from .pretrain import other_profile, own_backbone_key, profile_backbone_key
+from .pretrain import other_profile, own_backbone_keys, profile_backbone_keys
 from .run import prepare_data, train
 
 __all__ = ["AblationRun", "run_ablation", "trained_checkpoint"]
@@ -170,12 +170,12 @@ def _finished_run(out: Path, profile: str, variant: str, seed: int) -> TrainResu
         ignore.add("pretrained")
         used = Path(str(done.config.get("pretrained")))
         root = (done.config.get("data") or {}).get("root")
-        if root is None or not used.is_file() or used.stem != profile_backbone_key(profile, root):
+        if root is None or not used.is_file() or used.stem not in profile_backbone_keys(profile, root):
             return None
     elif (other := other_profile(wanted.get("pretrained"))) is not None:  # another profile's backbone
         ignore.add("pretrained")
         used = Path(str(done.config.get("pretrained")))
-        if not used.is_file() or used.stem != own_backbone_key(other):
+        if not used.is_file() or used.stem not in own_backbone_keys(other):
             return None
     same = all(done.config.get(k) == wanted[k] for k in wanted.keys() - ignore)
     if same and done.step >= wanted["steps"] and done.checkpoint is not None and Path(done.checkpoint).is_file():

@@ -24,7 +24,7 @@ from pathlib import Path
 from typing import Any
 
 from airpose_lib.config_fields import ConfigError, check_fields, check_keys, check_type, config_from, finite, require
-from airpose_lib.devices import is_device_name
+from airpose_lib.devices import PRECISION_CHOICES, is_device_name
 from airpose_lib.errors import ProfileSettingError
 from airpose_lib.profiles import profile_section, section_where
 
@@ -74,8 +74,10 @@ class TrainConfig:
             (``torch.nn.SyncBatchNorm``) instead of each process's share.
         device: ``auto`` (CUDA if available), ``cpu``, ``cuda`` (each process its own GPU,
             ``cuda:<LOCAL_RANK>``) or ``cuda:N``; a run records the device it used.
-        precision: ``fp32``, ``bf16`` (autocast, CPU and CUDA) or ``fp16`` (autocast with loss
-            scaling, CUDA only) for the training step's network; losses and validation in float32.
+        precision: ``auto`` (bf16 where the device computes it natively, else fp32:
+            :func:`airpose_lib.engine.launch.resolve_precision`), ``fp32``, ``bf16`` (autocast, CPU
+            and CUDA) or ``fp16`` (autocast with loss scaling, CUDA only) for the training step's
+            network; losses and validation in float32.
         num_threads: torch CPU threads per process (None: torch's default, divided by the number
             of processes under DDP).
         deterministic: ``torch.use_deterministic_algorithms`` (warn only).
@@ -123,7 +125,7 @@ class TrainConfig:
     world_size: int = 1
     sync_batchnorm: bool = False
     device: str = "auto"
-    precision: str = "fp32"
+    precision: str = "auto"
     num_threads: int | None = None
     deterministic: bool = True
     progress: bool = True
@@ -164,7 +166,7 @@ class TrainConfig:
         require(self.train_split != "test", "train_split", "not 'test' (the reported tables' split)", self.train_split)
         require(self.val_split != "test", "val_split", "not 'test' (choose on 'val'; the test split makes the "
                 "reported tables only)", self.val_split)
-        require(self.precision in ("fp32", "bf16", "fp16"), "precision", "'fp32', 'bf16' or 'fp16'", self.precision)
+        require(self.precision in PRECISION_CHOICES, "precision", "'auto', 'fp32', 'bf16' or 'fp16'", self.precision)
         require(self.checkpoint_every >= 1, "checkpoint_every", ">= 1", self.checkpoint_every)
         require(self.log_every >= 1, "log_every", ">= 1", self.log_every)
         require(self.keep_checkpoints >= 0, "keep_checkpoints", ">= 0 (0: only last.pt)", self.keep_checkpoints)

@@ -269,19 +269,22 @@ class TrainResult:
     # the kit's commit that ran this call (``eval.reference.git_commit``: ``commit``, ``dirty``);
     # a resumed run names the commit that finished it. None: not a git checkout, or an older run.
     git: dict | None = None
+    # the precision this call computed in and why (``config["precision"]`` may say ``auto``)
+    precision: dict | None = None
 
     def to_json(self) -> dict:
         return {"out_dir": str(self.out_dir), "step": self.step,
                 "checkpoint": str(self.checkpoint) if self.checkpoint else None,
                 "train_loss": self.train_loss, "val_losses": self.val_losses, "tensorboard": self.tensorboard,
-                "stopped_early": self.stopped_early, "config": self.config, "wall_s": self.wall_s, "git": self.git}
+                "stopped_early": self.stopped_early, "config": self.config, "wall_s": self.wall_s, "git": self.git,
+                "precision": self.precision}
 
     @classmethod
     def from_json(cls, d: dict) -> "TrainResult":
         return cls(out_dir=Path(d["out_dir"]), step=d["step"],
                    checkpoint=Path(d["checkpoint"]) if d["checkpoint"] else None, train_loss=d["train_loss"],
                    val_losses=d["val_losses"], tensorboard=d["tensorboard"], stopped_early=d["stopped_early"],
-                   config=d["config"], wall_s=d.get("wall_s"), git=d.get("git"))
+                   config=d["config"], wall_s=d.get("wall_s"), git=d.get("git"), precision=d.get("precision"))
 
 
 def default_out_dir(profile: str | Path | None, variant: str, seed: int) -> Path:
@@ -530,7 +533,7 @@ def _run_training(cfg: TrainConfig, out_dir: Path, resume: bool, model_factory: 
                          train_loss=run.values["total"] if run.values else None, val_losses=run.val,
                          tensorboard=run.tensorboard, stopped_early=run.stopped_early,
                          config=cfg.to_dict(), wall_s=round(time.time() - t_start, 1),
-                         git=git_commit() if rank == 0 else None)
+                         git=git_commit() if rank == 0 else None, precision=run.precision)
     if rank == 0:
         (out_dir / "result.json").write_text(json.dumps(result.to_json(), indent=2))
     return result

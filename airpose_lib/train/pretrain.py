@@ -37,7 +37,7 @@ from airpose_lib.data.still.generate import GenerationConfig, default_root, ensu
 from airpose_lib.data.still.manifest import load_manifest
 from airpose_lib.data.still.shards import sha256_file
 from airpose_lib.engine.checkpoint import kit_version, load_checkpoint
-from airpose_lib.engine.launch import resolve_device, single_process
+from airpose_lib.engine.launch import resolve_device, resolve_precision, single_process
 from airpose_lib.errors import ConfigError, DamagedFileError, ProfileError, ProfileSettingError, reading
 from airpose_lib.eval.metrics import root_yaw_tilt, rotation_error
 from airpose_lib.eval.reference import git_commit
@@ -52,7 +52,8 @@ from .config import TrainConfig
 from .loop import check_data_root, default_model_factory, start_training
 
 __all__ = ["PRETRAIN_VERSION", "DATA_OPTIONS", "pretrain_config", "pretrain_stages", "backbone_key",
-           "stage_keys", "ensure_backbone", "profile_backbone", "profile_backbone_key", "OTHER_PROFILE",
+           "stage_keys", "stage_key_options", "ensure_backbone", "profile_backbone", "profile_backbone_key",
+           "profile_backbone_keys", "own_backbone_keys", "OTHER_PROFILE",
            "other_profile", "own_backbone_key", "other_profile_backbone", "export_backbone",
            "import_torchvision_backbone", "gate_metrics", "reference_backbone_path",
            "write_reference_backbone"]
@@ -277,16 +278,30 @@ def _at_hand(profile: str, key: str) -> Path | None:
     return target
 
 
-def stage_keys(stages: list[TrainConfig], data_fingerprint: str) -> list[str]:
+def stage_keys(stages: list[TrainConfig], data_fingerprint: str, auto_as: str | None = None) -> list[str]:
     """The key of each stage of :func:`pretrain_stages` (each includes the one before).
 
     ``data_fingerprint`` is that of the dataset the stages without their own dataset train on.
+    A stage of ``precision: auto`` is keyed by the precision it trains in: ``auto_as``, or (None)
+    the one :func:`~airpose_lib.engine.launch.resolve_precision` picks on this machine.
     """
     keys: list[str] = []
     for cfg in stages:
+        if cfg.precision == "auto":
+            cfg = cfg.replace(precision=auto_as or resolve_precision("auto", resolve_device(cfg.device))[0])
         fp = cfg.data.get("fingerprint", data_fingerprint)
         keys.append(backbone_key(cfg, fp, keys[-1] if keys else None))
     return keys
+
+
+def stage_key_options(stages: list[TrainConfig], data_fingerprint: str) -> list[list[str]]:
+    """The stage keys this machine trains (first), then, for stages of ``precision: auto``, those
+    of the other precision auto may pick (``bf16`` / ``fp32``): a backbone that auto made on
+    another CPU is the one the profile asks for, so it is taken where it is at hand."""
+    options = [stage_keys(stages, data_fingerprint)]
+    if any(cfg.precision == "auto" for cfg in stages):
+        options += [k for p in ("bf16", "fp32") if (k := stage_keys(stages, data_fingerprint, p)) not in options]
+    return options
 
 
 def _with_data(stages: list[TrainConfig], data_root: str | Path, data_fingerprint: str) -> list[TrainConfig]:
@@ -312,7 +327,13 @@ def ensure_backbone(profile: str, data_root: str | Path, data_fingerprint: str, 
     stages = _with_data(pretrain_stages(profile, **overrides), data_root, data_fingerprint)
     if device is not None:
         stages = [cfg.replace(device=device) for cfg in stages]
-    keys = stage_keys(stages, data_fingerprint)
+    options = stage_key_options(stages, data_fingerprint)
+    for other in options[1:]:  # made in the other precision auto may pick: complete, or not at all
+        with file_lock(cache_dir() / "backbones" / f"{other[-1]}.lock"):
+            found = _at_hand(profile, other[-1])
+        if found is not None:
+            return found
+    keys = options[0]
     start, path = 0, None
     for i in reversed(range(len(stages))):  # the latest stage already made needs nothing before it
         with file_lock(cache_dir() / "backbones" / f"{keys[i]}.lock"):
@@ -373,9 +394,16 @@ def _load_pretrain_model(checkpoint: str | Path, cfg: TrainConfig) -> torch.nn.M
 
 
 def profile_backbone_key(profile: str, data_root: str | Path) -> str:
-    """The key of the backbone a profile asks for on the dataset in ``data_root`` (its last stage)."""
+    """The key of the backbone a profile asks for on the dataset in ``data_root`` (its last stage),
+    as this machine would train it."""
+    return profile_backbone_keys(profile, data_root)[0]
+
+
+def profile_backbone_keys(profile: str, data_root: str | Path) -> list[str]:
+    """Every key a backbone the profile asks for may have (:func:`stage_key_options`; this
+    machine's first)."""
     fingerprint = load_manifest(Path(data_root))["fingerprint"]
-    return stage_keys(_with_data(pretrain_stages(profile), data_root, fingerprint), fingerprint)[-1]
+    return [k[-1] for k in stage_key_options(_with_data(pretrain_stages(profile), data_root, fingerprint), fingerprint)]
 
 
 def profile_backbone(profile: str, progress: bool = False) -> Path:
@@ -400,18 +428,27 @@ def other_profile(pretrained: str | None) -> str | None:
 
 
 def own_backbone_key(profile: str) -> str:
-    """The key of :func:`profile_backbone` (from the profile's settings; no dataset is read)."""
+    """The key of :func:`profile_backbone` (from the profile's settings; no dataset is read), as
+    this machine would train it."""
+    return own_backbone_keys(profile)[0]
+
+
+def own_backbone_keys(profile: str) -> list[str]:
+    """Every key :func:`profile_backbone` may have (:func:`stage_key_options`; this machine's first)."""
     fingerprint = profile_config(profile).fingerprint()
-    return stage_keys(_with_data(pretrain_stages(profile), default_root(profile), fingerprint), fingerprint)[-1]
+    stages = _with_data(pretrain_stages(profile), default_root(profile), fingerprint)
+    return [k[-1] for k in stage_key_options(stages, fingerprint)]
 
 
 def other_profile_backbone(profile: str, progress: bool = False) -> Path:
     """:func:`profile_backbone`, without making the profile's dataset when the backbone is at hand
     (in the cache, or the committed reference)."""
-    key = own_backbone_key(profile)
-    with file_lock(cache_dir() / "backbones" / f"{key}.lock"):
-        found = _at_hand(profile, key)
-    return found if found is not None else profile_backbone(profile, progress)
+    for key in own_backbone_keys(profile):
+        with file_lock(cache_dir() / "backbones" / f"{key}.lock"):
+            found = _at_hand(profile, key)
+        if found is not None:
+            return found
+    return profile_backbone(profile, progress)
 
 
 def write_reference_backbone(profile: str, backbone_file: str | Path) -> Path:

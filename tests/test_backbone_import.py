@@ -1,4 +1,4 @@
-"""`airpose backbone import` (issue 29): a torchvision ResNet state dict becomes a kit backbone file
+"""`airpose backbone import`: a torchvision ResNet state dict becomes a kit backbone file
 that trainings start from (`train: pretrained: FILE`); checked on random weights with torchvision's
 key names (the kit's ResNet uses them: tests/test_model_backbone.py)."""
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""results/cpu_backbone_seed1/backbone_spread.py: two backbones' Table I side by side, on a
+"""scripts/backbone_spread.py: two backbones' Table I side by side, on a
 hand-made case whose differences, seed-SD ratios and claim counts are computed by hand."""
 import importlib.util
 from pathlib import Path
@@ -9,7 +9,7 @@ import pytest
 
 @pytest.fixture(scope="module")
 def spread():
-    path = Path(__file__).resolve().parents[1] / "results" / "cpu_backbone_seed1" / "backbone_spread.py"
+    path = Path(__file__).resolve().parents[1] / "scripts" / "backbone_spread.py"
     spec = importlib.util.spec_from_file_location("backbone_spread_script", path)
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
@@ -63,7 +63,7 @@ def test_summary_counts_verdicts_and_overlapping_intervals(spread):
 
 
 def test_the_committed_spread_is_what_the_script_prints(spread, capsys, monkeypatch):
-    """backbone_spread.md beside the script is its output on the two committed folders."""
+    """results/cpu_backbone_seed1/backbone_spread.md is the script's output on the two committed folders."""
     results = Path(__file__).resolve().parents[1] / "results"
     monkeypatch.chdir(results.parent)
     monkeypatch.setattr("sys.argv", ["backbone_spread.py", "results/cpu", "results/cpu_backbone_seed1"])

@@ -196,7 +196,7 @@ def test_posing_bends_the_knee_backwards(open_model):
     assert j[J("right_ankle"), 2] == pytest.approx(_rest(open_model)[1][J("right_ankle"), 2], abs=1e-9)
 
 
-# -- quiet start-up (issue 32): anny's warp prints a no-driver warning on every CPU-only machine ---
+# -- quiet start-up: anny's warp prints a no-driver warning on every CPU-only machine ---
 def test_loading_anny_and_the_body_model_prints_nothing(open_model_files):
     """A fresh process that imports the body package, loads the model and imports anny (what the
     first build does) writes nothing on stdout or stderr: before the fix, warp's banner went to

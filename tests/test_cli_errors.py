@@ -384,7 +384,7 @@ def test_argparse_errors_are_one_line_too(argv, says, capsys):
     assert exc.value.code == 2 and err.count("\n") == 1 and err.startswith("airpose: error: ") and says in err, err
 
 
-# -- issue 33: a full disk, bad values and a refused command -------------------------------------
+# -- a full disk, bad values and a refused command -------------------------------------
 def _enospc(*args, **kwargs):
     raise OSError(28, "No space left on device")
 

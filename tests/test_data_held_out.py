@@ -1,4 +1,4 @@
-"""Appearance the networks never saw (``data.sequences.held_out``, issue 31 item 1): each part
+"""Appearance the networks never saw (``data.sequences.held_out``): each part
 lies outside what the still-frame generator draws, by its sampling code and over many draws;
 off, the recordings are the clean ones; the field preset and a profile's field recordings."""
 from __future__ import annotations

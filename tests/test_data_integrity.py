@@ -1,5 +1,5 @@
 """Damaged data is never read silently, a healthy dataset verifies on any machine, and a command
-that needs a dataset another process is making waits for it (issue 33, points 2, 3 and 6)."""
+that needs a dataset another process is making waits for it."""
 from __future__ import annotations
 
 import shutil

@@ -106,7 +106,7 @@ def test_camera_poses_from_the_markers_match_the_known_ones(board):
         assert np.linalg.norm(-R_p.T @ t_p + R.T @ t) < 0.05
         assert rms < 1.0
         poses.append((R, t, R_p, t_p))
-    # UAV 2 in UAV 1 from the markers against the truth (issue 31 target: 0.10 m and 1 degree)
+    # UAV 2 in UAV 1 from the markers against the truth (target: 0.10 m and 1 degree)
     (R1, t1, P1, p1), (R2, t2, P2, p2) = poses[:2]
     R_true, t_true = relative_camera_from_markers(R1, t1, R2, t2)
     R_mark, t_mark = relative_camera_from_markers(P1, p1, P2, p2)
@@ -231,7 +231,7 @@ def test_rendered_recording_markers_give_the_cameras(tmp_path, open_model_files)
     R_true, t_true = relative_camera_from_markers(gt["R_cw"][:, 0], gt["t_cw"][:, 0], gt["R_cw"][:, 1],
                                                   gt["t_cw"][:, 1])
     assert valid.all()
-    assert max(_deg(R12[i], R_true[i]) for i in range(2)) < 1.0  # issue 31's target
+    assert max(_deg(R12[i], R_true[i]) for i in range(2)) < 1.0  # the markers' target: 1 degree
     assert np.linalg.norm(t12 - t_true, axis=-1).max() < 0.10
     # the same recording without the option: no marker to find, and no layout to read
     plain = simulate_sequence(dataclasses.replace(cfg, markers=None, n_frames=1))

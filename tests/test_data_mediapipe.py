@@ -1,4 +1,4 @@
-"""MediaPipe Pose as a BODY_25 detector (issue 31 item 3), without MediaPipe: the landmark
+"""MediaPipe Pose as a BODY_25 detector, without MediaPipe: the landmark
 mapping on hand-made landmarks, the crop geometry, the crop boxes and the file the kit reads.
 The detector run itself needs the detector's own environment (test at the end, skipped here)."""
 from __future__ import annotations

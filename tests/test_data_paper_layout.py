@@ -1,4 +1,4 @@
-"""The paper-layout data option (profile ``cpu_paper_layout``, issue 28 item 6): cameras 10 m from
+"""The paper-layout data option (profile ``cpu_paper_layout``): cameras 10 m from
 the ground origin and aimed at it, and a stature spread of real adults within a sex."""
 from __future__ import annotations
 

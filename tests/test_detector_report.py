@@ -1,4 +1,4 @@
-"""The detector report (issue 31 item 3) on a hand-made recording with known errors."""
+"""The detector report on a hand-made recording with known errors."""
 from __future__ import annotations
 
 from pathlib import Path

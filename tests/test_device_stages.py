@@ -1,4 +1,4 @@
-"""The device of the stages outside the training loop (issue 29): the one device rule
+"""The device of the stages outside the training loop: the one device rule
 (:mod:`airpose_lib.devices`), AirPose+ and the prior's training on the asked device with their
 results on the CPU, the parallel ablation workers spread over the GPUs, and the device and
 precision of each training in the results provenance. Runs on a CPU-only machine; the CUDA

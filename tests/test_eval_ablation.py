@@ -164,7 +164,7 @@ def test_paper_gaps_are_ratios_to_the_paper_and_the_references():
 
 
 def test_findings_are_written_from_the_tables():
-    """Notebook 02's summary (issue 32): every number comes from the tables passed in."""
+    """Notebook 02's summary: every number comes from the tables passed in."""
     runs = {("baseline", 1): _per_view(0.9, 0.12), ("airpose", 1): _per_view(0.75, 0.10)}
     references = pd.DataFrame({"method": [NEUTRAL_LABEL] * 2 + [GENDERED_LABEL],
                                "mpe_m": [0.5, 0.7, 0.5]})  # neutral 0.6 m, true gender 0.5 m

@@ -448,8 +448,8 @@ def test_committed_reference_results_come_from_clean_commits_of_this_history():
 
 
 def test_provenance_names_an_own_profile_file_by_its_place_in_the_checkout(tmp_path):
-    inside = RESULTS_ROOT / "cpu_backbone_seed1" / "cpu_backbone_seed1.yaml"
-    assert provenance_record(str(inside), "cmd")["profile"] == "results/cpu_backbone_seed1/cpu_backbone_seed1.yaml"
+    inside = RESULTS_ROOT.parent / "airpose_lib" / "profiles" / "lab" / "cpu_backbone_seed1.yaml"
+    assert provenance_record(str(inside), "cmd")["profile"] == "airpose_lib/profiles/lab/cpu_backbone_seed1.yaml"
     outside = tmp_path / "mine.yaml"
     assert provenance_record(str(outside), "cmd")["profile"] == str(outside)
     assert provenance_record("cpu", "cmd")["profile"] == "cpu"

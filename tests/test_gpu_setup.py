@@ -1,4 +1,4 @@
-"""The README's "On a GPU" path (issue 29), as far as it runs without a GPU: the set-up that keeps
+"""The GPU route (docs/gpu.md), as far as it runs without a GPU: the set-up that keeps
 the user's torch refuses an environment without one, and the documented commands parse."""
 from __future__ import annotations
 
@@ -20,11 +20,10 @@ def test_keep_torch_refuses_an_environment_without_torch(tmp_path):
     assert proc.returncode == 1 and "has no torch to keep" in proc.stderr, proc.stderr
 
 
-def test_the_gpu_commands_of_the_readme_parse():
+def test_the_gpu_commands_of_the_docs_parse():
     from airpose_lib.cli import build_parser
 
-    text = (REPO / "README.md").read_text()
-    section = text[text.index("## On a GPU"):text.index("## The body model")]
+    section = (REPO / "docs" / "gpu.md").read_text()
     commands = [" ".join(c.split("\\\n")) for c in re.findall(r"^\.venv/bin/(?:airpose|torchrun) .*?(?<!\\)$",
                                                              section, flags=re.M | re.S)]
     parsed = 0

@@ -1,4 +1,4 @@
-"""No hand-typed measured number in a notebook's prose (issue 32).
+"""No hand-typed measured number in a notebook's prose.
 
 A number typed into a markdown cell from an earlier run contradicts the outputs as soon as the run
 differs. Results are printed by code cells from the run's own tables (for notebook 02,

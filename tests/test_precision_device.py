@@ -1,4 +1,4 @@
-"""Mixed precision and devices (issue 29): bf16 training steps of every variant and of the
+"""Mixed precision and devices: bf16 training steps of every variant and of the
 pretraining, every tensor on the run's device, one-line errors for a bad device or fp16 on CPU, and
 the RNG restore with another number of GPUs."""
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""The pose prior's held-out motions (issue 31, item 4): the corpus never contains a pose of the
+"""The pose prior's held-out motions: the corpus never contains a pose of the
 activities a profile holds out, those are the activities of its recordings, and the prior's
 record says so."""
 from __future__ import annotations

@@ -184,7 +184,7 @@ def test_loads_a_fake_official_snapshot(tmp_path, monkeypatch):
 
 def test_non_tensor_hyper_parameters_load_without_running_their_classes(tmp_path):
     """The release pickles hyper-parameters of classes the kit does not import; they become inert
-    placeholders (issue 33: no code runs from a file) and the weights load."""
+    placeholders (no code runs from a file) and the weights load."""
     ckpt = tmp_path / "V02_05" / "snapshots" / "x.ckpt"
     state = _write_fake_ckpt(ckpt, seed=3, hparams=argparse.Namespace(latentD=32))
     with warnings.catch_warnings():

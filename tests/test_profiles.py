@@ -33,7 +33,7 @@ def test_sections_are_copies_and_empty_ones_take_the_defaults(tmp_path):
 
 
 def test_an_empty_file_or_a_missing_section_is_an_error_not_the_defaults(tmp_path):
-    """Issue 33: an empty profile file, or one without the section a command reads, used to run
+    """An empty profile file, or one without the section a command reads, used to run
     silently on the defaults."""
     (tmp_path / "empty.yaml").write_text("")
     with pytest.raises(ProfileError, match=r"empty\.yaml is empty"):

@@ -1,4 +1,5 @@
-"""The README's result block (airpose_lib.eval.readme_block): made from a bundle, never typed."""
+"""The generated result blocks of the README and the docs pages (airpose_lib.eval.readme_block,
+scripts/readme_results.py): made from a bundle, never typed."""
 from __future__ import annotations
 
 import json
@@ -9,7 +10,7 @@ import pytest
 
 from airpose_lib.eval.readme_block import readme_block, recordings_block, replace_block, results_block
 
-README = Path(__file__).resolve().parents[1] / "README.md"
+ROOT = Path(__file__).resolve().parents[1]
 
 
 def _bundle(root: Path) -> None:
@@ -72,15 +73,23 @@ def test_the_recordings_block_is_the_marker_tables(tmp_path):
     assert readme_block(new, "toy", "recordings") == "\n".join(block) and readme_block(new, "toy") == readme_block(text, "toy")
 
 
-def test_the_readme_recordings_block_matches_the_committed_results():
-    block = readme_block(README.read_text(), "cpu", "recordings")
-    assert block is not None, "README.md lost its <!-- recordings:cpu --> block"
-    assert block == recordings_block("cpu"), \
-        "README.md's cpu recordings block differs from results/cpu/recordings/: run python scripts/readme_results.py"
+@pytest.mark.parametrize(("page", "profile", "kind"), [("README.md", "cpu", "results"),
+                                                     ("docs/findings.md", "cpu_paper_layout", "results"),
+                                                     ("docs/recordings.md", "cpu", "recordings")])
+def test_the_blocks_match_the_committed_results(page, profile, kind):
+    # `python scripts/readme_results.py` after a new results/<profile>/ (airpose reproduce --write-reference)
+    block = readme_block((ROOT / page).read_text(), profile, kind)
+    assert block is not None, f"{page} lost its <!-- {kind}:{profile} --> block"
+    made = results_block(profile) if kind == "results" else recordings_block(profile)
+    assert block == made, f"{page}'s {profile} {kind} block differs from results/{profile}/: " \
+                          "run python scripts/readme_results.py"
 
 
-@pytest.mark.parametrize("profile", ["cpu", "cpu_paper_layout"])
-def test_the_readme_blocks_match_the_committed_results(profile):
-    # `python scripts/readme_results.py --profile P` after a new results/P/ (airpose reproduce --write-reference)
-    assert readme_block(README.read_text(), profile) == results_block(profile), \
-        f"README.md's {profile} block differs from results/{profile}/: run python scripts/readme_results.py --profile {profile}"
+def test_the_writer_knows_every_block_the_tests_check():
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("readme_results", ROOT / "scripts" / "readme_results.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    assert set(module.BLOCKS) == {("README.md", "cpu", "results"), ("docs/findings.md", "cpu_paper_layout", "results"),
+                                  ("docs/recordings.md", "cpu", "recordings")}

@@ -1,4 +1,4 @@
-"""The HTML report of a reproduction (issue 32): pages, figures, captions and the checks that fail it.
+"""The HTML report of a reproduction: pages, figures, captions and the checks that fail it.
 
 Built from hand-made executed notebooks and figures in a temporary run folder: nothing is executed.
 """

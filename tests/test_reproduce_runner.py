@@ -210,7 +210,7 @@ def test_real_catalog_profiles_and_notebooks():
             assert prof["description"]
             # Every parameter a profile sets is declared by the notebook's parameters cell.
             check_notebook(path, list(prof["notebooks"].get(entry.name, {})))
-        # Every notebook can be pointed at the official assets (issue: official assets as drop-ins).
+        # Every notebook can be pointed at the official assets (official assets are drop-ins).
         check_notebook(path, ["profile", "output_dir", "data_source"])
         assert notebook_outputs(path) == [], f"{entry.file} carries outputs; clear them before committing"
     for prof in profiles:
@@ -298,7 +298,7 @@ def _gone(pid: int, within_s: float) -> bool:
 
 @pytest.mark.parametrize("signame", ["SIGINT", "SIGTERM"])
 def test_a_signal_stops_the_run_and_its_kernel_at_once_and_quietly(tmp_path, signame):
-    """Issue 33: SIGINT to the process alone was ignored until the notebook ended; Ctrl-C printed a
+    """SIGINT to the process alone was ignored until the notebook ended; Ctrl-C printed a
     19-line ZMQ traceback. Now either signal kills the kernel's process group within seconds, the
     run says one line, and the report keeps the finished notebook."""
     import signal

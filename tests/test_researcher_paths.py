@@ -1,4 +1,4 @@
-"""What a researcher relies on (issue 15): one runs folder, profile defaults for notebooks run by
+"""What a researcher relies on: one runs folder, profile defaults for notebooks run by
 hand, throttled progress off a terminal, validated ``--set``, figure footers, camera frustums."""
 from __future__ import annotations
 

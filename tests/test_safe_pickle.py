@@ -1,4 +1,4 @@
-"""No code runs from a data file (issue 33): every pickle the kit reads from a user's or the
+"""No code runs from a data file: every pickle the kit reads from a user's or the
 release's files goes through `airpose_lib.safe_pickle`. Each reader gets a crafted pickle whose
 unpickling would create a file; the file must not appear, and the reader must fail with its own
 one-line error. The plain-data unpickler must give what `pickle.loads` gives for the types the
@@ -86,7 +86,7 @@ def test_detector_file_of_a_recording_runs_nothing(tmp_path):
 
 
 def test_predict_on_a_crafted_recording_is_one_line_and_runs_nothing(tmp_path, capsys):
-    """The attack of the issue: `airpose predict --sequence DIR` with a crafted openpose_res.pkl."""
+    """A crafted file: `airpose predict --sequence DIR` with a crafted openpose_res.pkl."""
     seq, marker = _crafted_recording(tmp_path)
     ckpt = tmp_path / "ckpt.pt"
     ckpt.write_bytes(b"")  # never reached: the recording is read first or the checkpoint fails

@@ -1,4 +1,4 @@
-"""torchrun (issue 29): processes launched by ``python -m torch.distributed.run`` (the same as
+"""torchrun: processes launched by ``python -m torch.distributed.run`` (the same as
 ``torchrun``) train from the environment alone, finish, resume, and match one process.
 
 The default run launches the kit's training on fake still frames (tests/torchrun_train.py, gloo on
@@ -102,8 +102,8 @@ def test_rank_comes_from_torchruns_environment(monkeypatch):
 @pytest.mark.slow
 def test_cli_torchrun_on_an_own_profile_with_an_empty_cache(tmp_path):
     """`torchrun -m airpose_lib.cli train --profile FILE.yaml` with nothing cached: the dataset and
-    the pretrained backbone are made before the process group exists (the nested pretraining of
-    issue 29 deadlocked), then resumed by a second launch."""
+    the pretrained backbone are made before the process group exists (a pretraining nested inside the
+    group deadlocks), then resumed by a second launch."""
     profile = tmp_path / "tiny.yaml"
     profile.write_text((HERE / "data" / "tiny_profile.yaml").read_text())
     env = dict(os.environ, AIRPOSE_CACHE=str(tmp_path / "cache"), AIRPOSE_RUNS=str(tmp_path / "runs"),

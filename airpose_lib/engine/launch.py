@@ -9,8 +9,8 @@ process group exists the environment is the only source; once it exists the grou
 :func:`single_process` marks work that every process does alone (building a prerequisite: the
 dataset, the pretrained backbone, the feature cache): inside it a process counts as rank 0 of 1
 whatever the environment says, so a nested training there neither joins the group nor waits for
-the other ranks (the deadlock of issue 29: rank 0 pretraining inside the group while rank 1 waited
-on the backbone's file lock).
+the other ranks (otherwise rank 0 pretrains inside the group while rank 1 waits on the
+backbone's file lock: a deadlock).
 
 Precision (:data:`PRECISIONS`): ``fp32``; ``bf16`` (``torch.autocast`` with bfloat16, on CPU and
 CUDA); ``fp16`` (autocast with float16 and a ``GradScaler``, CUDA only: CPU float16 kernels are

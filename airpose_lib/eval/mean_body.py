@@ -12,7 +12,7 @@ test subjects costs an estimate that reads everything but stature exactly. Two r
   female model, beta = 0), what a stature-blind estimate of the right gender gets. Gender is
   visible in an image, so this is the nearer mark for a network.
 
-Neither is a bound: within a gender, the body's proportions predict stature closely (issue 28),
+Neither is a bound: within a gender, the body's proportions predict stature closely,
 so a network may read stature from the pixels and beat both. A third reference measures how far
 that can go:
 

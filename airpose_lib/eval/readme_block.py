@@ -1,9 +1,9 @@
-"""The README's result block: a committed reference bundle (``results/<profile>/``) as the short
-Markdown the README opens with, so that no number in the README is typed by hand.
+"""The generated result blocks: a committed reference bundle (``results/<profile>/``) as the short
+Markdown of the README and the docs pages, so that no number there is typed by hand.
 
 The block sits between two HTML comments, ``<!-- results:<profile> -->`` and
 ``<!-- /results:<profile> -->``; ``scripts/readme_results.py`` rewrites it from the bundle and
-``tests/test_readme_block.py`` fails when the README's block and the bundle disagree. A second
+``tests/test_readme_block.py`` fails when a page's block and the bundle disagree. A second
 kind of block, ``<!-- recordings:<profile> -->``, holds the recordings' UAV2-in-UAV1 table
 against the ArUco markers (:func:`recordings_block`, from ``results/<profile>/recordings/``).
 """

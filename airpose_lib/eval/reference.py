@@ -516,12 +516,12 @@ def reference_report(bundle: str | Path, profile: str, write: bool = False, comm
 #: The files notebook 05 writes into its output folder that make the recordings' reference.
 RECORDING_FILES = ("recording_errors.csv", "recording_errors.md", "comparisons.csv", "comparisons.md",
                    "paper_claims.csv", "paper_claims.md", "finetune_transfer.csv", "finetune_transfer.md")
-#: Notebook 05's tables of the field recordings (issue 31), installed beside them when it made them
+#: Notebook 05's tables of the field recordings, installed beside them when it made them
 #: (a profile with ``sequences: field_recordings:``), removed from the reference when it did not.
 FIELD_RECORDING_FILES = ("field_gap.csv", "field_gap.md", "field_finetune_transfer.csv", "field_finetune_transfer.md",
                          "field_recovery.csv", "field_recovery.md", "field_comparisons.csv", "field_comparisons.md",
                          "field_paper_claims.csv", "field_paper_claims.md")
-#: Notebook 05's tables of the ArUco markers' UAV2-in-UAV1 (issue 31), on the clean and on the
+#: Notebook 05's tables of the ArUco markers' UAV2-in-UAV1, on the clean and on the
 #: field recordings, installed the same way when the recordings had markers.
 MARKER_RECORDING_FILES = ("markers.csv", "markers.md", "field_markers.csv", "field_markers.md")
 _OPTIONAL_RECORDING_FILES = FIELD_RECORDING_FILES + MARKER_RECORDING_FILES

@@ -20,7 +20,7 @@ samples a difference of means can come from noise, so each adjacent pair is test
 * its size is the relative gain ``(e_A - e_B) / e_A`` of the means, with its interval from the same
   resamples (the ratio of the resampled means, so numerator and denominator stay paired), next to
   the paper's relative gain from its Table I (``eval.ablation.PAPER_TABLE_I``); a gain is of the
-  paper's size here when it reaches :data:`PAPER_GAIN_SHARE` of the paper's (issue 28's target).
+  paper's size here when it reaches :data:`PAPER_GAIN_SHARE` of the paper's (the kit's bar for an effect).
 
 What the seeds vary: the kit's networks, the regressor's initialisation, the order of its training
 batches and their random augmentation (``train.config.TrainConfig.seed``); the official
@@ -49,7 +49,7 @@ PAPER_ORDER = ("baseline", "multiview", "fullcam", "airpose")
 #: Table I metric -> per-view column.
 CLAIM_METRICS = {"MPE": "mpe_m", "MPJPE": "mpjpe_m"}
 #: Share of the paper's relative gain a kit gain must reach to count as an effect of the paper's
-#: size (issue 28: "at least a third of the paper's relative gain").
+#: size ("at least a third of the paper's relative gain").
 PAPER_GAIN_SHARE = 1 / 3
 
 _KEYS = ["sample", "view"]

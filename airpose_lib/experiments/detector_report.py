@@ -1,5 +1,5 @@
 """How a 2D detector does on a generated recording: detection rate, error against the true
-keypoints and disagreement with the other detectors, per view and joint group (issue 31 item 3).
+keypoints and disagreement with the other detectors, per view and joint group.
 
 Every detector is compared in BODY_25 (AlphaPose's COCO-18 through
 :data:`~airpose_lib.finetune.keypoints.BODY25_FROM_COCO18`; a joint a layout lacks is missing).

@@ -271,7 +271,7 @@ def _frame_errors(exp: RecordingExperiment, person: str, method: str, keep: np.n
 
 #: The networks whose recovery :func:`recovery_table` measures: (fine-tuned, pre-trained).
 RECOVERY_NETWORKS = (("Baseline", "Baseline (pre-trained)"), ("AirPose", "AirPose (pre-trained)"))
-#: The share of the field rise that fine-tuning must recover to count (issue 31's positive control).
+#: The share of the field rise that fine-tuning must recover to count (the positive control's target).
 RECOVERY_SHARE = 1 / 3
 
 
@@ -292,7 +292,7 @@ def recovery_table(clean: RecordingExperiment, field: RecordingExperiment, netwo
 
     ``verdict``: ``no significant rise`` (the rise's interval reaches zero: nothing to take back,
     and the share columns are NaN), else ``recovers a third or more`` (share >=
-    :data:`RECOVERY_SHARE` and the recovered interval above zero: issue 31's target),
+    :data:`RECOVERY_SHARE` and the recovered interval above zero: the target),
     ``recovers less than a third``, ``makes it worse`` (recovered interval below zero) or ``not
     significant``. Rows of the tuning person measure fitting, not transfer (``tuning``).
 
@@ -363,7 +363,7 @@ def marker_table(exp: RecordingExperiment, methods=MARKER_METHODS) -> pd.DataFra
     (:func:`~airpose_lib.eval.recordings.relative_camera_positions`) against the generated
     cameras and against the markers. Every row of a recording is over the same frames: those
     where the markers posed both drones and every network estimated both views
-    (:func:`~airpose_lib.experiments.recordings.scored_frames`). Medians, as the issue's target
+    (:func:`~airpose_lib.experiments.recordings.scored_frames`). Medians, as the target
     (a pose solver's rare flips would dominate a mean); the means beside them.
 
     Returns:

@@ -34,10 +34,8 @@ bound: a network may read stature from the body's proportions).
 """
 from __future__ import annotations
 
-import dataclasses
 import hashlib
 import json
-from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -84,7 +82,7 @@ from airpose_lib.train.config import load_train_config
 from airpose_lib.train.official import find_official_checkpoint
 
 __all__ = ["METHODS", "RecordingExperiment", "default_experiment_dir", "run_recording_experiment", "runs_field",
-           "finetune_candidates", "body_vertices", "recording_prior", "ground_truth_diagnostic", "scored_frames",
+           "body_vertices", "recording_prior", "ground_truth_diagnostic", "scored_frames",
            "CONTROL_LABEL", "official_recordings", "official_networks", "networks_for", "recordings_for",
            "marker_truth"]
 
@@ -421,7 +419,7 @@ def recordings_for(source, profile: str) -> dict | None:
 
 
 def runs_field(source, profile: str, field: bool | None = None) -> bool:
-    """Whether the real-data notebooks also run the profile's field recordings (issue 31).
+    """Whether the real-data notebooks also run the profile's field recordings.
 
     Args:
         source: the resolved data source (:func:`recordings_for`'s).
@@ -481,46 +479,6 @@ def _tests_key(tests: dict) -> str | None:
     return _key(*((name, recording_fingerprint(seq)) for name, seq in sorted(tests.items()))) if tests else None
 
 
-def finetune_candidates(profile: str, candidates: Mapping[str, Mapping], out: str | Path, *,
-                        variants: tuple[str, ...] = ("airpose", "baseline"), field: bool = True,
-                        sequences: Mapping[str, str | Path] | None = None) -> list[dict]:
-    """A fine-tuning choice, measured as the profile's recording experiment would make it: each
-    variant's first-seed network tuned on person 1 with each candidate's overrides of the
-    profile's ``finetune:`` settings (``out/<variant>/<candidate>``; finished runs are reused),
-    person 2's errors logged per checkpoint as the diagnostic. ``sequences`` (``person1``,
-    ``person2`` -> recording folder) replaces the profile's recordings, e.g. another tuning
-    recording of person 1 for the same networks.
-
-    Returns:
-        one row per variant and candidate: ``network``, ``candidate``, ``kept_step`` (the selection
-        rule's), ``heldout_j2d_step0`` and ``heldout_j2d_kept`` (person 1's held-out 2D error: the
-        choice's criterion), ``person2_mpjpe_step0_m`` and ``person2_mpjpe_kept_m`` (the diagnostic).
-    """
-    out = Path(out)
-    roots = sequences if sequences is not None else ensure_sequences(profile, field=field)
-    seqs = {n: load_sequence(p) for n, p in roots.items()}
-    tuning, tests = seqs["person1"], {"person2": seqs["person2"]}
-    prior, prior_info = recording_prior(profile, False)
-    seed = load_train_config(profile, "airpose").seed
-    base = dataclasses.replace(finetune_config(profile), prior=prior_info["source"], prior_path=prior_info["file"])
-    key = _tests_key(tests)
-    rows = []
-    for variant in variants:
-        pre = trained_checkpoint(profile, variant, seed)
-        for name, changes in candidates.items():
-            run = out / variant / name
-            _, info = _finetune_logged(pre, tuning, tests, dataclasses.replace(base, **changes), run, prior, False, key)
-            sel = info["selection"]  # the selection log's columns (selection.csv)
-            log = {int(step): {k: v[i] for k, v in sel.items()} for i, step in enumerate(sel["step"])}
-            kept = int(info["selected_step"])
-            rows.append({"network": variant, "candidate": name, "kept_step": kept,
-                         "heldout_j2d_step0": round(float(log[0]["heldout_j2d"]), 2),
-                         "heldout_j2d_kept": round(float(info["heldout_j2d"]), 2),
-                         "person2_mpjpe_step0_m": round(float(log[0]["diag_person2_mpjpe_m"]), 4),
-                         "person2_mpjpe_kept_m": round(float(log[kept]["diag_person2_mpjpe_m"]), 4)})
-    return rows
-
-
 def _kit_networks(profile: str, seed: int, tuning, tests: dict, prior, prior_info: dict, out: Path,
                   progress: bool) -> tuple[dict, dict]:
     """Table I's Baseline and AirPose of the profile, their fine-tuning on ``tuning`` (model
@@ -569,7 +527,7 @@ def run_recording_experiment(profile: str = "smoke", out_dir: str | Path | None 
         networks: method -> checkpoint for every network method (``Baseline (pre-trained)``,
             ``AirPose (pre-trained)``, ``Baseline``, ``AirPose``), kit ``.pt`` or official
             ``.ckpt`` (:func:`official_networks`); then nothing is trained or fine-tuned.
-        field: on the profile's field recordings (``sequences: field_recordings:``, issue 31)
+        field: on the profile's field recordings (``sequences: field_recordings:``)
             instead of the clean ones, cached in :func:`default_experiment_dir` ``(profile,
             field=True)``: the same pre-trained networks, fine-tuned again on the field person 1.
     """

@@ -9,9 +9,8 @@ multi-view variants, the other view's message) to residual updates of the parame
 ``activation="relu"`` (not the paper's) puts a ReLU after fc1 and after fc2, each before its
 dropout. HMR, SPIN and AirPose train their backbone with the regressor, so its last blocks shape
 the feature for this linear trunk; a frozen backbone cannot, and a ReLU gives the trunk the
-nonlinearity those blocks would have supplied (issue 28: a nonlinear readout of the cpu profile's
-frozen features finds the root orientation that a linear one misses,
-``results/cpu/selection/root_from_true_2d.txt``).
+nonlinearity those blocks would have supplied (a nonlinear readout of the cpu profile's frozen
+features finds the root orientation that a linear one misses: ``docs/findings.md``, the root probes).
 
 The decoder heads start Xavier-uniform with gain 0.01, so the first updates are small and the
 iteration starts close to the mean parameters. The layer names (``fc1``, ``fc2``, ``decpose``,

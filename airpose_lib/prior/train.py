@@ -75,7 +75,7 @@ class CorpusConfig:
     ``n_val`` held-out poses from a separate stream with the same mixture.
 
     ``held_out_motions`` names motion activities (``data.sequences.motions.ACTIVITIES``) whose poses the
-    corpus never contains: the scripts are drawn without them (issue 31, item 4: the paper's
+    corpus never contains: the scripts are drawn without them (the paper's
     VPoser was trained on AMASS, not on its test motions, so the kit's prior must not have seen
     the recordings' activities either). Empty (default): all activities, and the setting is
     absent from :meth:`to_dict` (the record of earlier priors stays as it was).

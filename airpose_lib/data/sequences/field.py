@@ -1,5 +1,5 @@
 """A field camera pipeline for the rendered recordings: what a drone camera does to the light
-that the renderer does not (issue 31, item 1).
+that the renderer does not.
 
 The renderer draws a clean pinhole image, the images the networks were trained on. A DJI
 camera's frame differs: its exposure and white balance are the camera's guess, the sensor adds

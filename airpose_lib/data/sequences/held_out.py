@@ -1,4 +1,4 @@
-"""Appearance the networks never saw, for the recordings (issue 31, item 1): clothing colours,
+"""Appearance the networks never saw, for the recordings: clothing colours,
 a ground photograph and a body shape that the still-frame training data provably never draws.
 
 Each part is a switch of :class:`HeldOutConfig` (the ``held_out:`` setting of a recording), all

@@ -1,4 +1,4 @@
-"""ArUco markers on the ground as ground truth for the drones' cameras (issue 31, item 5).
+"""ArUco markers on the ground as ground truth for the drones' cameras.
 
 The paper's scene had ArUco markers on the ground, "never used for any of our methods" (Fig. 1);
 the official real data ships per-frame marker poses (``data.official.real``). This module is

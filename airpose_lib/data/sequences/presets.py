@@ -1,4 +1,4 @@
-"""Named field presets of the recordings (issue 31, item 1): a camera pipeline
+"""Named field presets of the recordings: a camera pipeline
 (:class:`~.field.FieldConfig`) and held-out appearance (:class:`~.held_out.HeldOutConfig`)
 together, so that a profile turns "recordings that behave like field footage" on with one name
 (``sequences: field_recordings: dji``, :func:`field_variant`).

@@ -16,6 +16,7 @@ module             subcommands
                    :mod:`.drone` is a drone's own process)
 :mod:`.reproduce`  ``reproduce``
 :mod:`.report`     ``report``
+:mod:`.zoo`        ``zoo build``, ``zoo verify``, ``zoo list`` (the shipped networks)
 :mod:`.common`     the user-error policy, path/range checks, ``--set`` parsing
 =================  ===========================================================================
 
@@ -42,13 +43,14 @@ from .prior import add_prior
 from .report import add_report
 from .reproduce import add_reproduce
 from .train import add_pretrain, add_train
+from .zoo import add_zoo
 
 __all__ = ["CLIError", "build_parser", "main"]
 
 # Subcommand builders, in help order; each adds its parser to the group.
 _SUBCOMMANDS: tuple[Callable, ...] = (add_body, add_data, add_pretrain, add_backbone, add_train, add_eval, add_prior,
                                        add_fit, add_finetune, add_predict, add_node, add_launch, add_export,
-                                       add_keys, add_reproduce, add_report)
+                                       add_keys, add_reproduce, add_report, add_zoo)
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -32,19 +32,30 @@ from airpose_lib.body.genders import GENDER_NAMES
 from airpose_lib.data.official.synthetic import OfficialSyntheticDataset
 from airpose_lib.data.still.config import default_root
 from airpose_lib.data.still.dataset import StillFrameDataset, split_arrays
-from airpose_lib.eval.ablation import per_seed_table
+from airpose_lib.data.still.generate import ensure_still_dataset
+from airpose_lib.eval.ablation import VARIANT_LABELS, per_seed_table
+from airpose_lib.eval.agreement import agreement_message, claims_agreement, table_agreement, write_check
 from airpose_lib.eval.mean_body import STATURE_FIT_SUBJECTS, mean_body_references
-from airpose_lib.eval.reference import train_settings, train_wall_s, write_reference
+from airpose_lib.eval.reference import (
+    check_against_reference,
+    read_reference_table,
+    reference_dir,
+    train_settings,
+    train_wall_s,
+    write_reference,
+)
 from airpose_lib.eval.significance import claims_table
 from airpose_lib.geometry import axis_angle_to_matrix, crop_intrinsics, full_to_crop_pixels, project_points
 from airpose_lib.model import posed_joints_and_vertices
 from airpose_lib.model.official import load_official_checkpoint
 from airpose_lib.train import load_trained_model, predict
-from airpose_lib.train.ablation import run_ablation
+from airpose_lib.train.ablation import AblationRun, run_ablation
 from airpose_lib.train.official import official_ablation
 
+from .shipped import ShippedNetworks, shipped_ablation_tables, shipped_from, shipped_networks
+
 __all__ = ["AblationExperiment", "run_ablation_experiment", "ablation_references", "ablation_claims",
-           "write_ablation_bundle", "AblationSamples", "ablation_samples"]
+           "write_ablation_bundle", "AblationSamples", "ablation_samples", "ablation_reference_dir", "reference_check"]
 
 
 @dataclass
@@ -60,6 +71,7 @@ class AblationExperiment:
         runs: (variant, seed) -> ``AblationRun`` (checkpoint and evaluation tables).
         test: the test split (``StillFrameDataset`` or ``OfficialSyntheticDataset``).
         wall: step name -> wall time in seconds, recorded in the results bundle.
+        shipped: the shipped networks evaluated (None: trained here, or the official ones).
     """
 
     profile: str
@@ -69,6 +81,7 @@ class AblationExperiment:
     runs: dict
     test: object
     wall: dict[str, float] = field(default_factory=dict)
+    shipped: ShippedNetworks | None = None
 
     @property
     def official(self) -> bool:
@@ -102,8 +115,13 @@ class AblationExperiment:
 
     def caption(self) -> str:
         """Caption of the kit's Table I: which networks on which data."""
-        what = ("the official checkpoints on the official synthetic test split" if self.official
-                else f"the kit's networks on its own data, profile '{self.profile}', seeds {list(self.seeds)}")
+        if self.official:
+            what = "the official checkpoints on the official synthetic test split"
+        elif self.shipped is not None:
+            what = (f"the '{self.shipped.profile}' profile's shipped networks (seed {self.shipped.seed}) on the test "
+                    f"split of profile '{self.profile}', rendered on this machine")
+        else:
+            what = f"the kit's networks on its own data, profile '{self.profile}', seeds {list(self.seeds)}"
         return f"Table I reproduced by the kit: {what}; paper columns from Saini et al. (RA-L 2022), Table I."
 
     def smoke_warning(self) -> str | None:
@@ -127,7 +145,13 @@ def run_ablation_experiment(profile: str, source: DataSource, variants: Sequence
         workers: runs trained at once.
     """
     t0 = time.perf_counter()
-    if source.source == "official":  # the paper's own networks on the paper's own test split
+    shipped = shipped_networks(profile) if source.source != "official" else None
+    if shipped is not None:  # another profile's networks on this profile's fresh test split
+        root = ensure_still_dataset(profile, progress=progress)
+        evaluated = shipped_ablation_tables(shipped, root, variants, max_samples=eval_max_samples)
+        runs = {(v, shipped.seed): AblationRun(v, shipped.seed, ckpt, tables) for v, (ckpt, tables) in evaluated.items()}
+        seeds, test = [shipped.seed], StillFrameDataset(root, "test")
+    elif source.source == "official":  # the paper's own networks on the paper's own test split
         runs = official_ablation(source.roots["official_checkpoints"], source.roots["official_synthetic"],
                                  variants=variants, max_samples=eval_max_samples, backbone=None)
         seeds = sorted({k for _, k in runs})  # the jitter draws of the test crops (official protocol)
@@ -137,7 +161,53 @@ def run_ablation_experiment(profile: str, source: DataSource, variants: Sequence
                             workers=workers, progress=progress)
         test = StillFrameDataset(default_root(profile), "test")
     wall = {"train and evaluate": time.perf_counter() - t0}
-    return AblationExperiment(profile, source.source, list(variants), list(seeds), runs, test, wall)
+    return AblationExperiment(profile, source.source, list(variants), list(seeds), runs, test, wall, shipped)
+
+
+def ablation_reference_dir(profile: str) -> Path:
+    """The committed reference notebook 02 compares with: ``results/<profile>/``, or for a
+    profile on shipped networks, that of the profile that made them."""
+    return reference_dir(shipped_from(profile) or profile)
+
+
+def reference_check(exp: AblationExperiment, table: pd.DataFrame, claims: pd.DataFrame, ref_dir: str | Path,
+                    compare: bool = True, out: str | Path | None = None) -> tuple[pd.DataFrame | None, str]:
+    """This run against the committed reference in ``ref_dir``.
+
+    On shipped networks: every variant's MPE, MPJPE and root median within the tolerances of
+    :mod:`airpose_lib.eval.agreement`, and every claim's verdict the reference's. On networks
+    trained here: each variant mean against the reference's seed spread
+    (:func:`~airpose_lib.eval.reference.check_against_reference`). ``compare=False``: no comparison
+    (a profile whose networks train a few steps checks that the code runs, not numbers).
+
+    Returns:
+        the comparison table (None without one) and a line saying what it shows; with ``out``
+        both are also written to ``<out>/reference_check.md`` (:func:`~airpose_lib.eval.agreement.write_check`).
+    """
+    rows, message = _reference_check(exp, table, claims, Path(ref_dir), compare)
+    if out is not None:
+        write_check(out, message, rows)
+    return rows, message
+
+
+def _reference_check(exp: AblationExperiment, table: pd.DataFrame, claims: pd.DataFrame, ref_dir: Path,
+                     compare: bool) -> tuple[pd.DataFrame | None, str]:
+    if not compare:
+        return None, ("no comparison with a reference: this profile's networks train a few steps, so its numbers "
+                      "only show that every step of the pipeline runs")
+    if exp.shipped is None:
+        return check_against_reference(exp.per_seed(), ref_dir)
+    reference = read_reference_table(ref_dir)
+    if reference is None or not (ref_dir / "claims.csv").is_file():
+        return None, f"no reference in {ref_dir}"
+    per_view = {VARIANT_LABELS[v]: t for (v, _), t in exp.per_view.items()}
+    parts = {"Table I values": table_agreement(table, reference, per_view),
+             "claim verdicts": claims_agreement(claims, pd.read_csv(Path(ref_dir) / "claims.csv"))}
+    rows = pd.concat([parts["Table I values"],
+                      parts["claim verdicts"].rename(columns={"claim": "method", "verdict": "this run",
+                                                              "reference verdict": "reference"})
+                      .assign(quantity="verdict")], ignore_index=True)
+    return rows, agreement_message(parts, ref_dir)
 
 
 def ablation_references(exp: AblationExperiment, max_samples: int | None = None) -> pd.DataFrame | None:

@@ -81,6 +81,8 @@ from airpose_lib.train.ablation import trained_checkpoint
 from airpose_lib.train.config import load_train_config
 from airpose_lib.train.official import find_official_checkpoint
 
+from .shipped import shipped_networks
+
 __all__ = ["METHODS", "RecordingExperiment", "default_experiment_dir", "run_recording_experiment", "runs_field",
            "body_vertices", "recording_prior", "ground_truth_diagnostic", "scored_frames",
            "CONTROL_LABEL", "official_recordings", "official_networks", "networks_for", "recordings_for",
@@ -295,7 +297,8 @@ def recording_prior(profile: str, progress: bool = False):
         msg = f"Pose prior: VPoser V02_05 ({file}), as the paper."
         source = "vposer"
     else:
-        file = ensure_prior(profile, progress=progress)
+        shipped = shipped_networks(profile)
+        file = shipped.prior if shipped is not None else ensure_prior(profile, progress=progress)
         prior = load_prior("kit", file)
         msg = (f"Pose prior: the kit's VPoser-architecture prior ({file}); VPoser V02_05 is not installed "
                "(data_manifests/vposer_v02_05.yaml says how to get it; it is then used automatically).")
@@ -397,11 +400,14 @@ def official_networks(checkpoints_root: str | Path) -> dict[str, Path]:
     return nets
 
 
-def networks_for(source) -> dict[str, Path] | None:
-    """The official networks when the data source is official and ``official_checkpoints`` is
-    present (see :func:`official_networks`), else None (the kit trains and fine-tunes its own)."""
+def networks_for(source, profile: str | None = None, field: bool = False) -> dict[str, Path] | None:
+    """The networks the experiment runs instead of training its own: the official ones when the
+    data source is official and ``official_checkpoints`` is present (see :func:`official_networks`),
+    the shipped set of a profile on shipped networks (``field``: those fine-tuned on the field
+    recordings), else None (the kit trains and fine-tunes its own)."""
     if getattr(source, "source", "generated") != "official":
-        return None
+        shipped = shipped_networks(profile) if profile is not None else None
+        return None if shipped is None else shipped.recordings(field)
 
     ckpts = resolve_data_source("official", needs=["official_checkpoints"])
     if ckpts.source != "official":

@@ -31,10 +31,11 @@ from airpose_lib.model import to_smplx_params
 from airpose_lib.model.record import NetworkRecord, network_from_checkpoint
 
 from .config import TrainConfig
+from .features import FeatureDataset, ensure_features
 from .loop import default_dataset_factory
 from .run import prepare_data
 
-__all__ = ["predict", "evaluate", "load_network", "load_trained_model", "evaluate_checkpoint"]
+__all__ = ["predict", "evaluate", "load_network", "load_trained_model", "evaluate_checkpoint", "evaluate_features"]
 
 
 @torch.no_grad()
@@ -154,3 +155,19 @@ def evaluate_checkpoint(checkpoint: str | Path, split: str = "test", method: str
     dataset = default_dataset_factory(prepare_data(cfg, progress=False, device=device), split)
     return evaluate(model, dataset, method or cfg.variant, batch_size=batch_size, device=device,
                     max_samples=max_samples, body=cfg.body_source, feature_cut=cfg.trainable_from)
+
+
+def evaluate_features(checkpoint: str | Path, backbone_file: str | Path, data_root: str | Path, method: str,
+                      split: str = "test", crops: str = "jittered", max_samples: int | None = None,
+                      batch_size: int = 64) -> dict[str, pd.DataFrame]:
+    """Evaluate a checkpoint of a frozen shared backbone on any dataset's split through the cached
+    features of ``backbone_file`` (computed once per dataset, split and crops, shared by every
+    variant; the checkpoint's own training data need not exist).
+
+    Returns:
+        :func:`evaluate`'s tables.
+    """
+    model, cfg = load_trained_model(checkpoint, "cpu")
+    features = ensure_features(backbone_file, data_root, split, crops=crops)
+    dataset = FeatureDataset(data_root, split, features, crops=crops, augment=False)
+    return evaluate(model, dataset, method, batch_size=batch_size, body=cfg.body_source, max_samples=max_samples)

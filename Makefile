@@ -1,13 +1,18 @@
-# Two entry points for a fresh machine (see README.md). Both set the kit up first.
+# Entry points for a fresh machine (see README.md). Each sets the kit up first.
 VENV ?= .venv
 PROFILE ?= smoke
 
-.PHONY: setup smoke reproduce report test test-all test-browser bench lint
+.PHONY: setup demo smoke reproduce report test test-all test-browser bench lint
 
 setup:
 	bash scripts/setup.sh
 
-# main job: every notebook of the profile, figures into figures/
+# the first command: every notebook on the cpu profile's shipped networks and data rendered here,
+# nothing trained; exits 1 unless the run agrees with results/cpu/ within its tolerances
+demo: setup
+	$(VENV)/bin/airpose reproduce --profile demo --require-agreement
+
+# the training path at tiny sizes: every notebook of the profile, figures into figures/
 smoke: setup
 	$(VENV)/bin/airpose reproduce --profile $(PROFILE)
 

@@ -41,14 +41,22 @@ def _cmd_reproduce(args: argparse.Namespace) -> int:
         print(report.figures_dir)
     else:
         print(f"figures collected in {report.figures_dir}")
-    _check_reference(report, args.write_reference)
+    differs = _check_reference(report, args.write_reference)
+    if args.require_agreement and differs:
+        print(f"\nreproduction DIFFERS from the committed reference in {', '.join(differs)} "
+              f"(the notebooks' reference_check.md under {report.run_dir})", file=sys.stderr)
+        return 1
     return _write_reference_report(report) if args.write_reference else 0
 
 
-def _check_reference(report, write: bool) -> None:
+def _check_reference(report, write: bool) -> list[str]:
     """After notebook 02 (Table I) and notebook 05 (the recordings' claims): their results against
     ``results/<profile>/``, or installed there with ``--write-reference``. Here, not in the
-    runner: the runner imports nothing of the kit."""
+    runner: the runner imports nothing of the kit.
+
+    Returns:
+        the notebooks whose own check (shipped networks) found this run outside its tolerances.
+    """
     from airpose_lib.eval.agreement import CHECK_FILE
     from airpose_lib.eval.reference import recordings_report, reference_report
     from airpose_lib.experiments.shipped import shipped_from
@@ -58,7 +66,7 @@ def _check_reference(report, write: bool) -> None:
         raise CLIError("--write-reference: neither 02_ablation_table nor 05_airpose_plus ran; add --only "
                        "02_ablation_table (Table I) or --only 03 04 05 (the recordings)")
     command = " ".join(["airpose", *sys.argv[1:]])
-    messages = []
+    messages, differs = [], []
     for name, report_of in (("02_ablation_table", lambda out: reference_report(out / "results", report.profile,
                                                                                write=write, command=command)),
                             ("05_airpose_plus", lambda out: recordings_report(out, report.profile, write=write,
@@ -69,12 +77,15 @@ def _check_reference(report, write: bool) -> None:
         check = out / CHECK_FILE
         if not write and (done[name].parameters.get("compare_reference") is False or shipped_from(report.profile)):
             # the notebook's own check: no comparison, or the agreement of shipped networks
-            messages.append(f"{name}: " + (check.read_text().splitlines()[0] if check.is_file() else "no check"))
+            line = check.read_text().splitlines()[0] if check.is_file() else "no check"
+            messages.append(f"{name}: {line}")
+            differs += [name] if line.startswith("DIFFERS") else []
         else:
             messages.append(report_of(out))
     for msg in messages:
         if msg:
             print(msg)
+    return differs
 
 
 def _write_reference_report(report) -> int:
@@ -134,4 +145,7 @@ def add_reproduce(sub) -> None:
                           "notebook 05's recording tables in results/<profile>/recordings/ and, when every "
                           "notebook ran, the run's HTML report in results/<profile>/report/; refused unless "
                           "the checkout is a clean commit (default: only compare with them)")
+    rep.add_argument("--require-agreement", action="store_true",
+                     help="exit 1 when a profile on shipped networks (`networks: shipped:`) finds this run "
+                          "outside the tolerances of its reference (notebooks 02 and 05 check it)")
     rep.set_defaults(func=_cmd_reproduce)

@@ -16,17 +16,24 @@ step's; the regressor task, the cpu profile's, runs only the regressor and gains
 The four set-ups are timed interleaved (one step of each in turn, repeated), so that a change of
 load on a shared machine hits them alike: the ratio to fp32 NCHW of the same run is the robust
 figure; the load average is printed with the table.
+
+On a CPU the table is printed twice: for the kernels this CPU runs, then (in a child process)
+with the CPU limited to AVX2 (``ONEDNN_MAX_CPU_ISA=AVX2 ATEN_CPU_CAPABILITY=avx2``), what an
+AVX2-only laptop runs, each with the precision ``precision: auto`` picks there
+(:func:`airpose_lib.engine.launch.resolve_precision`). ``--kernels native`` prints only the first.
 """
 from __future__ import annotations
 
 import argparse
 import os
 import statistics
+import subprocess
+import sys
 import time
 
 import torch
 
-from airpose_lib.engine.launch import autocast, grad_scaler
+from airpose_lib.engine.launch import autocast, grad_scaler, resolve_precision
 from airpose_lib.model import build_model
 
 SETUPS = {"fp32": ("fp32", False), "fp32 channels_last": ("fp32", True), "bf16": ("bf16", False),
@@ -84,10 +91,16 @@ def main(argv=None) -> None:
     ap.add_argument("--repeat", type=int, default=5)
     ap.add_argument("--quick", action="store_true", help="ResNet-18 at 128 px only")
     ap.add_argument("--device", default="cpu", help="cpu (default) or cuda / cuda:N (adds fp16 with a loss scaler)")
+    ap.add_argument("--kernels", choices=("both", "native"), default="both",
+                    help="CPU: both kernel paths (default: this CPU's, then AVX2 in a child process) or native only")
     args = ap.parse_args(argv)
     configs = [("resnet18", 128)] + ([] if args.quick else [("resnet50", 224)])
     where = (torch.cuda.get_device_name(torch.device(args.device)) if args.device.startswith("cuda")
              else f"{torch.get_num_threads()} thread(s)")
+    limit = os.environ.get("ONEDNN_MAX_CPU_ISA")
+    picked, why = resolve_precision("auto", args.device if args.device != "cpu" else "cpu")
+    print(f"\nkernels: {'ONEDNN_MAX_CPU_ISA=' + limit if limit else 'this CPU'}"
+          f" (ATen {torch.backends.cpu.get_cpu_capability()}); precision auto picks {picked} ({why})")
     print(f"torch {torch.__version__}, {where}, batch {args.batch} two-view samples, "
           f"median of {args.repeat} interleaved steps; load average before: {os.getloadavg()}")
     print("| backbone @ px | set-up | step [s] | img/s | speed-up vs fp32 |")
@@ -96,6 +109,10 @@ def main(argv=None) -> None:
         for name, t, ratio in bench(backbone, size, args.batch, args.repeat, args.device):
             print(f"| {backbone} @ {size} | {name} | {t:.3f} | {2 * args.batch / t:.1f} | {ratio:.2f}x |")
     print(f"load average after: {os.getloadavg()}")
+    if args.device == "cpu" and args.kernels == "both" and not limit:
+        env = {**os.environ, "ONEDNN_MAX_CPU_ISA": "AVX2", "ATEN_CPU_CAPABILITY": "avx2"}
+        rest = [a for a in (argv if argv is not None else sys.argv[1:]) if not a.startswith("--kernels")]
+        subprocess.run([sys.executable, __file__, *rest, "--kernels", "native"], env=env, check=True)
 
 
 if __name__ == "__main__":

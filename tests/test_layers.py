@@ -50,6 +50,10 @@ ALLOWED: dict[str, set[str]] = {
 # before it, never one after it (LAYERS.md gives the reasons).
 DATA_WINGS = ("network_input", "still", "sequences", "official")
 
+# The most kit modules one module of experiments imports: a module there is one stage of an
+# experiment, and one that needs more does several jobs (split it by stage).
+EXPERIMENT_MAX_IMPORTS = 13
+
 # Circles that are real recursion, each broken by a commented import inside a function.
 ACCEPTED_MODULE_CYCLES: dict[frozenset[str], str] = {}
 
@@ -227,3 +231,26 @@ def test_every_data_wing_is_ordered():
 def test_data_wings_import_downwards():
     bad = climbing_data_imports()
     assert not bad, f"imports that climb data's wings ({' < '.join(DATA_WINGS)}):\n" + "\n".join(bad)
+
+
+def kit_modules_imported(path: Path) -> set[str]:
+    """The kit modules ``path`` imports, each once: ``from pkg import name`` counts ``pkg.name``
+    when that is a module, else ``pkg`` (helpers count too)."""
+    modules = {_module_name(p) for p in ROOT.rglob("*.py")}
+    name, is_pkg = _module_name(path), path.name == "__init__.py"
+    found = set()
+    for node in ast.walk(ast.parse(path.read_text(), filename=str(path))):
+        if isinstance(node, ast.Import):
+            found.update(a.name for a in node.names)
+        elif isinstance(node, ast.ImportFrom):
+            base = name.split(".")[:len(name.split(".")) - node.level + (1 if is_pkg else 0)] if node.level else []
+            target = ".".join(base + ([node.module] if node.module else []))
+            found.update(f"{target}.{a.name}" if f"{target}.{a.name}" in modules else target for a in node.names)
+    return {m for m in found if m.startswith(KIT + ".")} - {name}
+
+
+def test_experiment_modules_import_few_of_the_kit():
+    heavy = {_module_name(p): len(kit_modules_imported(p)) for p in sorted((ROOT / "experiments").rglob("*.py"))}
+    heavy = {m: n for m, n in heavy.items() if n > EXPERIMENT_MAX_IMPORTS}
+    assert not heavy, f"modules of experiments importing more than {EXPERIMENT_MAX_IMPORTS} of the kit's (split " \
+        f"them by stage): {heavy}"

@@ -1,4 +1,5 @@
 """Joint tables against smplx's own joint-name list (the independent reference)."""
+import numpy as np
 import smplx.joint_names
 
 from airpose_lib.body import (
@@ -14,6 +15,9 @@ from airpose_lib.body import (
     SMPLX_JOINT_NAMES,
     SMPLX_PARENTS,
     joint_index,
+)
+from airpose_lib.body.joint_sets import (
+    left_right_permutation,
 )
 
 REF = smplx.joint_names.JOINT_NAMES
@@ -84,3 +88,14 @@ def test_body_pose_from_named_joints_matches_scipy():
     assert pose[joint_index("left_knee") - 1, 0] == 1.0 and np.count_nonzero(pose) == 1
     with pytest.raises(KeyError, match="21 body joints"):
         body_pose_from_joints({"jaw": [0.1, 0, 0]})
+
+
+def test_left_right_permutation():
+    perm = left_right_permutation(BODY_25_NAMES)
+    assert BODY_25_NAMES[perm[BODY_25_NAMES.index("LWrist")]] == "RWrist"
+    assert BODY_25_NAMES[perm[BODY_25_NAMES.index("RHeel")]] == "LHeel"
+    assert perm[BODY_25_NAMES.index("Nose")] == BODY_25_NAMES.index("Nose")
+    assert np.array_equal(perm[perm], np.arange(25))  # an involution
+    arms = left_right_permutation(COCO18_NAMES, ("Shoulder", "Elbow", "Wrist"))
+    assert COCO18_NAMES[arms[COCO18_NAMES.index("LElbow")]] == "RElbow"
+    assert arms[COCO18_NAMES.index("LKnee")] == COCO18_NAMES.index("LKnee")

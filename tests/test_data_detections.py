@@ -12,7 +12,6 @@ from airpose_lib.data.sequences.detections import (
     OPENPOSE,
     DetectorModel,
     detect_keypoints,
-    left_right_permutation,
     simulate_detections,
 )
 
@@ -26,17 +25,6 @@ def _scene(F=3000, sizes=(80.0, 400.0), J=25, W=1920, H=1080, seed=0):
     kp = rng.uniform([200, 200], [W - 200, H - 200], (1, len(sizes), J, 2)).repeat(F, 0)
     size = np.broadcast_to(np.asarray(sizes), (F, len(sizes))).copy()
     return kp, size, np.array([[W, H]] * len(sizes))
-
-
-def test_left_right_permutation():
-    perm = left_right_permutation(BODY_25_NAMES)
-    assert BODY_25_NAMES[perm[BODY_25_NAMES.index("LWrist")]] == "RWrist"
-    assert BODY_25_NAMES[perm[BODY_25_NAMES.index("RHeel")]] == "LHeel"
-    assert perm[BODY_25_NAMES.index("Nose")] == BODY_25_NAMES.index("Nose")
-    assert np.array_equal(perm[perm], np.arange(25))  # an involution
-    arms = left_right_permutation(COCO18_NAMES, ("Shoulder", "Elbow", "Wrist"))
-    assert COCO18_NAMES[arms[COCO18_NAMES.index("LElbow")]] == "RElbow"
-    assert arms[COCO18_NAMES.index("LKnee")] == COCO18_NAMES.index("LKnee")
 
 
 def test_noise_std_matches_model_and_grows_relative_to_size():

@@ -11,7 +11,7 @@ import torch
 def official(module_tmp, open_model_files):
     from official_fixtures import write_official_real_fixture
 
-    from airpose_lib.experiments.recordings import OFFICIAL_REAL_CHECKPOINTS
+    from airpose_lib.experiments.recording_inputs import OFFICIAL_REAL_CHECKPOINTS
     from airpose_lib.model import build_model, write_official_checkpoint
     from airpose_lib.train.official import OFFICIAL_CHECKPOINT_FOLDERS
 

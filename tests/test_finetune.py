@@ -414,7 +414,7 @@ def test_finetune_trains_the_backbones_last_block_from_its_cached_input(tiny_ckp
     A block the backbone lacks is refused before anything is written."""
     from airpose_lib.data.sequences.reader import load_sequence
     from airpose_lib.errors import ConfigError
-    from airpose_lib.experiments.recordings import ground_truth_diagnostic
+    from airpose_lib.experiments.recording_diagnostic import ground_truth_diagnostic
     from airpose_lib.train import load_checkpoint
 
     kw = dict(prior=tiny_prior, body_model=body32)
@@ -752,7 +752,7 @@ def test_model_selection_never_reads_the_test_person(tiny_ckpt, smoke_root, tmp_
     import types
 
     from airpose_lib.data.sequences.reader import load_sequence
-    from airpose_lib.experiments.recordings import ground_truth_diagnostic
+    from airpose_lib.experiments.recording_diagnostic import ground_truth_diagnostic
     from airpose_lib.finetune.predict import sequence_features
     from airpose_lib.train import load_checkpoint
 

@@ -46,6 +46,14 @@ ALLOWED: dict[str, set[str]] = {
             "finetune", "runtime", "experiments", "reproduce", "engine", "zoo"},
 }
 
+# data's wings, bottom first: a module of data imports data's modules of its own wing or of a wing
+# before it, never one after it (LAYERS.md gives the reasons).
+DATA_WINGS = ("network_input", "still", "sequences", "official")
+
+# The most kit modules one module of experiments imports: a module there is one stage of an
+# experiment, and one that needs more does several jobs (split it by stage).
+EXPERIMENT_MAX_IMPORTS = 13
+
 # Circles that are real recursion, each broken by a commented import inside a function.
 ACCEPTED_MODULE_CYCLES: dict[frozenset[str], str] = {}
 
@@ -191,3 +199,58 @@ def test_graph_sees_lazy_imports(module):
     if not path.exists():
         path = path.with_suffix("") / "__init__.py"
     assert _imports(path)
+
+
+def _data_wing(module: str) -> int | None:
+    """``airpose_lib.data.still.scene`` -> the index of ``still`` in :data:`DATA_WINGS`; None
+    outside data's wings (``airpose_lib.data`` itself, or another package)."""
+    parts = module.split(".")
+    if parts[:2] != [KIT, "data"] or len(parts) < 3:
+        return None
+    return DATA_WINGS.index(parts[2]) if parts[2] in DATA_WINGS else None
+
+
+def climbing_data_imports() -> list[str]:
+    """``file -> target`` for each import of a data module from a wing above the importer's."""
+    bad = []
+    for path in sorted((ROOT / "data").rglob("*.py")):
+        src = _data_wing(_module_name(path))
+        for target in sorted(_imports(path)):
+            dst = _data_wing(target)
+            if src is not None and dst is not None and dst > src:
+                bad.append(f"{path.relative_to(ROOT.parent)} -> {target}")
+    return bad
+
+
+def test_every_data_wing_is_ordered():
+    wings = {p.stem for p in (ROOT / "data").iterdir() if p.stem != "__init__" and
+             ((p / "__init__.py").is_file() or p.suffix == ".py")}
+    assert wings == set(DATA_WINGS), "add the new wing of data to DATA_WINGS (and LAYERS.md)"
+
+
+def test_data_wings_import_downwards():
+    bad = climbing_data_imports()
+    assert not bad, f"imports that climb data's wings ({' < '.join(DATA_WINGS)}):\n" + "\n".join(bad)
+
+
+def kit_modules_imported(path: Path) -> set[str]:
+    """The kit modules ``path`` imports, each once: ``from pkg import name`` counts ``pkg.name``
+    when that is a module, else ``pkg`` (helpers count too)."""
+    modules = {_module_name(p) for p in ROOT.rglob("*.py")}
+    name, is_pkg = _module_name(path), path.name == "__init__.py"
+    found = set()
+    for node in ast.walk(ast.parse(path.read_text(), filename=str(path))):
+        if isinstance(node, ast.Import):
+            found.update(a.name for a in node.names)
+        elif isinstance(node, ast.ImportFrom):
+            base = name.split(".")[:len(name.split(".")) - node.level + (1 if is_pkg else 0)] if node.level else []
+            target = ".".join(base + ([node.module] if node.module else []))
+            found.update(f"{target}.{a.name}" if f"{target}.{a.name}" in modules else target for a in node.names)
+    return {m for m in found if m.startswith(KIT + ".")} - {name}
+
+
+def test_experiment_modules_import_few_of_the_kit():
+    heavy = {_module_name(p): len(kit_modules_imported(p)) for p in sorted((ROOT / "experiments").rglob("*.py"))}
+    heavy = {m: n for m, n in heavy.items() if n > EXPERIMENT_MAX_IMPORTS}
+    assert not heavy, f"modules of experiments importing more than {EXPERIMENT_MAX_IMPORTS} of the kit's (split " \
+        f"them by stage): {heavy}"

@@ -30,6 +30,8 @@ from airpose_lib.viz.render import (  # noqa: E402
     look_at,
     render_turntable,
     render_views,
+    set_vtk_camera,
+    vtk_camera,
 )
 from airpose_lib.viz.skeleton import joint_side  # noqa: E402
 
@@ -232,11 +234,11 @@ def test_style_and_save_figure(tmp_path):
 
 
 def test_vertex_normals_point_outwards():
-    from airpose_lib.viz.render import _vertex_normals
+    from airpose_lib.viz.render import vertex_normals
 
     centre = np.array([0.1, -0.2, 3.0])
     v, f = _sphere(centre, radius=0.5, res=24)
-    n = _vertex_normals(v, f)
+    n = vertex_normals(v, f)
     radial = (v - centre) / np.linalg.norm(v - centre, axis=1, keepdims=True)
     assert np.einsum("ij,ij->i", n, radial).min() > 0.98
 
@@ -253,3 +255,44 @@ def test_light_direction(renderer):
     renderer.set_light((0.25, 0.6, 1.0))
     (top_a, bottom_a), (top_b, bottom_b) = means
     assert top_a > 1.2 * bottom_a and bottom_b > 1.2 * top_b
+
+
+def _vtk_pixels(settings: dict, image_size, X: np.ndarray) -> np.ndarray:
+    """World points ``(N, 3)`` -> ``(N, 2)`` pixels through a bare ``vtkCamera`` (no rendering):
+    its world -> NDC matrix, then NDC [-1, 1] to OpenCV pixels (centres at integers, v down)."""
+    from vtkmodules.vtkRenderingCore import vtkCamera
+
+    W, H = image_size
+    cam = vtkCamera()
+    set_vtk_camera(cam, settings, 0.1, 100.0)
+    m = cam.GetCompositeProjectionTransformMatrix(W / H, -1.0, 1.0)
+    M = np.array([[m.GetElement(i, j) for j in range(4)] for i in range(4)])
+    h = np.c_[X, np.ones(len(X))] @ M.T
+    ndc = h[:, :2] / h[:, 3:]
+    return np.c_[(ndc[:, 0] + 1.0) * W / 2.0 - 0.5, (1.0 - ndc[:, 1]) * H / 2.0 - 0.5]
+
+
+def test_vtk_camera_projects_as_opencv():
+    """The OpenCV -> VTK camera rule against cv2.projectPoints: a turned, moved camera with an
+    off-centre principal point puts every point on OpenCV's pixel."""
+    size = (320, 200)
+    K = np.array([[300.0, 0, 170.3], [0, 300.0, 88.7], [0, 0, 1]])
+    rng = np.random.default_rng(3)
+    R, _ = cv2.Rodrigues(rng.normal(size=3) * 0.5)
+    t = np.array([0.3, -0.2, 6.0])
+    X = (rng.uniform(-1, 1, (20, 3)) - t) @ R  # points about 6 m in front of the camera
+    uv, _ = cv2.projectPoints(X.reshape(-1, 1, 3), cv2.Rodrigues(R)[0], t, K, None)
+    assert np.abs(_vtk_pixels(vtk_camera(K, size, R, t), size, X) - uv[:, 0]).max() < 1e-6
+
+
+def test_vtk_camera_by_hand():
+    """Camera frame as world: view angle 2 atan(H / 2 fy), window centre from the principal point."""
+    s = vtk_camera(np.array([[500.0, 0, 159.5], [0, 500.0, 99.5], [0, 0, 1]]), (320, 200))
+    assert s["position"] == (0.0, 0.0, 0.0) and s["focal_point"] == (0.0, 0.0, 1.0)
+    assert s["view_up"] == (0.0, -1.0, 0.0)
+    assert s["view_angle"] == pytest.approx(np.degrees(2 * np.arctan(100 / 500)))
+    assert s["window_center"] == pytest.approx((0.0, 0.0))  # centred principal point: no shift
+    s = vtk_camera(np.array([[500.0, 0, 79.5], [0, 500.0, 149.5], [0, 0, 1]]), (320, 200))
+    assert s["window_center"] == pytest.approx((0.5, 0.5))  # 80 px left, 50 px down of the centre
+    with pytest.raises(ValueError, match="skew"):
+        vtk_camera(np.array([[500.0, 1.0, 79.5], [0, 500.0, 149.5], [0, 0, 1]]), (320, 200))

@@ -21,6 +21,10 @@ SMPL-X counterpart are marked ``-1``.
 """
 from __future__ import annotations
 
+from collections.abc import Sequence
+
+import numpy as np
+
 _FINGERS = ("index", "middle", "pinky", "ring", "thumb")  # SMPL-X hand order
 
 SMPLX_JOINT_NAMES: tuple[str, ...] = (
@@ -81,6 +85,24 @@ COCO18_NAMES: tuple[str, ...] = (
     "RHip", "RKnee", "RAnkle", "LHip", "LKnee", "LAnkle", "REye", "LEye", "REar", "LEar",
 )
 """OpenPose's COCO-18 layout (COCO-17 plus a neck), as AlphaPose writes it for OpenPose tools."""
+
+
+def left_right_permutation(names: Sequence[str], parts: Sequence[str] | None = None) -> np.ndarray:
+    """(J,) index permutation exchanging left/right keypoints (``L...`` <-> ``R...``).
+
+    Args:
+        names: keypoint names (OpenPose style).
+        parts: only exchange these parts (e.g. ``("Shoulder", "Elbow", "Wrist")``); None = all.
+    """
+    perm = np.arange(len(names))
+    index = {n: i for i, n in enumerate(names)}
+    for i, n in enumerate(names):
+        if len(n) > 1 and n[0] in "LR" and n[1].isupper():
+            other = ("R" if n[0] == "L" else "L") + n[1:]
+            if other in index and (parts is None or n[1:] in parts):
+                perm[i] = index[other]
+    return perm
+
 
 # Which SMPL-X output joint stands for each keypoint. MidHip and Neck have no exact
 # counterpart; like SMPLify-X we use the pelvis and neck joints.

@@ -35,6 +35,11 @@ __all__ = [
     "person_box",
     "keep_previous_box",
     "hold_boxes",
+    "NETWORK_IMAGE_SIZE",
+    "NETWORK_FOCAL",
+    "BOX_MARGIN_PX",
+    "BOX_JITTER_PX",
+    "full_frame_intrinsics",
     "network_camera",
     "network_box_margin",
     "box_margin",
@@ -135,21 +140,37 @@ def hold_boxes(detected: Sequence[np.ndarray | None], leading: str = "first") ->
 
 
 # -- the network camera and the box margin ------------------------------------------------------
-def network_camera() -> np.ndarray:
-    """``(3, 3)`` intrinsics of the camera every kit and official network is trained with: the
-    still-frame data's (``data.still.scene.SceneConfig``: f = 1475 px, 1920x1080, principal point at
-    the image centre). A checkpoint records its own (``model.record``, ``camera_K``)."""
-    from airpose_lib.data.still.scene import SceneConfig  # lazy: ~0.2 s of a drone's start-up
+#: The camera every kit and official network is trained with, the still frames' default scene
+#: (``data.still.scene.SceneConfig`` takes its defaults from here): ``(W, H)`` pixels and f in pixels.
+NETWORK_IMAGE_SIZE: tuple[int, int] = (1920, 1080)
+NETWORK_FOCAL = 1475.0
+#: A training box: the joints +- ``BOX_MARGIN_PX``, each side moved out by ``U(0, BOX_JITTER_PX)``
+#: pixels of the network camera (the paper: between the tight box and a 200 px margin).
+BOX_MARGIN_PX = 20.0
+BOX_JITTER_PX = 200.0
 
-    return SceneConfig().K
+
+def full_frame_intrinsics(image_size: tuple[int, int], focal: float,
+                          principal_point: tuple[float, float] | None = None) -> np.ndarray:
+    """``K (3, 3)`` with ``fx = fy = focal`` and the principal point (default: the image centre)."""
+    W, H = image_size
+    cx, cy = principal_point if principal_point is not None else ((W - 1) / 2.0, (H - 1) / 2.0)
+    return np.array([[focal, 0.0, cx], [0.0, focal, cy], [0.0, 0.0, 1.0]])
+
+
+def network_camera() -> np.ndarray:
+    """``(3, 3)`` intrinsics of the camera every kit and official network is trained with
+    (:data:`NETWORK_IMAGE_SIZE`, :data:`NETWORK_FOCAL`, principal point at the image centre). A
+    checkpoint records its own (``model.record``, ``camera_K``)."""
+    return full_frame_intrinsics(NETWORK_IMAGE_SIZE, NETWORK_FOCAL)
 
 
 def network_box_margin(K: np.ndarray, K_net: np.ndarray | None = None) -> float:
     """The person-box margin, in pixels of an image with intrinsics ``K (3, 3)``, that frames the
     person as the training crops do on average.
 
-    A training box is the joints +- ``bbox_margin_px`` with each side moved out by
-    ``U(0, bbox_jitter_px)`` (``data.still.scene.SceneConfig``: 20 + U(0, 200) px at f = 1475, as
+    A training box is the joints +- :data:`BOX_MARGIN_PX` with each side moved out by
+    ``U(0,`` :data:`BOX_JITTER_PX` ``)`` (20 + U(0, 200) px at f = 1475, as
     ``copenet/dsets/aerialpeople.py`` for both of its splits): 120 px on average in the network
     camera. A box much tighter than that puts the crop scale s of P outside the training range
     (Table I's tight-box column: AirPose MPJPE 0.143 vs 0.106 m on the same samples). The
@@ -164,13 +185,10 @@ def network_box_margin(K: np.ndarray, K_net: np.ndarray | None = None) -> float:
         the margin in the image's pixels: 120 px scaled by ``f / f_net`` (mean of fx and fy), the
         same margin in the virtual camera whatever the image's resolution.
     """
-    from airpose_lib.data.still.scene import SceneConfig  # lazy: see network_camera
-
-    sc = SceneConfig()
     K = np.asarray(K, np.float64)
     K_net = np.asarray(network_camera() if K_net is None else K_net, np.float64)
     f_ratio = (K[0, 0] + K[1, 1]) / (K_net[0, 0] + K_net[1, 1])
-    return float((sc.bbox_margin_px + sc.bbox_jitter_px / 2.0) * f_ratio)
+    return float((BOX_MARGIN_PX + BOX_JITTER_PX / 2.0) * f_ratio)
 
 
 def box_margin(margin_px: float | None, K: np.ndarray, K_net: np.ndarray | None = None) -> float:

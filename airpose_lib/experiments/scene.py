@@ -9,7 +9,7 @@ import torch
 
 from airpose_lib.body import load_body_model
 from airpose_lib.body.genders import GENDER_NAMES
-from airpose_lib.experiments.recordings import body_vertices
+from airpose_lib.experiments.recording_estimates import body_vertices
 from airpose_lib.geometry import axis_angle_to_matrix
 from airpose_lib.viz.scene3d import RecordingScene
 

@@ -35,6 +35,9 @@ __all__ = [
     "CameraView",
     "OffscreenRenderer",
     "intrinsics_from_fov",
+    "vtk_camera",
+    "set_vtk_camera",
+    "vertex_normals",
     "look_at",
     "project_points",
     "render_views",
@@ -136,6 +139,52 @@ def look_at(eye: Sequence[float], target: Sequence[float], up: Sequence[float] =
     return R, -R @ eye
 
 
+def vtk_camera(K: np.ndarray, image_size: tuple[int, int], R_cw: np.ndarray | None = None,
+               t_cw: np.ndarray | None = None) -> dict:
+    """The VTK camera of an OpenCV camera: a world point X lands on the pixel ``K (R_cw X + t_cw)``.
+
+    VTK has one focal length, that of ``fy``; a caller with ``fx != fy`` stretches x by ``fx / fy``.
+
+    Args:
+        K: ``(3, 3)`` intrinsics in pixels, no skew (OpenCV pixel centres at integers).
+        image_size: ``(W, H)`` in pixels.
+        R_cw, t_cw: ``(3, 3)``, ``(3,)`` world -> OpenCV camera (x right, y down, z forward);
+            None: the world is the camera frame.
+
+    Returns:
+        ``position``, ``focal_point``, ``view_up`` (each ``(3,)``), ``view_angle`` (vertical,
+        degrees) and ``window_center`` (``(2,)``, normalised device coordinates).
+    """
+    W, H = image_size
+    K = np.asarray(K, dtype=np.float64)
+    if abs(K[0, 1]) > 1e-9:
+        raise ValueError("skewed intrinsics (K[0, 1] != 0) are not supported")
+    fy, cx, cy = K[1, 1], K[0, 2], K[1, 2]
+    if R_cw is None:
+        position, focal_point, view_up = (0.0, 0.0, 0.0), (0.0, 0.0, 1.0), (0.0, -1.0, 0.0)
+    else:
+        R = np.asarray(R_cw, dtype=np.float64)
+        position = -R.T @ np.asarray(t_cw, dtype=np.float64)
+        focal_point = position + R[2]  # the optical axis is the camera's third row
+        view_up = -R[1]  # image up = -y of the OpenCV camera
+    # OpenCV pixel u spans [u - 0.5, u + 0.5]; VTK's viewport spans [0, W] in NDC [-1, 1]. The
+    # principal point must land at NDC (2 (cx + .5) / W - 1, 1 - 2 (cy + .5) / H); the window
+    # centre shifts the image the opposite way, hence the signs.
+    return {"position": tuple(position), "focal_point": tuple(focal_point), "view_up": tuple(view_up),
+            "view_angle": math.degrees(2.0 * math.atan(0.5 * H / fy)),
+            "window_center": (1.0 - 2.0 * (cx + 0.5) / W, 2.0 * (cy + 0.5) / H - 1.0)}
+
+
+def set_vtk_camera(camera, settings: dict, near: float, far: float) -> None:
+    """Give a ``vtkCamera`` the :func:`vtk_camera` settings and the clipping planes (metres)."""
+    camera.SetPosition(*settings["position"])
+    camera.SetFocalPoint(*settings["focal_point"])
+    camera.SetViewUp(*settings["view_up"])
+    camera.SetViewAngle(settings["view_angle"])
+    camera.SetWindowCenter(*settings["window_center"])
+    camera.SetClippingRange(near, far)
+
+
 def _as_rgb(color, n: int | None = None) -> np.ndarray:
     """Colour(s) -> float RGB in [0, 1]: (3,) for one colour or (n, 3) per vertex."""
     if color is None:
@@ -150,7 +199,7 @@ def _as_rgb(color, n: int | None = None) -> np.ndarray:
     raise ValueError(f"colour must be (3,) or (V, 3) with V={n}, got shape {c.shape}")
 
 
-def _vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     """Area-weighted vertex normals (V, 3) of a triangle mesh (V, 3), (F, 3)."""
     tri = vertices[faces]
     fn = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])  # length = 2 * area
@@ -239,24 +288,11 @@ class OffscreenRenderer:
 
     def _fit_camera(self, K: np.ndarray, near: float, far: float) -> tuple[float, float]:
         """Point the VTK camera so that it reproduces the pinhole K (3, 3); returns x scale."""
-        W, H = self.image_size
-        fx, fy, cx, cy = K[0, 0], K[1, 1], K[0, 2], K[1, 2]
-        if abs(K[0, 1]) > 1e-9:
-            raise ValueError("OffscreenRenderer: skewed intrinsics (K[0, 1] != 0) are not supported")
-        cam = self._plotter.renderer.GetActiveCamera()
-        cam.SetPosition(0.0, 0.0, 0.0)
-        cam.SetFocalPoint(0.0, 0.0, 1.0)
-        cam.SetViewUp(0.0, -1.0, 0.0)
-        cam.SetViewAngle(math.degrees(2.0 * math.atan(0.5 * H / fy)))
-        # OpenCV pixel u spans [u - 0.5, u + 0.5]; VTK's viewport spans [0, W] in NDC [-1, 1].
-        # The principal point must land at NDC (2 (cx + .5) / W - 1, 1 - 2 (cy + .5) / H); the
-        # window centre shifts the image the opposite way, hence the signs.
-        cam.SetWindowCenter(1.0 - 2.0 * (cx + 0.5) / W, 2.0 * (cy + 0.5) / H - 1.0)
-        cam.SetClippingRange(near, far)
+        set_vtk_camera(self._plotter.renderer.GetActiveCamera(), vtk_camera(K, self.image_size), near, far)
         self._plotter.renderer.camera_set = True  # keep pyvista from resetting the camera
         self._clip = (near, far)
         # VTK has one focal length; fx != fy is reproduced by stretching x by fx / fy.
-        return fx / fy
+        return K[0, 0] / K[1, 1]
 
     # -- rendering ----------------------------------------------------------------------------
     def render(
@@ -321,7 +357,7 @@ class OffscreenRenderer:
     def _update_slot(self, i: int, v: np.ndarray, faces: np.ndarray, color, opacity: float) -> None:
         rgb = _as_rgb(color, len(v))
         per_vertex = rgb.ndim == 2
-        normals = _vertex_normals(v, faces)
+        normals = vertex_normals(v, faces)
         slot = self._slots[i] if i < len(self._slots) else None
         same_topology = (slot is not None and slot.per_vertex == per_vertex
                          and slot.poly.n_points == len(v) and slot.faces.shape == faces.shape

@@ -42,7 +42,6 @@ from __future__ import annotations
 
 from collections.abc import Iterable, Mapping
 from collections.abc import Sequence as SequenceABC
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -50,6 +49,7 @@ import numpy as np
 from airpose_lib import safe_pickle
 
 from ..sequences.layout import SequenceFormatError, _frame_name, _image_index, _lookup, _machines
+from ..sequences.marker_poses import MarkerPoses
 from ..sequences.reader import Sequence, load_sequence
 
 __all__ = [
@@ -58,7 +58,6 @@ __all__ = [
     "MARKER_POSES_FILE",
     "real_split_frames",
     "read_marker_poses",
-    "MarkerPoses",
     "load_marker_poses",
     "load_official_real",
 ]
@@ -140,23 +139,6 @@ def read_marker_poses(path: Path | str, frames: Iterable[int], marker: str = "0"
         t[n] = tvec
         valid[n] = True
     return R, t, valid
-
-
-@dataclass
-class MarkerPoses:
-    """The ArUco board seen by each drone.
-
-    Attributes:
-        frames: ``(F,)`` frame numbers.
-        R_cm: ``(F, V, 3, 3)`` marker -> camera rotation of each view.
-        t_cm: ``(F, V, 3)`` marker -> camera translation (metres).
-        valid: ``(F, V)`` bool, marker detected.
-    """
-
-    frames: np.ndarray
-    R_cm: np.ndarray
-    t_cm: np.ndarray
-    valid: np.ndarray
 
 
 def load_marker_poses(root: Path | str, frames: Iterable[int], marker: str = "0",

@@ -68,7 +68,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from airpose_lib.body.joint_sets import BODY_25_NAMES, COCO18_NAMES
+from airpose_lib.body.joint_sets import BODY_25_NAMES, COCO18_NAMES, left_right_permutation
 from airpose_lib.errors import ConfigError
 
 __all__ = [
@@ -79,7 +79,6 @@ __all__ = [
     "OPENPOSE",
     "ALPHAPOSE",
     "DEFAULT_DETECTORS",
-    "left_right_permutation",
     "detect_keypoints",
     "simulate_detections",
     "detection_summary",
@@ -112,23 +111,6 @@ _LIMBS = (("L", _ARMS), ("R", _ARMS), ("L", _LEGS), ("R", _LEGS))
 def _limb_mask(names: Sequence[str], side: str, parts: Sequence[str]) -> np.ndarray:
     """(J,) bool: the keypoints of one limb (e.g. ``LShoulder, LElbow, LWrist``)."""
     return np.array([len(n) > 1 and n[0] == side and n[1:] in parts for n in names])
-
-
-def left_right_permutation(names: Sequence[str], parts: Sequence[str] | None = None) -> np.ndarray:
-    """(J,) index permutation exchanging left/right keypoints (``L...`` <-> ``R...``).
-
-    Args:
-        names: keypoint names (OpenPose style).
-        parts: only exchange these parts (e.g. ``("Shoulder", "Elbow", "Wrist")``); None = all.
-    """
-    perm = np.arange(len(names))
-    index = {n: i for i, n in enumerate(names)}
-    for i, n in enumerate(names):
-        if len(n) > 1 and n[0] in "LR" and n[1].isupper():
-            other = ("R" if n[0] == "L" else "L") + n[1:]
-            if other in index and (parts is None or n[1:] in parts):
-                perm[i] = index[other]
-    return perm
 
 
 @dataclass(frozen=True)

@@ -29,7 +29,7 @@ from airpose_lib.config_fields import config_from
 from airpose_lib.errors import ConfigError
 from airpose_lib.geometry import relative_camera_pose
 
-from ..official.real import MarkerPoses
+from .marker_poses import MarkerPoses
 
 __all__ = [
     "MarkerLayout",
@@ -262,7 +262,7 @@ def relative_camera_from_markers(R1: np.ndarray, t1: np.ndarray, R2: np.ndarray,
 
     Args:
         R1, t1, R2, t2: (..., 3, 3), (..., 3) marker/world -> camera poses of UAV 1 and UAV 2
-            (:func:`camera_pose_from_markers`, or ``data.official.real.MarkerPoses``).
+            (:func:`camera_pose_from_markers`, or ``data.sequences.marker_poses.MarkerPoses``).
     Returns:
         ``R_12 (..., 3, 3)``, ``t_12 (..., 3)``, float64.
     """
@@ -296,7 +296,7 @@ def sequence_marker_poses(seq, layout: MarkerLayout | None = None, min_markers: 
         dist: OpenCV distortion coefficients of the stored images; default: a generated
             recording's own (:func:`recording_lens_distortion`).
     Returns:
-        :class:`~airpose_lib.data.official.real.MarkerPoses` in the layout's (world) frame
+        :class:`~airpose_lib.data.sequences.marker_poses.MarkerPoses` in the layout's (world) frame
         (``R_cm``, ``t_cm`` = ``R_cw``, ``t_cw``; identity / zero where invalid), the number of
         markers detected ``(F, V)`` and the RMS reprojection error ``(F, V)`` pixels (NaN where
         no pose).

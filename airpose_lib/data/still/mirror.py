@@ -38,10 +38,8 @@ from __future__ import annotations
 import torch
 from torch import Tensor
 
-from airpose_lib.body.joint_sets import BODY22_NAMES, BODY_25_NAMES
+from airpose_lib.body.joint_sets import BODY22_NAMES, BODY_25_NAMES, left_right_permutation
 from airpose_lib.geometry import crop_vector, split_intrinsics
-
-from ..sequences.detections import left_right_permutation
 
 __all__ = ["BODY22_MIRROR", "BODY_25_MIRROR", "mirror_matrix", "mirror_rotation", "mirror_body_pose",
            "mirror_pixels", "mirror_box", "mirror_sample"]

@@ -6,9 +6,8 @@ the world while the camera moves. :class:`SceneRenderer` therefore keeps every a
 coordinates and moves the VTK camera instead: one body upload serves all views of a sample, and
 a view only costs a camera update and a draw.
 
-The camera follows the same pinhole mapping as :mod:`airpose_lib.viz.render` (view angle from
-``fy`` and the image height, principal point through ``vtkCamera.SetWindowCenter``, OpenCV pixel
-centres at integers), so a world point lands on the pixel that ``K (R_cw X + t_cw)`` gives.
+The camera is :func:`airpose_lib.viz.render.vtk_camera` (OpenCV ``K, R_cw, t_cw`` to VTK), so a
+world point lands on the pixel that ``K (R_cw X + t_cw)`` gives.
 
 Crops are rendered directly at the network input size with the crop's intrinsics
 (:func:`airpose_lib.geometry.crop_intrinsics`); :func:`airpose_lib.geometry.pad_outside_box` then
@@ -26,7 +25,7 @@ from vtkmodules.vtkRenderingCore import vtkTexture  # noqa: E402
 
 # Importing viz.render selects the EGL window (no X server) and sets pyvista off-screen before
 # VTK creates a window; keep this import first.
-import airpose_lib.viz.render  # noqa: F401  (side effects)
+from airpose_lib.viz.render import set_vtk_camera, vertex_normals, vtk_camera  # noqa: E402
 
 from .scene import EnvironmentSample  # noqa: E402
 
@@ -102,17 +101,6 @@ def ground_textures(size: int = 256) -> list[tuple[str, np.ndarray]]:
 
 
 # -- renderer -------------------------------------------------------------------------------------
-def _vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
-    """Area-weighted unit vertex normals ``(V, 3)`` of a triangle mesh ``(V, 3)``, ``(F, 3)``."""
-    tri = vertices[faces]
-    fn = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-    idx = faces.reshape(-1)
-    w = np.repeat(fn, 3, axis=0)
-    vn = np.stack([np.bincount(idx, weights=w[:, c], minlength=len(vertices)) for c in range(3)], 1)
-    norm = np.linalg.norm(vn, axis=1, keepdims=True)
-    return vn / np.where(norm > 0, norm, 1.0)
-
-
 class SceneRenderer:
     """Renders one sample's scene (ground, sky, distractors, body) from any pinhole camera.
 
@@ -257,7 +245,7 @@ class SceneRenderer:
         """The person: world vertices ``(V, 3)``, faces ``(F, 3)``, vertex colours ``(V, 3)`` uint8."""
         v = np.asarray(vertices, dtype=np.float64)
         f = np.asarray(faces, dtype=np.int64)
-        normals = _vertex_normals(v, f)
+        normals = vertex_normals(v, f)
         rgb = np.asarray(colors, dtype=np.uint8)
         same = (self._body is not None and self._body.n_points == len(v)
                 and self._body_faces.shape == f.shape and np.array_equal(self._body_faces, f))
@@ -281,22 +269,11 @@ class SceneRenderer:
 
     # -- camera and drawing ---------------------------------------------------------------------
     def _set_camera(self, K: np.ndarray, R_cw: np.ndarray, t_cw: np.ndarray) -> None:
-        W, H = self.image_size
         K = np.asarray(K, dtype=np.float64)
-        fx, fy, cx, cy = K[0, 0], K[1, 1], K[0, 2], K[1, 2]
-        if abs(K[0, 1]) > 1e-9 or abs(fx - fy) > 1e-6 * abs(fy):
+        if abs(K[0, 1]) > 1e-9 or abs(K[0, 0] - K[1, 1]) > 1e-6 * abs(K[1, 1]):
+            # the world's meshes cannot be stretched per view as viz.render's camera-frame meshes are
             raise ValueError("SceneRenderer: needs square pixels (fx == fy) and no skew")
-        R = np.asarray(R_cw, dtype=np.float64)
-        centre = -R.T @ np.asarray(t_cw, dtype=np.float64)
-        cam = self._cam
-        cam.SetPosition(*centre)
-        cam.SetFocalPoint(*(centre + R[2]))  # the optical axis is the camera's third row
-        cam.SetViewUp(*(-R[1]))  # image up = -y of the OpenCV camera
-        cam.SetViewAngle(math.degrees(2.0 * math.atan(0.5 * H / fy)))
-        # OpenCV pixel u spans [u - 0.5, u + 0.5]; the principal point goes to NDC
-        # (2 (cx + .5) / W - 1, 1 - 2 (cy + .5) / H); the window centre moves the other way.
-        cam.SetWindowCenter(1.0 - 2.0 * (cx + 0.5) / W, 2.0 * (cy + 0.5) / H - 1.0)
-        cam.SetClippingRange(self.near, self.far)
+        set_vtk_camera(self._cam, vtk_camera(K, self.image_size, R_cw, t_cw), self.near, self.far)
         self._pl.renderer.camera_set = True  # keep pyvista from resetting the camera
 
     def render(self, K: np.ndarray, R_cw: np.ndarray, t_cw: np.ndarray, *,

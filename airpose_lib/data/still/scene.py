@@ -24,6 +24,8 @@ import numpy as np
 from airpose_lib.body.genders import GENDER_CODES
 from airpose_lib.errors import ConfigError
 
+from ..network_input import BOX_JITTER_PX, BOX_MARGIN_PX, NETWORK_FOCAL, NETWORK_IMAGE_SIZE, full_frame_intrinsics
+
 __all__ = [
     "SceneConfig",
     "PersonSample",
@@ -34,7 +36,6 @@ __all__ = [
     "body_world_pose",
     "sample_cameras",
     "look_at_extrinsics",
-    "full_frame_intrinsics",
     "points_in_frame",
     "tight_bbox",
     "jitter_bbox",
@@ -81,8 +82,8 @@ class SceneConfig:
     """
 
     num_views: int = 2
-    image_size: tuple[int, int] = (1920, 1080)
-    focal: float = 1475.0
+    image_size: tuple[int, int] = NETWORK_IMAGE_SIZE
+    focal: float = NETWORK_FOCAL
     principal_point: tuple[float, float] | None = None
     camera_distance: float = 10.0
     camera_distance_jitter: float = 1.5
@@ -95,8 +96,8 @@ class SceneConfig:
     beta_std: float | tuple[float, ...] = 1.0
     beta_clip: float = 3.0
     bbox_from: str = "joints"
-    bbox_margin_px: float = 20.0
-    bbox_jitter_px: float = 200.0
+    bbox_margin_px: float = BOX_MARGIN_PX
+    bbox_jitter_px: float = BOX_JITTER_PX
     frame_margin_px: float = 0.0
     num_distractors: tuple[int, int] = (0, 4)
     distractor_radius: tuple[float, float] = (1.5, 12.0)
@@ -121,14 +122,6 @@ class SceneConfig:
     def K(self) -> np.ndarray:
         """Full-frame intrinsics ``(3, 3)``, float64."""
         return full_frame_intrinsics(self.image_size, self.focal, self.principal_point)
-
-
-def full_frame_intrinsics(image_size: tuple[int, int], focal: float,
-                          principal_point: tuple[float, float] | None = None) -> np.ndarray:
-    """``K (3, 3)`` with ``fx = fy = focal`` and the principal point (default: the image centre)."""
-    W, H = image_size
-    cx, cy = principal_point if principal_point is not None else ((W - 1) / 2.0, (H - 1) / 2.0)
-    return np.array([[focal, 0.0, cx], [0.0, focal, cy], [0.0, 0.0, 1.0]])
 
 
 # -- person ---------------------------------------------------------------------------------------

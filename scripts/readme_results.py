@@ -3,8 +3,9 @@
     python scripts/readme_results.py            # rewrite every block from its results/<profile>/
     python scripts/readme_results.py --check    # exit 1 when a page and its bundle disagree
 
-A block is Table I (``<!-- results:<profile> -->``) or the recordings' UAV2 in UAV1
-(``<!-- recordings:<profile> -->``); :data:`BLOCKS` says which page holds which.
+A block is Table I (``<!-- results:<profile> -->``), the recordings' UAV2 in UAV1
+(``<!-- recordings:<profile> -->``) or the shipped networks' manifest (``<!-- zoo:<profile> -->``);
+:data:`BLOCKS` says which page holds which.
 """
 from __future__ import annotations
 
@@ -12,17 +13,24 @@ import argparse
 import sys
 from pathlib import Path
 
-from airpose_lib.eval.readme_block import readme_block, recordings_block, replace_block, results_block
+from airpose_lib.eval.readme_block import block_markers, readme_block, recordings_block, replace_block, results_block
+from airpose_lib.zoo import zoo_dir, zoo_table
 
 ROOT = Path(__file__).resolve().parents[1]
 #: (page, profile, kind): every generated block and the page it lives on.
 BLOCKS = (("README.md", "cpu", "results"),
           ("docs/findings.md", "cpu_paper_layout", "results"),
-          ("docs/recordings.md", "cpu", "recordings"))
+          ("docs/recordings.md", "cpu", "recordings"),
+          ("docs/model_zoo.md", "cpu", "zoo"))
 
 
 def block(profile: str, kind: str) -> str:
     """The block of ``kind`` made from ``results/<profile>/``."""
+    if kind == "zoo":
+        opening, closing = block_markers(profile, kind)
+        folder = zoo_dir(profile)
+        return (f"{opening}\nThe `{profile}` profile's shipped networks (`{folder.relative_to(ROOT)}/manifest.yaml`; "
+                f"`airpose zoo verify --profile {profile}` checks them):\n\n{zoo_table(folder)}\n{closing}")
     made = results_block(profile) if kind == "results" else recordings_block(profile)
     if made is None:
         raise SystemExit(f"results/{profile}/recordings/ has no marker table (markers.csv): make it with "

@@ -92,4 +92,17 @@ def test_the_writer_knows_every_block_the_tests_check():
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     assert set(module.BLOCKS) == {("README.md", "cpu", "results"), ("docs/findings.md", "cpu_paper_layout", "results"),
-                                  ("docs/recordings.md", "cpu", "recordings")}
+                                  ("docs/recordings.md", "cpu", "recordings"), ("docs/model_zoo.md", "cpu", "zoo")}
+
+
+def test_the_model_zoo_page_lists_every_shipped_file_with_its_hash():
+    from airpose_lib.zoo import read_manifest
+
+    folder = ROOT / "results" / "cpu" / "networks"
+    block = readme_block((ROOT / "docs" / "model_zoo.md").read_text(), "cpu", "zoo")
+    assert block is not None, "docs/model_zoo.md lost its <!-- zoo:cpu --> block"
+    entries = read_manifest(folder).values()
+    rows = [line for line in block.splitlines() if line.startswith("| `")]
+    assert len(rows) == len(entries)  # one row a file, nothing stale
+    for entry in entries:
+        assert any(f"`{entry['file']}`" in r and entry["sha256"][:16] in r for r in rows), entry["name"]

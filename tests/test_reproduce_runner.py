@@ -163,10 +163,11 @@ def test_configuration_errors(kit):
         run("stray")
     with pytest.raises(ReproductionError, match="matches no notebook"):
         run(only=["07"])
-    # A profile parameter the notebook does not declare fails before any kernel starts.
-    report = run("typo", only=["00_ok"])
-    assert report.results[0].status == "invalid" and "sise" in report.results[0].error
-    assert report.results[0].wall_s < 5
+    # A profile parameter the notebook does not declare fails before any kernel starts or any
+    # folder is made, naming the profile file and the closest parameter.
+    with pytest.raises(ReproductionError, match=r"typo\.yaml: `notebooks: 00_ok:` sets 'sise'.*did you mean 'size'"):
+        run("typo", only=["00_ok"])
+    assert not (root / "runs").exists()
 
 
 def test_catalog_validation(tmp_path):

@@ -34,12 +34,14 @@ import time
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
+from typing import Any
 
 import nbformat
 import yaml
 
 from airpose_lib import __version__  # the package root holds only the version
-from airpose_lib.errors import UserError
+from airpose_lib.config_fields import check_type, unknown_hint
+from airpose_lib.errors import ConfigError, UserError
 from airpose_lib.folder_lock import folder_lock
 from airpose_lib.paths import figures_root, runs_root
 from airpose_lib.profiles import PROFILES_DIR, ProfileError, loaded, read_profile
@@ -62,6 +64,7 @@ __all__ = [
     "check_profile_unchanged",
     "list_profiles",
     "check_notebook",
+    "check_parameters",
     "notebook_outputs",
     "run_profile",
 ]
@@ -247,6 +250,45 @@ def check_profile_unchanged(prof, before: str) -> None:
 
 
 # -- notebook checks ------------------------------------------------------------------------------
+def _default_type(source: str | None):
+    """The type a parameter's value must have: its default's (``256`` -> int; ``None``, an
+    expression or a name: any). ``bool`` is not an int here, an int may stand for a float."""
+    try:
+        default = ast.literal_eval(source or "None")
+    except (ValueError, SyntaxError):
+        return Any
+    if default is None:
+        return Any
+    return {tuple: list}.get(type(default), type(default))
+
+
+def check_parameters(prof: dict, catalog: list[CatalogEntry], notebooks_dir: Path = NOTEBOOKS_DIR) -> None:
+    """Every ``notebooks:`` entry of a profile (:func:`load_profile`) names a catalogued notebook
+    and parameters its parameters cell declares, each of the type of its default; else a
+    :class:`ReproductionError` naming the profile file, the entry and the closest name, before
+    anything runs.
+    """
+    import papermill
+
+    entries = {e.name: e for e in catalog}
+    for nb_name, params in prof["notebooks"].items():
+        where = f"{prof['path']}: `notebooks: {nb_name}:`"
+        if nb_name not in entries:
+            raise ReproductionError(f"{where} is not a catalogued notebook; {unknown_hint(nb_name, entries)}")
+        path = Path(notebooks_dir) / entries[nb_name].file
+        if not path.is_file() or not params:
+            continue  # a missing notebook is reported when it runs
+        declared = papermill.inspect_notebook(str(path))
+        for key, value in params.items():
+            if key not in declared:
+                raise ReproductionError(f"{where} sets {key!r}, which {path.name} does not declare; "
+                                        f"{unknown_hint(key, declared)}")
+            try:
+                check_type(key, value, _default_type(declared[key].get("default")))
+            except ConfigError as e:
+                raise ReproductionError(f"{where} {e}") from None
+
+
 def _parameters_cell(nb) -> int | None:
     for i, cell in enumerate(nb.cells):
         if "parameters" in (cell.get("metadata", {}).get("tags") or []):
@@ -460,10 +502,7 @@ def run_profile(
     out_dir = Path(out_dir) if out_dir is not None else runs_root()
     figures_dir = Path(figures_dir) if figures_dir is not None else figures_root() / prof["name"]
     catalog = load_catalog(Path(catalog_path))
-    unknown = sorted(set(prof["notebooks"]) - {e.name for e in catalog})
-    if unknown:
-        raise ReproductionError(f"profile {prof['name']!r} sets parameters for notebooks not in the "
-                                f"catalog: {unknown}")
+    check_parameters(prof, catalog, notebooks_dir)
     selected = _select(catalog, only)
     if data_source == "official":
         check_official_assets([notebooks_dir / e.file for e in selected])

@@ -10,7 +10,7 @@ import errno
 import typing
 from pathlib import Path
 
-from airpose_lib.atomic import full_disk_error  # standard library only
+from airpose_lib.atomic import no_room_error  # standard library only
 from airpose_lib.body.genders import GENDERS  # a leaf of the lazy body package: no torch
 from airpose_lib.errors import UserError  # standard library only
 from airpose_lib.profiles import profile_names  # yaml only
@@ -76,9 +76,9 @@ _OS_FIXES = {
 
 def user_error_message(exc: BaseException) -> str | None:
     """The one-line message for an error the user can fix, None for anything else (a bug)."""
-    no_space = _no_space(exc)
-    if no_space is not None:
-        return no_space
+    no_room = _no_room(exc)
+    if no_room is not None:
+        return no_room
     if isinstance(exc, UserError):  # every kit error the user can fix derives from it (CLIError too)
         return " ".join(str(exc).split()) or type(exc).__name__
     if isinstance(exc, OSError) and exc.filename is not None and exc.errno in _OS_FIXES:
@@ -88,16 +88,43 @@ def user_error_message(exc: BaseException) -> str | None:
     return None
 
 
-def _no_space(exc: BaseException) -> str | None:
-    """A full disk anywhere in the chain of ``exc`` (a writer's ENOSPC often surfaces as another
-    error raised while the writer cleans up): the one-line message, else None."""
-    full = full_disk_error(exc)
+def _no_room(exc: BaseException) -> str | None:
+    """A write that found no room anywhere in the chain of ``exc`` (a writer's ENOSPC often
+    surfaces as another error raised while the writer cleans up): the one-line message naming the
+    file, the room there is and what to free, else None."""
+    full = no_room_error(exc)
     if full is None:
         return None
     where = f" while writing {full.filename}" if full.filename else ""
-    return (f"no space left on the device{where}; free some space (or point $AIRPOSE_CACHE / "
-            "$AIRPOSE_RUNS / --out at a larger disk) and run the command again: what was finished is "
-            "kept and the rerun resumes")
+    rerun = "run the command again: what was finished is kept and the rerun resumes"
+    if full.errno == errno.EFBIG:
+        return (f"{full.filename or 'a file'} would be larger than this process may write ({_size_limit()}); "
+                f"raise the limit (`ulimit -f unlimited`) or write to another file system, and {rerun}")
+    return (f"no space left on the device{where}{_free_space(full.filename)}; free some space there (or point "
+            f"$AIRPOSE_CACHE / $AIRPOSE_RUNS / --out at a larger disk) and {rerun}")
+
+
+def _free_space(filename: str | None) -> str:
+    """`` (12.3 MB free in FOLDER)`` for the folder of ``filename``, or ``""`` when unknown."""
+    import shutil
+
+    folder = Path(filename).parent if filename else None
+    while folder is not None and not folder.exists() and folder != folder.parent:
+        folder = folder.parent
+    try:
+        return f" ({shutil.disk_usage(folder).free / 1e6:.1f} MB free in {folder})" if folder else ""
+    except OSError:
+        return ""
+
+
+def _size_limit() -> str:
+    """The process's file size limit as the message gives it (``ulimit -f`` is in 1024-byte blocks)."""
+    import resource
+
+    soft = resource.getrlimit(resource.RLIMIT_FSIZE)[0]
+    if soft == resource.RLIM_INFINITY:
+        return "no process limit: the file system's largest file"
+    return f"the process limit `ulimit -f` is {soft} bytes"
 
 
 def parse_range(text: str | None, what: str = "image numbers",

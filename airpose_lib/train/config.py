@@ -37,7 +37,7 @@ from airpose_lib.devices import is_device_name
 from airpose_lib.errors import ProfileSettingError
 from airpose_lib.profiles import profile_section, section_where
 
-__all__ = ["DATA_KEYS", "TrainConfig", "load_train_config", "option_types"]
+__all__ = ["DATA_KEYS", "TrainConfig", "check_options", "load_train_config", "option_types"]
 
 
 @dataclass
@@ -163,7 +163,7 @@ class TrainConfig:
         require(self.val_split != "test", "val_split", "not 'test' (choose on 'val'; the test split makes the "
                 "reported tables only)", self.val_split)
         require(self.precision in ("fp32", "bf16", "fp16"), "precision", "'fp32', 'bf16' or 'fp16'", self.precision)
-        _check_options(self)
+        check_options(self)
 
     def lr_at(self, step: int) -> float:
         """The learning rate of optimiser step ``step + 1`` (``step`` steps done)."""
@@ -213,7 +213,9 @@ def option_types(name: str, task: str = "supervised", source: str = "generated")
     ``model``: the keyword arguments of the task's network (:class:`~airpose_lib.model.variants.AirPoseNet`,
     or :class:`~airpose_lib.model.pretrain.PretrainNet` for ``pretrain``) and the ranges the
     network declares (``OPTION_RANGES``); ``data``: :data:`DATA_KEYS` and the keywords of the
-    dataset ``source`` names; ``loss``: the fields of :class:`~airpose_lib.losses.LossConfig`.
+    dataset ``source`` names (the kit's datasets: a training given a dataset factory of its own
+    takes other keys); ``loss``: the fields of :class:`~airpose_lib.losses.LossConfig` (of
+    :class:`~airpose_lib.losses.pretrain.PretrainLossConfig` for ``pretrain``).
     """
     import inspect
     import typing
@@ -223,11 +225,12 @@ def option_types(name: str, task: str = "supervised", source: str = "generated")
     from airpose_lib.data.official.synthetic import OfficialSyntheticDataset
     from airpose_lib.data.still.dataset import StillFrameDataset
     from airpose_lib.losses import LossConfig
+    from airpose_lib.losses.pretrain import PretrainLossConfig
     from airpose_lib.model.pretrain import PretrainNet
     from airpose_lib.model.variants import AirPoseNet
 
     if name == "loss":
-        return field_types(LossConfig), {}
+        return field_types(PretrainLossConfig if task == "pretrain" else LossConfig), {}
     if name == "model":
         owner, skip, extra = (PretrainNet if task == "pretrain" else AirPoseNet), ("self", "variant", "backbone"), {}
     else:
@@ -238,10 +241,11 @@ def option_types(name: str, task: str = "supervised", source: str = "generated")
     return {**extra, **types_}, dict(getattr(owner, "OPTION_RANGES", {}))
 
 
-def _check_options(config: TrainConfig) -> None:
-    """The keys and values of the dict fields ``model``, ``data`` and ``loss`` (:func:`option_types`):
-    an unknown key names the closest known one, a value its type or range."""
-    for name in ("model", "data", "loss"):
+def check_options(config: TrainConfig, names: tuple[str, ...] = ("model", "loss")) -> None:
+    """The keys and values of dict fields of ``config`` (:func:`option_types`): an unknown key
+    names the closest known one, a value its type or range. ``data`` is checked where the kit's
+    own datasets are chosen (``train.loop.check_data_root``)."""
+    for name in names:
         options = getattr(config, name)
         types_, ranges = option_types(name, config.task, options.get("source", "generated") if name == "data" else "")
         check_keys_in(options, types_, name)

@@ -14,7 +14,7 @@ import tempfile
 from collections.abc import Iterator
 from pathlib import Path
 
-__all__ = ["atomic_path", "atomic_torch_save", "full_disk_error"]
+__all__ = ["NO_ROOM", "atomic_path", "atomic_torch_save", "no_room_error"]
 
 
 @contextlib.contextmanager
@@ -22,7 +22,7 @@ def atomic_path(target: Path) -> Iterator[Path]:
     """Yield a temporary path beside ``target``; move it over ``target`` only if the block succeeds.
 
     A crash or Ctrl-C leaves the previous file (or none) in place, never a truncated one. A full
-    disk raises ``OSError(ENOSPC)`` naming ``target``.
+    disk or a file size limit raises ``OSError`` (:data:`NO_ROOM`) naming ``target``.
     """
     target = Path(target)
     target.parent.mkdir(parents=True, exist_ok=True)
@@ -36,7 +36,7 @@ def atomic_path(target: Path) -> Iterator[Path]:
         os.chmod(tmp_path, 0o666 & ~umask)  # mkstemp makes 0600; give the file normal permissions
         os.replace(tmp_path, target)
     except Exception as e:
-        full = full_disk_error(e)
+        full = no_room_error(e)
         if full is not None and full.filename is None:
             # The writers (zipfile, torch.save, numpy) do not say which file the full disk stopped.
             raise OSError(full.errno, os.strerror(full.errno), str(target)) from e
@@ -46,13 +46,18 @@ def atomic_path(target: Path) -> Iterator[Path]:
             tmp_path.unlink()
 
 
-def full_disk_error(exc: BaseException | None) -> OSError | None:
-    """The ENOSPC / EDQUOT error in the chain of ``exc``, if any: a writer's clean-up often raises
+#: The errors of a write that found no room: a full disk, a full quota, a file past the largest the
+#: process may write (``ulimit -f``) or the file system holds.
+NO_ROOM = (errno.ENOSPC, errno.EDQUOT, errno.EFBIG)
+
+
+def no_room_error(exc: BaseException | None) -> OSError | None:
+    """The :data:`NO_ROOM` error in the chain of ``exc``, if any: a writer's clean-up often raises
     again over it (zipfile's close, torch's end-of-archive ``RuntimeError: ... unexpected pos``)."""
     seen = set()
     while exc is not None and id(exc) not in seen:
         seen.add(id(exc))
-        if isinstance(exc, OSError) and exc.errno in (errno.ENOSPC, errno.EDQUOT):
+        if isinstance(exc, OSError) and exc.errno in NO_ROOM:
             return exc
         exc = exc.__cause__ or exc.__context__
     return None
@@ -63,7 +68,7 @@ def atomic_torch_save(obj: object, target: Path) -> Path:
 
     torch writes through a Python file object here, not a path: given a path, torch's C++ writer
     turns a full disk into ``RuntimeError: ... unexpected pos`` with no errno anywhere, which reads
-    as a bug; through a file object the ``OSError(ENOSPC)`` stays in the chain, and
+    as a bug; through a file object the ``OSError`` (:data:`NO_ROOM`) stays in the chain, and
     :func:`atomic_path` raises it naming ``target``, the previous file left in place.
 
     Returns:

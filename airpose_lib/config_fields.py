@@ -4,8 +4,10 @@ Every config of the kit (``TrainConfig``, ``FineTuneConfig`` ...) is a dataclass
 annotations say what each field holds. :func:`check_fields`, called first in its
 ``__post_init__``, makes that a rule: a value of another type raises :class:`ConfigError` naming
 the field, the type it wants and the value it got, before anything runs (``steps: thirty`` in a
-profile used to end in a ``TypeError`` deep in the training loop). Ranges stay next to the field
-they concern, in the dataclass's own ``__post_init__`` (:func:`require`).
+profile used to end in a ``TypeError`` deep in the training loop). A numeric range is declared with
+the field it concerns (:func:`ranged`: ``steps: int = ranged(1000, ge=0)``) and checked by
+:func:`check_fields` too; a rule that ties several fields together stays in the dataclass's own
+``__post_init__`` (:func:`require`).
 
 The same check reads a profile section (:func:`check_keys` for unknown keys, with the closest
 known one; :func:`config_from` under ``profiles.section_config``) and ``--set KEY=VALUE`` on the
@@ -24,7 +26,8 @@ from typing import Any
 
 from airpose_lib.errors import ConfigError, ProfileError
 
-__all__ = ["ConfigError", "check_type", "check_fields", "check_keys", "config_from", "field_types", "require", "finite"]
+__all__ = ["ConfigError", "Range", "check_type", "check_fields", "check_keys", "check_keys_in", "closest_key", "config_from",
+           "field_range", "field_types", "finite", "ranged", "require", "unknown_hint"]
 
 
 def _type_name(tp) -> str:
@@ -76,13 +79,76 @@ def check_type(name: str, value: Any, annotation: Any) -> Any:
     raise ConfigError(f"{name}: expected {wanted}, got {value!r} ({type(value).__name__})")
 
 
-def check_fields(config: Any) -> None:
-    """Check (and convert in place, as :func:`check_type`) every field of a dataclass instance."""
-    for name, annotation in field_types(type(config)).items():
-        value = getattr(config, name)
-        checked = check_type(name, value, annotation)
-        if checked is not value:
-            object.__setattr__(config, name, checked)
+@dataclasses.dataclass(frozen=True)
+class Range:
+    """The numbers a field accepts: each bound given is a limit (``ge``: >=, ``gt``: >, ``le``: <=,
+    ``lt``: <); a bounded number must also be finite. None (where the field's type allows it) is
+    not a number and passes."""
+
+    ge: float | None = None
+    gt: float | None = None
+    le: float | None = None
+    lt: float | None = None
+
+    def holds(self, value: Any) -> bool:
+        """True when ``value`` (a number, or None) is inside the range."""
+        if value is None:
+            return True
+        return (math.isfinite(value) and (self.ge is None or value >= self.ge) and (self.gt is None or value > self.gt)
+                and (self.le is None or value <= self.le) and (self.lt is None or value < self.lt))
+
+    @property
+    def rule(self) -> str:
+        """``">= 0"``, ``"in [0, 1)"`` ...: how a message states the range."""
+        low = (f"[{_num(self.ge)}" if self.ge is not None else f"({_num(self.gt)}" if self.gt is not None else None)
+        high = (f"{_num(self.le)}]" if self.le is not None else f"{_num(self.lt)})" if self.lt is not None else None)
+        if low is not None and high is not None:
+            return f"in {low}, {high}"
+        if low is not None:
+            return f"{'>=' if low[0] == '[' else '>'} {low[1:]}"
+        return f"{'<=' if high[-1] == ']' else '<'} {high[:-1]}"
+
+
+def _num(x: float) -> str:
+    return str(int(x)) if float(x).is_integer() else str(x)
+
+
+_RANGE = "airpose_range"  # the key of a field's metadata that holds its Range
+
+
+def ranged(default: Any = dataclasses.MISSING, *, ge: float | None = None, gt: float | None = None,
+           le: float | None = None, lt: float | None = None) -> Any:
+    """A dataclass field with a default and the :class:`Range` of numbers it accepts, checked by
+    :func:`check_fields` (``lr: float = ranged(5e-5, gt=0)``)."""
+    return dataclasses.field(default=default, metadata={_RANGE: Range(ge=ge, gt=gt, le=le, lt=lt)})
+
+
+def field_range(cls, name: str) -> Range | None:
+    """The :class:`Range` declared for field ``name`` of dataclass ``cls`` (None: any number)."""
+    return next((f.metadata.get(_RANGE) for f in dataclasses.fields(cls) if f.name == name), None)
+
+
+def check_fields(config: Any, prefix: str = "", convert: bool = True) -> None:
+    """Check every field of a dataclass instance: its type, then its declared :class:`Range`; a
+    field that holds a dataclass is checked the same way, its fields named ``<field>.<name>``.
+
+    Args:
+        config: the dataclass instance.
+        prefix: put before every field name in messages.
+        convert: store the converted values (:func:`check_type`: ints to floats, lists to
+            tuples). Off for configs whose values make a fingerprint or a cache key, where
+            ``1`` and ``1.0`` would name other data.
+    """
+    for f in dataclasses.fields(config):
+        name, value = prefix + f.name, getattr(config, f.name)
+        checked = check_type(name, value, field_types(type(config))[f.name])
+        if convert and checked is not value:
+            object.__setattr__(config, f.name, checked)
+        rng = f.metadata.get(_RANGE)
+        if rng is not None and not isinstance(checked, bool):
+            require(rng.holds(checked), name, rng.rule, checked)
+        if dataclasses.is_dataclass(checked) and not isinstance(checked, type):
+            check_fields(checked, f"{name}.", convert)
 
 
 def check_keys(keys: Iterable[str], cls, where: str, error: type[ConfigError] = ConfigError) -> None:
@@ -99,12 +165,41 @@ def check_keys(keys: Iterable[str], cls, where: str, error: type[ConfigError] = 
     """
     classes = cls if isinstance(cls, tuple) else (cls,)
     known = set().union(*(field_types(c) for c in classes))
+    check_keys_in(keys, known, where, " or ".join(c.__name__ for c in classes), error)
+
+
+def check_keys_in(keys: Iterable[str], known: Iterable[str], where: str, of: str | None = None,
+                  error: type[ConfigError] = ConfigError) -> None:
+    """Raise ``error`` ``"<where>: unknown key 'x' [of <of>]; did you mean 'y'?"`` for a key not in ``known``."""
+    known = set(known)
     for key in keys:
         if key not in known:
-            close = difflib.get_close_matches(key, sorted(known), n=1)
-            hint = f"did you mean {close[0]!r}?" if close else f"known: {', '.join(sorted(known))}"
-            names = " or ".join(c.__name__ for c in classes)
-            raise error(f"{where}: unknown key {key!r} of {names}; {hint}")
+            raise error(f"{where}: unknown key {key!r}{f' of {of}' if of else ''}; {unknown_hint(str(key), known)}")
+
+
+def closest_key(key: str, known: Iterable[str]) -> str | None:
+    """The known key a misspelt ``key`` most likely meant, or None.
+
+    A dotted key (``model.dropout``) is also found by its last part (``dropout``), and a key
+    that starts with a known one of two letters or more (``lrate``: ``lr``) counts as close.
+    """
+    known = sorted(set(known))
+    close = difflib.get_close_matches(key, known, n=1)
+    if close:
+        return close[0]
+    tails = {k.rpartition(".")[2]: k for k in known if "." in k}
+    close = difflib.get_close_matches(key, sorted(tails), n=1)
+    if close:
+        return tails[close[0]]
+    starts = [k for k in known if len(k) >= 2 and key.startswith(k)]
+    return max(starts, key=len) if starts else None
+
+
+def unknown_hint(key: str, known: Iterable[str]) -> str:
+    """``"did you mean 'lr'?"``, or the known keys when none is close."""
+    known = sorted(set(known))
+    close = closest_key(key, known)
+    return f"did you mean {close!r}?" if close else f"known: {', '.join(known)}"
 
 
 def finite(value: float | None) -> bool:
@@ -132,6 +227,8 @@ def config_from(cls, values: Mapping[str, Any], where: str, *, build=None, error
     """
     check_keys(values, cls, where, error)
     try:
-        return cls(**values) if build is None else build(values)
+        config = cls(**values) if build is None else build(values)
+        check_fields(config, convert=False)  # the configs without a __post_init__ of their own too
+        return config
     except (ConfigError, ProfileError) as e:  # ProfileError: a nested config's own check
         raise error(f"{where}: {e}") from None

@@ -175,9 +175,9 @@ def test_generation_config_round_trip_and_splits():
     assert cfg.num_shards == 11 and cfg.shard_samples(10) == 5 and cfg.num_test_shards == 1
     assert [cfg.shard_split(k) for k in range(11)] == ["train"] * 9 + ["val", "test"]
     assert cfg.replace(seed=1).fingerprint() != cfg.fingerprint()
-    with pytest.raises(ValueError, match="unknown scene setting"):
+    with pytest.raises(ValueError, match="scene: unknown key 'num_view'.*did you mean 'num_views'"):
         GenerationConfig.from_dict({"scene": {"num_view": 2}})
-    with pytest.raises(ValueError, match="unknown data setting"):
+    with pytest.raises(ValueError, match="data: unknown key 'samples'"):
         GenerationConfig.from_dict({"samples": 2})
 
 

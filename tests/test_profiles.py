@@ -58,7 +58,7 @@ def test_a_bad_value_or_key_in_a_profile_names_the_file_and_the_field(tmp_path):
     with pytest.raises(ConfigError, match=r"mine\.yaml, section `train:`: unknown key 'stepz'.*did you mean 'steps'"):
         load_train_config(path, "airpose")
     path.write_text("train:\n  lr: .inf\n")
-    with pytest.raises(ConfigError, match=r"mine\.yaml.*lr must be a finite number > 0"):
+    with pytest.raises(ConfigError, match=r"mine\.yaml.*lr must be > 0"):
         load_train_config(path, "airpose")
 
 

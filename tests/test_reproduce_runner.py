@@ -119,6 +119,29 @@ def test_success_failure_and_stop(kit):
     assert "00_ok" in report.table() and "FAILED" in report.table()
 
 
+def test_a_failed_rerun_keeps_the_last_good_results_and_says_where_its_partial_run_is(kit):
+    """A rerun writes into a fresh folder; when it fails, the folder, executed notebook, figure
+    and report entry of the last good run are the ones in place, and the partial run is named."""
+    root, run = kit
+    run_dir = root / "runs" / "tiny"
+    assert run(only=["00_ok"]).ok
+    good = {p: p.read_bytes() for p in (run_dir / "00_ok" / "seen.json", run_dir / "00_ok" / "a.png",
+                                        run_dir / "notebooks" / "00_ok.ipynb", root / "figures" / "a.png")}
+    good_report = json.loads((run_dir / "report.json").read_text())
+    _write_nb(root / "notebooks" / "00_ok.ipynb",
+              "(__import__('pathlib').Path(output_dir) / 'a.png').write_text('half')\nraise RuntimeError('cut')")
+    report = run(only=["00_ok"])
+    assert not report.ok and report.results[0].status == "failed"
+    assert f"partial run in {run_dir / '00_ok.partial'}" in report.results[0].error
+    assert {p: p.read_bytes() for p in good} == good  # every last good file, byte for byte
+    assert (run_dir / "00_ok.partial" / "a.png").read_text() == "half"
+    assert (run_dir / "notebooks" / "00_ok.ipynb.partial").is_file()
+    assert json.loads((run_dir / "report.json").read_text())["results"] == good_report["results"]
+    partial = json.loads((run_dir / "report.partial.json").read_text())
+    assert partial["results"][0]["status"] == "failed"
+    assert not list(run_dir.glob("*.last-good"))
+
+
 def test_an_own_profile_file_reaches_the_kernels_as_its_absolute_path(kit, monkeypatch):
     root, run = kit
     own = root / "mine" / "own.yaml"
@@ -163,10 +186,11 @@ def test_configuration_errors(kit):
         run("stray")
     with pytest.raises(ReproductionError, match="matches no notebook"):
         run(only=["07"])
-    # A profile parameter the notebook does not declare fails before any kernel starts.
-    report = run("typo", only=["00_ok"])
-    assert report.results[0].status == "invalid" and "sise" in report.results[0].error
-    assert report.results[0].wall_s < 5
+    # A profile parameter the notebook does not declare fails before any kernel starts or any
+    # folder is made, naming the profile file and the closest parameter.
+    with pytest.raises(ReproductionError, match=r"typo\.yaml: `notebooks: 00_ok:` sets 'sise'.*did you mean 'size'"):
+        run("typo", only=["00_ok"])
+    assert not (root / "runs").exists()
 
 
 def test_catalog_validation(tmp_path):

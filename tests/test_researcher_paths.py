@@ -69,7 +69,7 @@ def test_progress_can_be_switched_off(monkeypatch):
 @pytest.mark.parametrize("item, message", [
     ("lr=abc", "--set lr=abc: expected float, got 'abc'"),
     ("steps=1.5", "--set steps=1.5: expected int"),
-    ("loss.vertex_subsampel=100", "unknown key 'vertex_subsampel' of loss (LossConfig); did you mean 'vertex_subsample'?"),
+    ("loss.vertex_subsampel=100", "unknown key 'vertex_subsampel' of loss; did you mean 'vertex_subsample'?"),
     ("stepz=3", "unknown key 'stepz' of TrainConfig; did you mean 'steps'?"),
     ("lr.x=1", "'lr' is not a dict option"),
 ])
@@ -80,11 +80,12 @@ def test_train_set_errors_are_one_line(item, message, capsys):
 
 
 def test_set_values_are_typed():
+    from airpose_lib.config_fields import field_types
     from airpose_lib.losses import LossConfig
     from airpose_lib.train import TrainConfig
 
     got = parse_sets(["lr=1e-4", "steps=3", "grad_clip=null", "loss.w_V=10", "model.dropout=0"],
-                          TrainConfig, {"loss": LossConfig})
+                          TrainConfig, {"loss": field_types(LossConfig)})
     assert got == {"lr": 1e-4, "steps": 3, "grad_clip": None, "loss": {"w_V": 10.0}, "model": {"dropout": 0}}
     assert isinstance(got["loss"]["w_V"], float)
 

@@ -380,6 +380,45 @@ def test_curve_links_tell_the_sender_and_refuse_outsiders(tmp_path):
         ctx.destroy(linger=0)
 
 
+def test_a_refused_handshake_is_logged_once_per_address(tmp_path, caplog):
+    """Outsiders' SUB sockets (key pairs not of the swarm) from one address, five handshakes: the
+    drone's ZAP handler refuses each, and logs the first one only."""
+    import logging
+    import time
+
+    import zmq
+
+    from airpose_lib.runtime.keys import create_swarm_keys, load_swarm_keys
+
+    keys = create_swarm_keys(tmp_path / "keys", [1, 2])
+    (port,) = free_ports(1)
+    drone = Transport(endpoint(port), {2: endpoint(free_ports(1)[0])}, keys=load_swarm_keys(keys, 1, [2]))
+    ctx = zmq.Context()
+    outsiders = []
+    refusals = []
+    real = drone.auth.credentials_providers["*"].callback
+    drone.auth.credentials_providers["*"].callback = lambda d, k: refusals.append(k) or real(d, k)
+    try:
+        with caplog.at_level(logging.WARNING, logger="airpose.runtime"):
+            for _ in range(5):
+                sub = ctx.socket(zmq.SUB)
+                sub.setsockopt(zmq.LINGER, 0)
+                sub.curve_publickey, sub.curve_secretkey = zmq.curve_keypair()
+                sub.curve_serverkey = load_swarm_keys(keys, 1, [2]).public
+                sub.connect(endpoint(port))
+                outsiders.append(sub)
+            deadline = time.monotonic() + 10
+            while len(refusals) < 5 and time.monotonic() < deadline:
+                time.sleep(0.05)
+        assert len(refusals) == 5  # every handshake reached the handler and was refused
+        logged = [r.getMessage() for r in caplog.records if "refused a CURVE handshake" in r.getMessage()]
+        assert logged == ["refused a CURVE handshake from 127.0.0.1: its key is not one of the swarm's "
+                          "(further refusals from this address are not logged)"], logged
+    finally:
+        drone.close()
+        ctx.destroy(linger=0)
+
+
 def test_swarm_keys_errors_name_the_file(tmp_path):
     from airpose_lib.runtime.keys import SwarmKeyError, create_swarm_keys, load_swarm_keys
 

@@ -62,6 +62,7 @@ class VerifyReport:
     results: tuple[EntryResult, ...]
     checksums: bool = True
     hint: str = ""
+    warning: str = ""
 
     @property
     def name(self) -> str:
@@ -117,6 +118,8 @@ class VerifyReport:
             lines.append(f"  {tag:<18} {r.entry.path}" + (f"  - {r.detail}" if r.detail else ""))
         if self.hint:
             lines.append(f"  note: {self.hint}")
+        if self.warning:
+            lines.append(f"  warning: {self.warning}")
         if self.ok:
             return "\n".join(lines)
         damaged = [r for r in self.problems if r.status in (SIZE_MISMATCH, CHECKSUM_MISMATCH)]
@@ -200,6 +203,17 @@ def verify(name: str | AssetManifest, root: str | Path | None = None, checksums:
     return VerifyReport(manifest, location, results, checksums, hint)
 
 
+def _settings_warning(record: AssetManifest, own: AssetManifest, root: Path) -> str:
+    """What ``verify`` says of a dataset made with other settings than its tracked record: both
+    fingerprints and the command that rewrites the record from this dataset (after which the two
+    agree, so following it ends the warning)."""
+    out = "" if root == locate(record).path else f" --out {root}"
+    return (f"made with other settings than the record {record.path} (fingerprint {str(own.fingerprint)[:12]}... "
+            f"instead of {str(record.fingerprint)[:12]}...: the generator or the profile changed); if that is "
+            f"intended, update the record with `airpose data generate --profile {record.profile}{out} "
+            "--record-manifest`, else regenerate the dataset")
+
+
 def _verify_generated(record: AssetManifest, location: AssetLocation, checksums: bool) -> VerifyReport:
     """A kit-generated dataset: its shards against the sizes and SHA-256 that the generator on
     *this* machine wrote into the dataset's own ``manifest.yaml``, after checking that it was made
@@ -220,15 +234,13 @@ def _verify_generated(record: AssetManifest, location: AssetLocation, checksums:
         return VerifyReport(record, location, (EntryResult(entry, CHECKSUM_MISMATCH, (own_path,),
                                                            f"unreadable ({type(e).__name__})"),), checksums)
     results = [_check_entry(location.path, e, checksums) for e in own.layout]
+    hint = "shards checked against the SHA-256 this machine's generator recorded in manifest.yaml" if checksums else ""
+    if record.fingerprint is not None and own.fingerprint != record.fingerprint:
+        # Other settings are not damage: the shards are checked against the dataset's own manifest
+        # all the same, and the record is what must follow a changed generator or profile.
+        return VerifyReport(record, location, tuple(results), checksums, hint,
+                            warning=_settings_warning(record, own, location.path))
     ours = {e.path for e in own.layout}
     results += [EntryResult(e, MISSING, (), "listed in the tracked record, not in the dataset's manifest")
                 for e in record.layout if e.path not in ours]
-    hint = ""
-    if record.fingerprint is not None and own.fingerprint != record.fingerprint:
-        entry = LayoutEntry(path="manifest.yaml", required=True, description="the dataset's own manifest")
-        results.insert(0, EntryResult(entry, CHECKSUM_MISMATCH, (own_path,),
-                                      f"made with other settings than {record.path} (fingerprint "
-                                      f"{str(own.fingerprint)[:12]}... instead of {record.fingerprint[:12]}...)"))
-    elif checksums:
-        hint = "shards checked against the SHA-256 this machine's generator recorded in manifest.yaml"
     return VerifyReport(record, location, tuple(results), checksums, hint)

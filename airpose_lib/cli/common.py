@@ -6,18 +6,18 @@ Only the standard library and pathlib at import time: the parser is built from t
 """
 from __future__ import annotations
 
-import difflib
 import errno
 import typing
 from pathlib import Path
 
-from airpose_lib.atomic import full_disk_error  # standard library only
+from airpose_lib.atomic import no_room_error  # standard library only
 from airpose_lib.body.genders import GENDERS  # a leaf of the lazy body package: no torch
 from airpose_lib.errors import UserError  # standard library only
 from airpose_lib.profiles import profile_names  # yaml only
 
 __all__ = [
-    "CLIError", "EXIT_USER_ERROR", "GENDERS", "PROFILES", "SEQUENCE_FOLDER", "VARIANTS", "parse_profile", "parse_range",
+    "CLIError", "EXIT_USER_ERROR", "GENDERS", "PROFILES", "SEQUENCE_FOLDER", "VARIANTS", "add_profile_flag",
+    "parse_profile", "parse_range",
     "parse_sets", "require_file", "require_folder", "require_path", "user_error_message",
 ]
 
@@ -44,6 +44,18 @@ def parse_profile(value: str) -> str:
                                      "or give the path of a profile YAML file")
 
 
+def add_profile_flag(parser, what: str) -> None:
+    """``--profile`` as every command takes it: a kit profile's name or a profile YAML of one's own.
+
+    Args:
+        parser: the subcommand's ``argparse`` parser.
+        what: what the command reads from the profile (``"sizes from the `train:` section"``).
+    """
+    parser.add_argument("--profile", type=parse_profile, default="smoke",
+                        help=f"{what}: a kit profile ({', '.join(PROFILES)}) or the path of your own profile YAML "
+                             "(default: smoke)")
+
+
 class CLIError(UserError):
     """A user-facing error found by the command line itself (a flag's value): printed on one line
     without a traceback, exit status 2."""
@@ -64,9 +76,9 @@ _OS_FIXES = {
 
 def user_error_message(exc: BaseException) -> str | None:
     """The one-line message for an error the user can fix, None for anything else (a bug)."""
-    no_space = _no_space(exc)
-    if no_space is not None:
-        return no_space
+    no_room = _no_room(exc)
+    if no_room is not None:
+        return no_room
     if isinstance(exc, UserError):  # every kit error the user can fix derives from it (CLIError too)
         return " ".join(str(exc).split()) or type(exc).__name__
     if isinstance(exc, OSError) and exc.filename is not None and exc.errno in _OS_FIXES:
@@ -76,16 +88,43 @@ def user_error_message(exc: BaseException) -> str | None:
     return None
 
 
-def _no_space(exc: BaseException) -> str | None:
-    """A full disk anywhere in the chain of ``exc`` (a writer's ENOSPC often surfaces as another
-    error raised while the writer cleans up): the one-line message, else None."""
-    full = full_disk_error(exc)
+def _no_room(exc: BaseException) -> str | None:
+    """A write that found no room anywhere in the chain of ``exc`` (a writer's ENOSPC often
+    surfaces as another error raised while the writer cleans up): the one-line message naming the
+    file, the room there is and what to free, else None."""
+    full = no_room_error(exc)
     if full is None:
         return None
     where = f" while writing {full.filename}" if full.filename else ""
-    return (f"no space left on the device{where}; free some space (or point $AIRPOSE_CACHE / "
-            "$AIRPOSE_RUNS / --out at a larger disk) and run the command again: what was finished is "
-            "kept and the rerun resumes")
+    rerun = "run the command again: what was finished is kept and the rerun resumes"
+    if full.errno == errno.EFBIG:
+        return (f"{full.filename or 'a file'} would be larger than this process may write ({_size_limit()}); "
+                f"raise the limit (`ulimit -f unlimited`) or write to another file system, and {rerun}")
+    return (f"no space left on the device{where}{_free_space(full.filename)}; free some space there (or point "
+            f"$AIRPOSE_CACHE / $AIRPOSE_RUNS / --out at a larger disk) and {rerun}")
+
+
+def _free_space(filename: str | None) -> str:
+    """`` (12.3 MB free in FOLDER)`` for the folder of ``filename``, or ``""`` when unknown."""
+    import shutil
+
+    folder = Path(filename).parent if filename else None
+    while folder is not None and not folder.exists() and folder != folder.parent:
+        folder = folder.parent
+    try:
+        return f" ({shutil.disk_usage(folder).free / 1e6:.1f} MB free in {folder})" if folder else ""
+    except OSError:
+        return ""
+
+
+def _size_limit() -> str:
+    """The process's file size limit as the message gives it (``ulimit -f`` is in 1024-byte blocks)."""
+    import resource
+
+    soft = resource.getrlimit(resource.RLIMIT_FSIZE)[0]
+    if soft == resource.RLIM_INFINITY:
+        return "no process limit: the file system's largest file"
+    return f"the process limit `ulimit -f` is {soft} bytes"
 
 
 def parse_range(text: str | None, what: str = "image numbers",
@@ -146,49 +185,56 @@ def parse_sets(items, config_cls=None, nested: dict | None = None) -> dict:
     dict field, returned as ``{"loss": {"w_V": 10.0}}``).
 
     With ``config_cls`` (a dataclass) every key must be one of its fields and every value must fit
-    the field's type; ``nested`` maps a dict field to the dataclass its keys belong to (``{"loss":
-    LossConfig}``), whose fields and types check the dotted keys. A bad key or value is a one-line
-    :class:`CLIError` naming it, the expected type and, for a typo, the closest key.
+    the field's type; ``nested`` maps a dict field to ``{key: type}`` of what it holds (``{"loss":
+    field_types(LossConfig)}``), which checks the dotted keys. A bad key or value is a one-line
+    :class:`CLIError` naming it, the expected type and, for a typo, the closest key (a dotted one
+    too: ``dropout`` -> ``model.dropout``).
     """
     import yaml  # only when --set is given: the parser is built on every call, --help included
 
     from airpose_lib.config_fields import field_types as fields_of
+    from airpose_lib.config_fields import unknown_hint
 
-    def unknown(item: str, key: str, known: dict, where: str) -> CLIError:
-        close = difflib.get_close_matches(key, list(known), n=1)
-        hint = f"; did you mean {close[0]!r}?" if close else f"; known: {', '.join(sorted(known))}"
-        return CLIError(f"--set {item}: unknown key {key!r} of {where}{hint}")
-
+    nested = nested or {}
     top = fields_of(config_cls) if config_cls is not None else None
+    dotted = [f"{name}.{key}" for name, keys in nested.items() for key in keys]
     out: dict = {}
     for item in items or ():
         key, sep, value = item.partition("=")
         if not sep or not key:
             raise CLIError(f"--set expects KEY=VALUE, got {item!r}")
-        try:
-            parsed = yaml.safe_load(value) if value else None
-        except yaml.YAMLError:
-            parsed = value  # not YAML: keep the text, the type check below decides
-        if isinstance(parsed, str):  # YAML 1.1 reads "1e-4" as a string
-            try:
-                parsed = float(parsed)
-            except ValueError:
-                pass
+        parsed = _parse_value(yaml, value)
         field_name, dot, sub = key.partition(".")
         if top is not None:
             if field_name not in top:
-                raise unknown(item, field_name, top, config_cls.__name__)
+                raise CLIError(f"--set {item}: unknown key {field_name!r} of {config_cls.__name__}; "
+                               f"{unknown_hint(field_name, [*top, *dotted])}")
             if not dot:
                 parsed = _check_value(item, parsed, top[field_name])
             elif typing.get_origin(top[field_name]) not in (dict,) and top[field_name] is not dict:
                 raise CLIError(f"--set {item}: {field_name!r} is not a dict option; write {field_name}=VALUE")
-            elif nested and field_name in nested:
-                sub_fields = fields_of(nested[field_name])
-                if sub not in sub_fields:
-                    raise unknown(item, sub, sub_fields, f"{field_name} ({nested[field_name].__name__})")
-                parsed = _check_value(item, parsed, sub_fields[sub])
+            elif field_name in nested:
+                if sub not in nested[field_name]:
+                    raise CLIError(f"--set {item}: unknown key {sub!r} of {field_name}; "
+                                   f"{unknown_hint(sub, nested[field_name])}")
+                parsed = _check_value(item, parsed, nested[field_name][sub])
         if dot:
             out.setdefault(field_name, {})[sub] = parsed
         else:
             out[key] = parsed
     return out
+
+
+def _parse_value(yaml, text: str):
+    """A ``--set`` value as YAML reads it (text that is not YAML stays text; ``1e-4``, which YAML
+    1.1 reads as text, is a number)."""
+    try:
+        parsed = yaml.safe_load(text) if text else None
+    except yaml.YAMLError:
+        return text  # not YAML: keep the text, the type check decides
+    if isinstance(parsed, str):
+        try:
+            return float(parsed)
+        except ValueError:
+            pass
+    return parsed

@@ -10,7 +10,7 @@ from pathlib import Path
 from airpose_lib.folder_lock import folder_lock  # standard library only
 
 from .assets import add_asset_commands
-from .common import PROFILES
+from .common import add_profile_flag
 
 __all__ = ['add_data']
 
@@ -21,7 +21,10 @@ __all__ = ['add_data']
 
 def _cmd_data_sequence(args: argparse.Namespace) -> int:
     from airpose_lib.data.sequences import default_sequence_root, ensure_sequences
+    from airpose_lib.data.sequences.config import profile_sequences
+    from airpose_lib.data.sequences.presets import profile_field_sequences
 
+    (profile_field_sequences if args.field else profile_sequences)(args.profile)  # a bad setting: no folder made
     root = args.out if args.out is not None else default_sequence_root(args.profile, args.field)
     with folder_lock(root, "recordings folder"):  # one writer; a killed one's temp files go
         paths = ensure_sequences(args.profile, root, only=args.only, force=args.force, progress=not args.quiet,
@@ -39,8 +42,7 @@ def _add_data_sequence(dsub) -> None:
                     "and AlphaPose-like keypoints and store each recording in the official real-data "
                     "layout (machine_1/, machine_2/, ground_truth.npz). Complete identical recordings are "
                     "kept.")
-    seq.add_argument("--profile", choices=PROFILES, default="smoke",
-                     help="sizes from the profile's `sequences:` section (default: smoke)")
+    add_profile_flag(seq, "sizes from the profile's `sequences:` section")
     seq.add_argument("--out", type=Path, default=None,
                      help="parent folder of the recordings (default: <cache>/data/sequences_<profile>)")
     seq.add_argument("--only", nargs="+", metavar="NAME", help="only these recordings (e.g. person1)")
@@ -74,8 +76,7 @@ def _add_data_generate(dsub) -> None:
                     "the open body model): person crops of every view plus ground truth, in shards "
                     "with a manifest (SHA-256 per shard). Same profile, same bytes; an interrupted "
                     "run resumes, finished shards are verified and kept, damaged ones rebuilt.")
-    gen.add_argument("--profile", choices=PROFILES, default="smoke",
-                     help="sizes from the profile's `data: still:` section (default: smoke)")
+    add_profile_flag(gen, "sizes from the profile's `data: still:` section")
     gen.add_argument("--out", type=Path, default=None,
                      help="dataset folder (default: <cache>/data/still_<profile>)")
     gen.add_argument("--workers", type=int, default=None,

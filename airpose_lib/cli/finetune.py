@@ -6,9 +6,9 @@ import argparse
 from pathlib import Path
 
 from .common import (
-    PROFILES,
     SEQUENCE_FOLDER,
     CLIError,
+    add_profile_flag,
     parse_range,
     parse_sets,
     require_file,
@@ -24,11 +24,12 @@ __all__ = ["add_finetune", "add_predict"]
 
 # -- finetune -------------------------------------------------------------------------------------
 def _cmd_finetune(args: argparse.Namespace) -> int:
+    from airpose_lib.config_fields import field_types  # standard library only
     from airpose_lib.finetune.config import FineTuneConfig, finetune_config
     from airpose_lib.finetune.loss import FineTuneLossConfig
     from airpose_lib.finetune.train import finetune
 
-    overrides = parse_sets(args.set, FineTuneConfig, {"loss": FineTuneLossConfig})
+    overrides = parse_sets(args.set, FineTuneConfig, {"loss": field_types(FineTuneLossConfig)})
     for name, field in (("steps", "steps"), ("batch_size", "batch_size"), ("seed", "seed"), ("threads", "num_threads"),
                         ("prior", "prior"), ("input_size", "input_size"), ("device", "device")):
         if getattr(args, name) is not None:
@@ -79,8 +80,7 @@ def add_finetune(sub) -> None:
     ft.add_argument("--checkpoint", type=Path, required=True, help="a checkpoints/*.pt of `airpose train`")
     ft.add_argument("--sequence", type=Path, required=True, help="recording folder (official layout)")
     ft.add_argument("--out", type=Path, required=True, help="run folder")
-    ft.add_argument("--profile", choices=PROFILES, default="smoke",
-                    help="sizes from the profile's `finetune:` section; defaults where it has none (default: smoke)")
+    add_profile_flag(ft, "sizes from the profile's `finetune:` section; defaults where it has none")
     ft.add_argument("--frames", default=None, metavar="START:STOP",
                     help="train on the images numbered START..STOP-1 (paper: 0:7000); default: the profile's or all")
     ft.add_argument("--steps", type=int, default=None, help="override the profile's step count")

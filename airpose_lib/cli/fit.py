@@ -4,7 +4,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from .common import PROFILES, SEQUENCE_FOLDER, CLIError, parse_range, require_file, require_folder, require_path
+from .common import SEQUENCE_FOLDER, CLIError, add_profile_flag, parse_range, require_file, require_folder, require_path
 
 __all__ = ['add_fit']
 
@@ -32,6 +32,8 @@ def _cmd_fit(args: argparse.Namespace) -> int:
     if unknown or not detectors:
         raise CLIError(f"--detectors {args.detectors}: give one or more of {', '.join(DETECTOR_FILES)}, "
                        "comma-separated")
+    cfg = fit_config(args.profile, official_temporal=args.official_temporal, iterations=args.iterations,
+                     threads=args.threads, device=args.device)
     require_folder(args.sequence, "--sequence", SEQUENCE_FOLDER)
     require_file(args.init, "--init", "the .npz of `airpose predict`")
     require_path(args.prior_path, "--prior-path", "a prior checkpoint file or folder")
@@ -40,8 +42,6 @@ def _cmd_fit(args: argparse.Namespace) -> int:
     frames = None if rng is None else frames_in_range(args.sequence, *rng)  # image numbers, as in `predict`
     seq = load_sequence(args.sequence, frames=frames, detectors=detectors, ground_truth=False)
     init = initialisation_for(pred, args.init, seq.frames)
-    cfg = fit_config(args.profile, official_temporal=args.official_temporal, iterations=args.iterations,
-                     threads=args.threads, device=args.device)
     prior, prior_prov = load_prior(args.prior, args.prior_path, return_provenance=True)
     res = fit_sequence(seq, init, prior=prior, config=cfg, progress=not args.quiet)
     out = save_refinement(args.out or refined_path(args.init), seq.frames, res, sequence=args.sequence,
@@ -63,8 +63,7 @@ def add_fit(sub) -> None:
     fit.add_argument("--sequence", type=Path, required=True, help="sequence folder (official layout)")
     fit.add_argument("--init", type=Path, required=True, help="network outputs (.npz, see above)")
     fit.add_argument("--out", type=Path, default=None, help="(default: <init>_airpose_plus.npz)")
-    fit.add_argument("--profile", choices=PROFILES, default="smoke",
-                     help="iterations/weights from the profile's `fitting:` section (default: smoke)")
+    add_profile_flag(fit, "iterations/weights from the profile's `fitting:` section")
     fit.add_argument("--frames", default=None, metavar="START:STOP",
                      help="only the images numbered START..STOP-1 (either end may be left out), "
                           "as in `predict` and `finetune`")

@@ -5,7 +5,7 @@ import argparse
 import json
 from pathlib import Path
 
-from .common import PROFILES, require_path
+from .common import add_profile_flag, require_path
 
 __all__ = ['add_prior']
 
@@ -52,8 +52,7 @@ def add_prior(sub) -> None:
         description="Train the prior on poses of airpose_lib.data.still.poses and data.sequences.motions, report the "
                     "held-out reconstruction error and the share of N(0, I) samples inside the joint "
                     "limits, and save <cache>/prior/<profile>/vposer.pt (atomic, with provenance).")
-    tr.add_argument("--profile", choices=PROFILES, default="smoke",
-                    help="smoke: seconds; cpu: a few minutes; paper: longer (default: smoke)")
+    add_profile_flag(tr, "sizes from the profile's `prior:` section (smoke: seconds; cpu: a few minutes; paper: longer)")
     tr.add_argument("--steps", type=int, default=None, help="override the profile's step count")
     tr.add_argument("--seed", type=int, default=None, help="(default: the profile's)")
     tr.add_argument("--threads", type=int, default=None,

@@ -17,9 +17,11 @@ __all__ = ['add_reproduce']
 
 def _cmd_reproduce(args: argparse.Namespace) -> int:
     from airpose_lib.reproduce import load_catalog, load_profile, run_profile
+    from airpose_lib.reproduce.runner import check_parameters
 
     if args.list:
         prof = load_profile(args.profile)
+        check_parameters(prof, load_catalog())
         print(f"profile {prof['name']}: {prof['description']}")
         for entry in load_catalog():
             params = prof["notebooks"].get(entry.name, {})

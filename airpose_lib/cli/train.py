@@ -9,7 +9,7 @@ from pathlib import Path
 from airpose_lib.errors import DamagedFileError  # standard library only
 from airpose_lib.folder_lock import folder_lock
 
-from .common import VARIANTS, CLIError, parse_profile, parse_sets
+from .common import VARIANTS, CLIError, add_profile_flag, parse_sets
 
 __all__ = ['add_pretrain', 'add_train']
 
@@ -20,11 +20,12 @@ __all__ = ['add_pretrain', 'add_train']
 
 def _cmd_train(args: argparse.Namespace) -> int:
     from airpose_lib.engine.launch import launch_env
-    from airpose_lib.losses import LossConfig
     from airpose_lib.train import TrainConfig, default_out_dir, load_train_config
+    from airpose_lib.train.config import option_types
     from airpose_lib.train.loop import check_data_root
 
-    overrides = parse_sets(args.set, TrainConfig, {"loss": LossConfig})
+    # data: its keys depend on the dataset source, checked with the whole config
+    overrides = parse_sets(args.set, TrainConfig, {name: option_types(name)[0] for name in ("model", "loss")})
     if args.quiet:
         overrides["progress"] = False
     for name in ("steps", "batch_size", "world_size", "num_workers", "device"):
@@ -83,8 +84,7 @@ def add_pretrain(sub) -> None:
         description="Train (or find in the cache / the committed results/<profile>/) the backbone every "
                     "variant of the profile starts from: the `pretrain:` section, variant-neutral objective, "
                     "gated on the validation split.")
-    pr.add_argument("--profile", type=parse_profile, default="smoke",
-                    help="a kit profile (smoke, cpu, paper) or the path of your own profile YAML (default: smoke)")
+    add_profile_flag(pr, "the `pretrain:` section")
     pr.add_argument("--write-reference", action="store_true",
                     help="also copy the backbone into results/<profile>/ (the committed reference)")
     pr.add_argument("--quiet", action="store_true", help="no progress bars")
@@ -101,8 +101,7 @@ def add_train(sub) -> None:
                     "`torchrun --nproc_per_node=N -m airpose_lib.cli train ...` the processes come from "
                     "torchrun (one per GPU, any number of nodes). Mixed precision: --set precision=bf16.")
     tr.add_argument("--variant", choices=VARIANTS, required=True)
-    tr.add_argument("--profile", type=parse_profile, default="smoke",
-                    help="a kit profile (smoke, cpu, paper) or the path of your own profile YAML (default: smoke)")
+    add_profile_flag(tr, "sizes from the `train:` section")
     tr.add_argument("--seed", type=int, default=None, help="(default: the profile's)")
     tr.add_argument("--out", type=Path, default=None,
                     help="run folder (default: <runs>/train/<profile>/<variant>/seed<seed>; <runs> is "

@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 
-from airpose_lib.config_fields import ConfigError, check_fields, config_from, finite, require
+from airpose_lib.config_fields import ConfigError, check_fields, config_from, ranged, require
 from airpose_lib.devices import is_device_name
 from airpose_lib.profiles import section_config
 
@@ -76,40 +76,40 @@ class FineTuneConfig:
         device: ``auto`` (CUDA if available), ``cpu`` or ``cuda``.
     """
 
-    steps: int = 1000
-    batch_size: int = 30
-    lr: float = 5e-5
+    steps: int = ranged(1000, ge=0)
+    batch_size: int = ranged(30, ge=1)
+    lr: float = ranged(5e-5, gt=0)
     amsgrad: bool = True
-    weight_decay: float = 0.0
+    weight_decay: float = ranged(0.0, ge=0)
     seed: int = 123
     loss: dict = field(default_factory=dict)
     official_loss: bool = False
-    threshold_px: float = 100.0
+    threshold_px: float = ranged(100.0, gt=0)
     targets: str = "detections"
-    reference_width: float = 1920.0
-    holdout_fraction: float = 0.2
+    reference_width: float = ranged(1920.0, gt=0)
+    holdout_fraction: float = ranged(0.2, ge=0, lt=1)
     selection: str = "first_overfit"
-    min_confidence: float = 0.05
+    min_confidence: float = ranged(0.05, ge=0, le=1)
     unmatched: str = "drop"
     frames: list | None = None
-    input_size: int | None = None
+    input_size: int | None = ranged(None, ge=32)
     detector: str = "openpose"
-    box_min_confidence: float = 0.2
-    margin_px: float | None = None
-    feature_batch_size: int = 16
+    box_min_confidence: float = ranged(0.2, ge=0, le=1)
+    margin_px: float | None = ranged(None, ge=0)
+    feature_batch_size: int = ranged(16, ge=1)
     trainable_from: str | None = None
-    backbone_lr_scale: float = 0.1
-    adapt_bn: float = 0.0
-    checkpoint_every: int = 100
-    keep_checkpoints: int = 2
-    log_every: int = 10
+    backbone_lr_scale: float = ranged(0.1, gt=0)
+    adapt_bn: float = ranged(0.0, ge=0, le=1)
+    checkpoint_every: int = ranged(100, ge=1)
+    keep_checkpoints: int = ranged(2, ge=0)  # 0: only last.pt
+    log_every: int = ranged(10, ge=1)
     prior: str = "kit"
     prior_path: str | None = None
     prior_tag: str | None = None
     body_source: str = "open"
     missing_detections: str = "error"
-    eval_batch_size: int = 256
-    num_threads: int | None = None
+    eval_batch_size: int = ranged(256, ge=1)
+    num_threads: int | None = ranged(None, ge=1)
     device: str = "auto"
 
     # Fields whose change makes a resumed run differ from a straight one.
@@ -120,35 +120,13 @@ class FineTuneConfig:
                    "backbone_lr_scale", "adapt_bn")
 
     def __post_init__(self) -> None:
-        check_fields(self)  # types first (`--set lr=abc`, a profile's `steps: ten`), then ranges
-        require(self.steps >= 0, "steps", ">= 0", self.steps)
-        require(self.batch_size >= 1, "batch_size", ">= 1", self.batch_size)
-        for name in ("checkpoint_every", "log_every", "feature_batch_size", "eval_batch_size"):
-            require(getattr(self, name) >= 1, name, ">= 1", getattr(self, name))
-        require(self.keep_checkpoints >= 0, "keep_checkpoints", ">= 0 (0: only last.pt)", self.keep_checkpoints)
-        require(finite(self.lr) and self.lr > 0, "lr", "a finite number > 0", self.lr)
-        require(finite(self.backbone_lr_scale) and self.backbone_lr_scale > 0, "backbone_lr_scale",
-                "a finite number > 0", self.backbone_lr_scale)
-        require(finite(self.adapt_bn) and 0 <= self.adapt_bn <= 1, "adapt_bn", "in [0, 1]", self.adapt_bn)
-        require(finite(self.weight_decay) and self.weight_decay >= 0, "weight_decay", "a finite number >= 0",
-                self.weight_decay)
-        require(finite(self.threshold_px) and self.threshold_px > 0, "threshold_px", "a finite number > 0",
-                self.threshold_px)
-        require(0 <= self.min_confidence <= 1, "min_confidence", "in [0, 1]", self.min_confidence)
-        require(0 <= self.box_min_confidence <= 1, "box_min_confidence", "in [0, 1]", self.box_min_confidence)
-        require(self.margin_px is None or finite(self.margin_px) and self.margin_px >= 0, "margin_px",
-                "null or a finite number >= 0", self.margin_px)
-        require(self.input_size is None or self.input_size >= 32, "input_size", "null or >= 32", self.input_size)
-        require(self.num_threads is None or self.num_threads >= 1, "num_threads", "null or >= 1", self.num_threads)
+        check_fields(self)  # types and declared ranges first (`--set lr=abc`, a profile's `steps: ten`)
         require(self.body_source in ("open", "smplx"), "body_source", "'open' or 'smplx'", self.body_source)
         require(is_device_name(self.device), "device",
                 "'auto', 'cpu', 'cuda' or 'cuda:N'", self.device)
-        require(0 <= self.holdout_fraction < 1, "holdout_fraction", "in [0, 1)", self.holdout_fraction)
         require(self.targets in TARGET_SOURCES, "targets", f"one of {', '.join(TARGET_SOURCES)}", self.targets)
         require(self.selection in SELECTION_RULES, "selection", f"one of {', '.join(SELECTION_RULES)}",
                 self.selection)
-        require(finite(self.reference_width) and self.reference_width > 0, "reference_width", "a finite number > 0",
-                self.reference_width)
         if self.frames is not None:
             frames = list(self.frames)
             if len(frames) != 2 or not all(isinstance(x, (int, np.integer)) for x in frames) or frames[0] >= frames[1]:

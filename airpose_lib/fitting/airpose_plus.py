@@ -62,6 +62,7 @@ from torch import Tensor
 
 from airpose_lib.body import BODY_25_FROM_SMPLX, COCO18_FROM_SMPLX, load_body_model
 from airpose_lib.body.forward import BodyForward
+from airpose_lib.config_fields import check_fields, ranged
 from airpose_lib.devices import resolve_device
 from airpose_lib.errors import ConfigError
 from airpose_lib.geometry import (
@@ -107,24 +108,27 @@ lacks have confidence 0)."""
 class AirPosePlusConfig:
     """Weights and schedule of AirPose+ (defaults: the paper's weights, the code's schedule)."""
 
-    w_j2d: float = 1.0
-    sigma: float = 30.0  # Geman-McClure scale, pixels
-    w_vposer: float = 0.05
-    w_temp: float = 1.0
-    temp_pose: float = 1.0  # relative weights inside L_temp; official code: 10, 100, 100
-    temp_root: float = 1.0
-    temp_transl: float = 1.0
-    w_beta: float = 2000.0
-    min_frame_confidence: float = 4.0
-    iterations: int = 300
-    latent_start: int = 100  # iteration at which the latents join (before: roots, tau, beta)
-    lr: float = 0.01
+    w_j2d: float = ranged(1.0, ge=0)
+    sigma: float = ranged(30.0, gt=0)  # Geman-McClure scale, pixels
+    w_vposer: float = ranged(0.05, ge=0)
+    w_temp: float = ranged(1.0, ge=0)
+    temp_pose: float = ranged(1.0, ge=0)  # relative weights inside L_temp; official code: 10, 100, 100
+    temp_root: float = ranged(1.0, ge=0)
+    temp_transl: float = ranged(1.0, ge=0)
+    w_beta: float = ranged(2000.0, ge=0)
+    min_frame_confidence: float = ranged(4.0, ge=0)
+    iterations: int = ranged(300, ge=0)
+    latent_start: int = ranged(100, ge=0)  # iteration at which the latents join (before: roots, tau, beta)
+    lr: float = ranged(0.01, gt=0)
     optimize_beta: bool = True
-    chunk_size: int = 2000
-    min_depth: float = 0.05  # metres; projected depths are clamped to this (keeps a wild start finite)
-    num_threads: int | None = None  # torch intra-op threads during the fit (None: unchanged)
+    chunk_size: int = ranged(2000, ge=1)
+    min_depth: float = ranged(0.05, gt=0)  # metres; projected depths are clamped to this (keeps a wild start finite)
+    num_threads: int | None = ranged(None, ge=1)  # torch intra-op threads during the fit (None: unchanged)
     device: str = "cpu"  # auto, cpu, cuda, cuda:N (airpose_lib.devices); results come back on the CPU
-    history_every: int = 10
+    history_every: int = ranged(10, ge=1)
+
+    def __post_init__(self) -> None:
+        check_fields(self, convert=False)  # types and declared ranges, before a fit starts
 
     @classmethod
     def official_code(cls, **overrides) -> AirPosePlusConfig:
@@ -450,9 +454,7 @@ def airpose_plus(
         ValueError: empty sequence, mismatched frame/view counts, NaN initialisation, or no frame
             above ``min_frame_confidence``.
     """
-    cfg = replace(config or AirPosePlusConfig(), **overrides)
-    if cfg.latent_start < 0 or cfg.iterations < 0 or cfg.chunk_size < 1:
-        raise ConfigError("iterations, latent_start must be >= 0 and chunk_size >= 1")
+    cfg = replace(config or AirPosePlusConfig(), **overrides)  # replace checks the fields again (__post_init__)
     dev = resolve_device(cfg.device)
     xy, w, idx, _ = _prepare_keypoints(keypoints, joint_maps)
     F, V = xy.shape[:2]

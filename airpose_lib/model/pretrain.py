@@ -28,6 +28,8 @@ import math
 
 from torch import Tensor, nn
 
+from airpose_lib.config_fields import Range
+
 from .backbone import ResNet, build_backbone
 
 __all__ = ["PretrainNet", "PRETRAIN_HEADS"]
@@ -46,6 +48,9 @@ class PretrainNet(nn.Module):
         n_heading_bins: classes of the heading head.
         channels_last: NHWC backbone (faster on CPU).
     """
+
+    #: The numbers the keyword arguments accept (a training config checks them before it runs).
+    OPTION_RANGES = {"n_heading_bins": Range(ge=1)}
 
     def __init__(self, backbone: str | ResNet = "resnet18", n_heading_bins: int = 12,
                  channels_last: bool = False) -> None:

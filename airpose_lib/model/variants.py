@@ -50,6 +50,8 @@ import numpy as np
 import torch
 from torch import Tensor, nn
 
+from airpose_lib.config_fields import Range
+
 from ..geometry import axis_angle_to_rot6d, weak_perspective_to_translation
 from .backbone import ResNet, build_backbone
 from .message import BETA_DIM, MESSAGE_DIM, NUM_BODY_JOINTS, THETA_DIM
@@ -230,6 +232,9 @@ class AirPoseNet(nn.Module):
         activation: the regressor trunk's nonlinearity, ``"none"`` (the paper's) or ``"relu"``
             (:class:`~airpose_lib.model.regressor.IterativeRegressor`).
     """
+
+    #: The numbers the keyword arguments accept (a training config checks them before it runs).
+    OPTION_RANGES = {"num_iterations": Range(ge=1), "dropout": Range(ge=0, le=1)}
 
     def __init__(self, variant: str = "airpose", backbone: str | ResNet = "resnet50",
                  mean_params: str | Path | MeanParams | None = None, num_iterations: int = 3,

@@ -96,6 +96,7 @@ def train_and_save_prior(profile: str, out: str | Path | None = None, *, steps: 
         plus ``samples_within_joint_limits`` (share of N(0, I) samples within the joint limits +5 deg).
     """
     path = Path(out) if out is not None else kit_prior_path(profile_name(profile))
+    prior_profile(profile)  # a bad `prior:` setting fails before the output folder is made
     with file_lock_for(path, "prior checkpoint"):  # one writer per output file
         return _train_and_save_prior(profile, path, steps, seed, device, progress)
 

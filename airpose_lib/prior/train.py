@@ -27,6 +27,7 @@ import numpy as np
 import torch
 from torch import Tensor
 
+from airpose_lib.config_fields import ranged
 from airpose_lib.devices import resolve_device
 from airpose_lib.engine import Schedule, TrainingTask, run_engine
 from airpose_lib.geometry import axis_angle_to_matrix, geodesic_angle
@@ -46,19 +47,19 @@ JointsFn = Callable[[Tensor], Tensor]
 class PriorTrainConfig:
     """Sizes and weights of prior training (defaults: the ``cpu`` profile's, a few minutes)."""
 
-    steps: int = 6000
-    batch_size: int = 256
-    lr: float = 1e-3
-    lr_final_fraction: float = 0.05  # cosine decay to lr * this at the last step
-    weight_decay: float = 1e-5  # the release's Adam setting
-    w_rot: float = 2.0  # the release's loss_matrot_wt (geodesic, radians)
-    w_joints: float = 2.0  # the release's loss_jtr_wt (L1, metres); used only with joints_fn
-    w_kl: float = 5e-3  # the release's loss_kl_wt
-    kl_anneal_steps: int = 1000
-    num_neurons: int = NUM_NEURONS
-    latent_dim: int = LATENT_DIM
+    steps: int = ranged(6000, ge=1)
+    batch_size: int = ranged(256, ge=1)
+    lr: float = ranged(1e-3, gt=0)
+    lr_final_fraction: float = ranged(0.05, ge=0, le=1)  # cosine decay to lr * this at the last step
+    weight_decay: float = ranged(1e-5, ge=0)  # the release's Adam setting
+    w_rot: float = ranged(2.0, ge=0)  # the release's loss_matrot_wt (geodesic, radians)
+    w_joints: float = ranged(2.0, ge=0)  # the release's loss_jtr_wt (L1, metres); used only with joints_fn
+    w_kl: float = ranged(5e-3, ge=0)  # the release's loss_kl_wt
+    kl_anneal_steps: int = ranged(1000, ge=0)
+    num_neurons: int = ranged(NUM_NEURONS, ge=1)
+    latent_dim: int = ranged(LATENT_DIM, ge=1)
     seed: int = 0
-    log_every: int = 250
+    log_every: int = ranged(250, ge=1)
     device: str = "cpu"  # auto, cpu, cuda, cuda:N (airpose_lib.devices); the model comes back on the CPU
 
     def to_dict(self) -> dict:
@@ -81,10 +82,10 @@ class CorpusConfig:
     absent from :meth:`to_dict` (the record of earlier priors stays as it was).
     """
 
-    n_poses: int = 100_000
-    n_motion_poses: int = 20_000
-    motion_fps: float = 5.0
-    n_val: int = 2000
+    n_poses: int = ranged(100_000, ge=1)
+    n_motion_poses: int = ranged(20_000, ge=0)
+    motion_fps: float = ranged(5.0, gt=0)
+    n_val: int = ranged(2000, ge=1)
     seed: int = 0
     held_out_motions: tuple[str, ...] = ()
 

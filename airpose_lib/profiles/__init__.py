@@ -43,7 +43,7 @@ from airpose_lib import config_fields
 from airpose_lib.config_fields import config_from
 from airpose_lib.errors import ProfileError, ProfileSettingError
 
-__all__ = ["PROFILES_DIR", "INHERITS", "ProfileError", "ProfileSettingError", "Profile", "loaded", "profile_names",
+__all__ = ["PROFILES_DIR", "INHERITS", "SECTIONS", "DATA_SECTIONS", "ProfileError", "ProfileSettingError", "Profile", "loaded", "profile_names",
            "profile_path", "read_profile", "profile_section", "section_where", "section_config"]
 
 #: Folder of the kit's ``<name>.yaml`` profile files.
@@ -79,6 +79,12 @@ def profile_path(profile: str | Path, folder: str | Path = PROFILES_DIR) -> Path
 
 #: The key of a profile that names the profile it starts from (see the module docstring).
 INHERITS = "inherits"
+
+#: The top-level keys a profile may have, and the sections inside ``data:``: a misspelt one
+#: (``trian:``) would otherwise be ignored while the command runs on the inherited or default one.
+SECTIONS = ("description", "cell_timeout_s", INHERITS, "sequences", "data", "notebooks", "pretrain", "train",
+            "prior", "finetune", "fitting")
+DATA_SECTIONS = ("still",)
 
 
 def read_profile(profile: str | Path, folder: str | Path = PROFILES_DIR) -> dict:
@@ -188,7 +194,18 @@ def _read_file(path: Path) -> dict:
     if not isinstance(raw, dict):
         raise ProfileError(f"{path} must be a YAML mapping of sections (train:, data: ...), "
                            f"not a {type(raw).__name__}; fix the file")
+    _check_sections(raw, SECTIONS, path, "")
+    if isinstance(raw.get("data"), dict):
+        _check_sections(raw["data"], DATA_SECTIONS, path, "data: ")
     return raw
+
+
+def _check_sections(raw: Mapping, known: tuple[str, ...], path: Path, parent: str) -> None:
+    """Raise :class:`ProfileError` for a key of ``raw`` that is not one of ``known`` sections."""
+    for key in raw:
+        if key not in known:
+            raise ProfileError(f"{path}: unknown section `{parent}{key}:`; "
+                               f"{config_fields.unknown_hint(str(key), known)} (fix the file)")
 
 
 def profile_section(profile: str | Path, section: str, *, required: str | None = None,

@@ -25,6 +25,7 @@ signals): it must be able to run any notebook.
 from __future__ import annotations
 
 import ast
+import dataclasses
 import datetime as _dt
 import json
 import re
@@ -34,12 +35,14 @@ import time
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
+from typing import Any
 
 import nbformat
 import yaml
 
 from airpose_lib import __version__  # the package root holds only the version
-from airpose_lib.errors import UserError
+from airpose_lib.config_fields import check_type, unknown_hint
+from airpose_lib.errors import ConfigError, UserError
 from airpose_lib.folder_lock import folder_lock
 from airpose_lib.paths import figures_root, runs_root
 from airpose_lib.profiles import PROFILES_DIR, ProfileError, loaded, read_profile
@@ -62,6 +65,7 @@ __all__ = [
     "check_profile_unchanged",
     "list_profiles",
     "check_notebook",
+    "check_parameters",
     "notebook_outputs",
     "run_profile",
 ]
@@ -247,6 +251,45 @@ def check_profile_unchanged(prof, before: str) -> None:
 
 
 # -- notebook checks ------------------------------------------------------------------------------
+def _default_type(source: str | None):
+    """The type a parameter's value must have: its default's (``256`` -> int; ``None``, an
+    expression or a name: any). ``bool`` is not an int here, an int may stand for a float."""
+    try:
+        default = ast.literal_eval(source or "None")
+    except (ValueError, SyntaxError):
+        return Any
+    if default is None:
+        return Any
+    return {tuple: list}.get(type(default), type(default))
+
+
+def check_parameters(prof: dict, catalog: list[CatalogEntry], notebooks_dir: Path = NOTEBOOKS_DIR) -> None:
+    """Every ``notebooks:`` entry of a profile (:func:`load_profile`) names a catalogued notebook
+    and parameters its parameters cell declares, each of the type of its default; else a
+    :class:`ReproductionError` naming the profile file, the entry and the closest name, before
+    anything runs.
+    """
+    import papermill
+
+    entries = {e.name: e for e in catalog}
+    for nb_name, params in prof["notebooks"].items():
+        where = f"{prof['path']}: `notebooks: {nb_name}:`"
+        if nb_name not in entries:
+            raise ReproductionError(f"{where} is not a catalogued notebook; {unknown_hint(nb_name, entries)}")
+        path = Path(notebooks_dir) / entries[nb_name].file
+        if not path.is_file() or not params:
+            continue  # a missing notebook is reported when it runs
+        declared = papermill.inspect_notebook(str(path))
+        for key, value in params.items():
+            if key not in declared:
+                raise ReproductionError(f"{where} sets {key!r}, which {path.name} does not declare; "
+                                        f"{unknown_hint(key, declared)}")
+            try:
+                check_type(key, value, _default_type(declared[key].get("default")))
+            except ConfigError as e:
+                raise ReproductionError(f"{where} {e}") from None
+
+
 def _parameters_cell(nb) -> int | None:
     for i, cell in enumerate(nb.cells):
         if "parameters" in (cell.get("metadata", {}).get("tags") or []):
@@ -339,9 +382,9 @@ def _run_one(entry: CatalogEntry, nb_path: Path, params: dict, run_dir: Path, fi
     except ReproductionError as e:
         result.status, result.error = "invalid", str(e)
         return result
-    # A fresh output folder: a figure left from an earlier run must not hide a missing one.
-    if output_dir.exists():
-        shutil.rmtree(output_dir)
+    # A fresh output folder: a figure left from an earlier run must not hide a missing one. The
+    # last good folder and executed notebook wait beside it and come back unless the run succeeds.
+    kept = _set_aside([output_dir, executed])
     output_dir.mkdir(parents=True)
     executed.parent.mkdir(parents=True, exist_ok=True)
     result.executed_notebook = str(executed)
@@ -352,9 +395,13 @@ def _run_one(entry: CatalogEntry, nb_path: Path, params: dict, run_dir: Path, fi
                 str(nb_path), str(executed), parameters=params, kernel_name=kernel_name,
                 cwd=str(nb_path.parent), progress_bar=False, log_output=log_output,
                 execution_timeout=cell_timeout_s, kernel_manager_class=ipc_kernel_manager())
-    except Exception as e:  # noqa: BLE001 - any failure is reported with the notebook's name
+    except BaseException as e:
         result.wall_s = time.perf_counter() - t0
-        result.status, result.error = "failed", _execution_error(e, executed)
+        note = _restore(kept)
+        result.status, result.error = "failed", _execution_error(e, _partial(executed) if executed in kept
+                                                                 else executed) + note
+        if not isinstance(e, Exception):
+            raise
         return result
     result.wall_s = time.perf_counter() - t0
 
@@ -363,9 +410,13 @@ def _run_one(entry: CatalogEntry, nb_path: Path, params: dict, run_dir: Path, fi
         (result.figures if f.is_file() and f.stat().st_size > 0 else result.missing_figures).append(fig)
     if result.missing_figures:
         result.status = "missing_figures"
-        result.error = (f"ran, but did not write {result.missing_figures} into {output_dir} "
-                        f"(the catalog expects {list(entry.figures)})")
+        note = _restore(kept)
+        result.error = (f"ran, but did not write {result.missing_figures} into "
+                        f"{_partial(output_dir) if output_dir in kept else output_dir} "
+                        f"(the catalog expects {list(entry.figures)})" + note)
         return result
+    for path in kept:
+        _remove(_last_good(path))
     figures_dir.mkdir(parents=True, exist_ok=True)
     copied = {}
     for fig in entry.figures:
@@ -374,6 +425,75 @@ def _run_one(entry: CatalogEntry, nb_path: Path, params: dict, run_dir: Path, fi
     _record_provenance(figures_dir, copied, entry, report)
     result.status = "ok"
     return result
+
+
+def _last_good(path: Path) -> Path:
+    """Where the last good ``path`` waits while a rerun writes ``path``: ``<name>.last-good``."""
+    return path.with_name(path.name + ".last-good")
+
+
+def _partial(path: Path) -> Path:
+    """Where a rerun that did not succeed leaves what it wrote to ``path``: ``<name>.partial``."""
+    return path.with_name(path.name + ".partial")
+
+
+def _remove(path: Path) -> None:
+    if path.is_dir():
+        shutil.rmtree(path)
+    elif path.exists():
+        path.unlink()
+
+
+def _set_aside(paths: list[Path]) -> list[Path]:
+    """Move each existing ``path`` (a notebook's output folder, its executed notebook) to its
+    :func:`_last_good` name; returns the paths moved. A last good copy left by a run that was
+    killed outright is the good one: what that run wrote becomes its partial run."""
+    moved = []
+    for path in paths:
+        aside = _last_good(path)
+        if aside.exists():
+            _remove(_partial(path))
+            if path.exists():
+                path.rename(_partial(path))
+            moved.append(path)
+        elif path.exists():
+            path.rename(aside)
+            moved.append(path)
+    return moved
+
+
+def _restore(kept: list[Path]) -> str:
+    """After a run that did not succeed: what it wrote goes to the ``.partial`` names, the last
+    good copies come back. Returns what the notebook's message adds (where each is)."""
+    for path in kept:
+        _remove(_partial(path))
+        if path.exists():
+            path.rename(_partial(path))
+        _last_good(path).rename(path)
+    if not kept:
+        return ""
+    return (f"; partial run in {', '.join(str(_partial(p)) for p in kept)}; the last good results stay in "
+            f"{', '.join(str(p) for p in kept)}")
+
+
+def _write_reports(report: RunReport, run_dir: Path) -> None:
+    """``report.json`` keeps the last good result of every notebook: a notebook that did not
+    succeed in this run keeps its earlier ``ok`` entry (its results were kept too). What this run
+    did, failures included, is ``report.partial.json`` until a run succeeds."""
+    path, partial = run_dir / "report.json", run_dir / "report.partial.json"
+    if report.ok:
+        report.write(path)
+        partial.unlink(missing_ok=True)
+        return
+    report.write(partial)
+    try:
+        earlier = {r["name"]: r for r in json.loads(path.read_text()).get("results", [])}
+    except (OSError, ValueError):
+        earlier = {}
+    kept = dataclasses.replace(report, results=[
+        NotebookResult(**earlier[r.name]) if r.status != "ok" and earlier.get(r.name, {}).get("status") == "ok" else r
+        for r in report.results])
+    kept.write(path)
 
 
 def _data_source_parameter(nb_path: Path, data_source: str | None) -> dict:
@@ -460,10 +580,7 @@ def run_profile(
     out_dir = Path(out_dir) if out_dir is not None else runs_root()
     figures_dir = Path(figures_dir) if figures_dir is not None else figures_root() / prof["name"]
     catalog = load_catalog(Path(catalog_path))
-    unknown = sorted(set(prof["notebooks"]) - {e.name for e in catalog})
-    if unknown:
-        raise ReproductionError(f"profile {prof['name']!r} sets parameters for notebooks not in the "
-                                f"catalog: {unknown}")
+    check_parameters(prof, catalog, notebooks_dir)
     selected = _select(catalog, only)
     if data_source == "official":
         check_official_assets([notebooks_dir / e.file for e in selected])
@@ -496,13 +613,13 @@ def run_profile(
                 result.status, result.error = "interrupted", f"stopped by {signal.Signals(caught[0]).name}"
             report.results[i] = result
             report.wall_s = time.perf_counter() - t_start
-            report.write(run_dir / "report.json")  # after every notebook: a killed run leaves a trace
+            _write_reports(report, run_dir)  # after every notebook: a killed run leaves a trace
             if caught:
                 raise Interrupted(signal.Signals(caught[0]).name)
             if result.status != "ok" and not keep_going:
                 stop = True
         report.wall_s = time.perf_counter() - t_start
-        report.write(run_dir / "report.json")
+        _write_reports(report, run_dir)
     if verbose:
         print(report.table(), flush=True)
     return report

@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import heapq
 import itertools
+import logging
 import socket
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
@@ -35,6 +36,8 @@ import zmq
 from airpose_lib.errors import ConfigError
 
 from .keys import SwarmKeyError, SwarmKeys
+
+log = logging.getLogger("airpose.runtime")
 
 __all__ = ["LinkConfig", "LinkEmulator", "Transport", "free_ports", "endpoint", "parse_peers"]
 
@@ -150,13 +153,43 @@ class LinkEmulator:
 
 
 class _SwarmMembers:
-    """ZAP credentials check of the PUB socket: only the swarm's public keys may subscribe."""
+    """ZAP credentials check of the PUB socket: only the swarm's public keys may subscribe.
+
+    A refused handshake is logged once per peer address (an outsider's socket retries every
+    reconnect interval, which would flood the log); ``address`` is the peer of the request being
+    checked, set by :class:`_Authenticator`.
+    """
 
     def __init__(self, keys: SwarmKeys):
         self.allowed = {keys.public, *keys.peers.values()}
+        self.address = "?"
+        self.refused: set[str] = set()
 
     def callback(self, domain: str, key: bytes) -> bool:
-        return key in self.allowed
+        if key in self.allowed:
+            return True
+        if self.address not in self.refused:
+            self.refused.add(self.address)
+            log.warning("refused a CURVE handshake from %s: its key is not one of the swarm's "
+                        "(further refusals from this address are not logged)", self.address)
+        return False
+
+
+def _authenticator(ctx, members: _SwarmMembers):
+    """A started ZAP handler (pyzmq's thread authenticator) that checks CURVE keys with
+    ``members`` and tells it the address of each request first (ZAP gives the callback none)."""
+    from zmq.auth.thread import ThreadAuthenticator
+
+    class _Authenticator(ThreadAuthenticator):
+        async def handle_zap_message(self, msg: list[bytes]) -> None:
+            if len(msg) >= 6:
+                members.address = msg[3].decode("utf-8", "replace") or "?"
+            await super().handle_zap_message(msg)
+
+    auth = _Authenticator(ctx)
+    auth.start()
+    auth.configure_curve_callback(domain="*", credentials_provider=members)
+    return auth
 
 
 class Transport:
@@ -183,11 +216,7 @@ class Transport:
         self.pub = self.ctx.socket(zmq.PUB)
         self.pub.setsockopt(zmq.SNDHWM, hwm)
         if keys is not None:
-            from zmq.auth.thread import ThreadAuthenticator
-
-            self.auth = ThreadAuthenticator(self.ctx)
-            self.auth.start()
-            self.auth.configure_curve_callback(domain="*", credentials_provider=_SwarmMembers(keys))
+            self.auth = _authenticator(self.ctx, _SwarmMembers(keys))
             self.pub.curve_secretkey = keys.secret
             self.pub.curve_publickey = keys.public
             self.pub.curve_server = True

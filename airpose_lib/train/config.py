@@ -23,12 +23,21 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from airpose_lib.config_fields import ConfigError, check_fields, check_keys, check_type, config_from, finite, require
+from airpose_lib.config_fields import (
+    ConfigError,
+    check_fields,
+    check_keys,
+    check_keys_in,
+    check_type,
+    config_from,
+    ranged,
+    require,
+)
 from airpose_lib.devices import PRECISION_CHOICES, is_device_name
 from airpose_lib.errors import ProfileSettingError
 from airpose_lib.profiles import profile_section, section_where
 
-__all__ = ["TrainConfig", "load_train_config"]
+__all__ = ["DATA_KEYS", "TrainConfig", "check_options", "load_train_config", "option_types"]
 
 
 @dataclass
@@ -96,14 +105,14 @@ class TrainConfig:
     """
 
     variant: str = "airpose"
-    steps: int = 1000
-    batch_size: int = 30
-    lr: float = 5e-5
+    steps: int = ranged(1000, ge=0)
+    batch_size: int = ranged(30, ge=1)
+    lr: float = ranged(5e-5, gt=0)
     amsgrad: bool = True
-    weight_decay: float = 0.0
+    weight_decay: float = ranged(0.0, ge=0)
     lr_schedule: str = "constant"
-    warmup_steps: int = 0
-    grad_clip: float | None = None
+    warmup_steps: int = ranged(0, ge=0)
+    grad_clip: float | None = ranged(None, gt=0)
     seed: int = 123
     backbone: str = "resnet50"
     model: dict = field(default_factory=dict)
@@ -115,27 +124,27 @@ class TrainConfig:
     data: dict = field(default_factory=dict)
     train_split: str = "train"
     val_split: str = "val"
-    num_workers: int = 0
-    checkpoint_every: int = 500
-    keep_checkpoints: int = 2
-    val_every: int | None = 500
-    val_batches: int | None = None
-    val_batch_size: int | None = None
-    log_every: int = 10
-    world_size: int = 1
+    num_workers: int = ranged(0, ge=0)
+    checkpoint_every: int = ranged(500, ge=1)
+    keep_checkpoints: int = ranged(2, ge=0)  # 0: only last.pt
+    val_every: int | None = ranged(500, ge=0)  # 0: at the end; null: never
+    val_batches: int | None = ranged(None, ge=1)
+    val_batch_size: int | None = ranged(None, ge=1)
+    log_every: int = ranged(10, ge=1)
+    world_size: int = ranged(1, ge=1)
     sync_batchnorm: bool = False
     device: str = "auto"
     precision: str = "auto"
-    num_threads: int | None = None
+    num_threads: int | None = ranged(None, ge=1)
     deterministic: bool = True
     progress: bool = True
     task: str = "supervised"
     pretrained: str | None = None
     trainable_from: str | None = None
-    backbone_lr_scale: float = 1.0
+    backbone_lr_scale: float = ranged(1.0, gt=0)
 
     def __post_init__(self) -> None:
-        # Types first (a profile's `steps: thirty`), then each field's range, before anything runs.
+        # Types and declared ranges first (a profile's `steps: thirty`), before anything runs.
         check_fields(self)
         variants, backbones = _model_choices()
         variants += ("pretrain",) if self.task == "pretrain" else ()  # the shared backbone's own objective
@@ -148,17 +157,6 @@ class TrainConfig:
         require(is_device_name(self.device), "device", "'auto', 'cpu', 'cuda' or 'cuda:N'", self.device)
         if self.trainable_from is not None and self.task != "regressor":
             raise ConfigError("trainable_from applies to the regressor task only")
-        require(finite(self.lr) and self.lr > 0, "lr", "a finite number > 0", self.lr)
-        require(finite(self.weight_decay) and self.weight_decay >= 0, "weight_decay", "a finite number >= 0",
-                self.weight_decay)
-        require(self.grad_clip is None or finite(self.grad_clip) and self.grad_clip > 0, "grad_clip",
-                "null or a finite number > 0", self.grad_clip)
-        require(finite(self.backbone_lr_scale) and self.backbone_lr_scale > 0, "backbone_lr_scale",
-                "a finite number > 0", self.backbone_lr_scale)
-        require(self.warmup_steps >= 0, "warmup_steps", ">= 0", self.warmup_steps)
-        require(self.steps >= 0, "steps", ">= 0", self.steps)
-        require(self.batch_size >= 1, "batch_size", ">= 1", self.batch_size)
-        require(self.world_size >= 1, "world_size", ">= 1", self.world_size)
         if self.batch_size < self.world_size:
             raise ConfigError(f"batch_size {self.batch_size} must be at least world_size {self.world_size} "
                               "(every process needs a sample)")
@@ -167,18 +165,7 @@ class TrainConfig:
         require(self.val_split != "test", "val_split", "not 'test' (choose on 'val'; the test split makes the "
                 "reported tables only)", self.val_split)
         require(self.precision in PRECISION_CHOICES, "precision", "'auto', 'fp32', 'bf16' or 'fp16'", self.precision)
-        require(self.checkpoint_every >= 1, "checkpoint_every", ">= 1", self.checkpoint_every)
-        require(self.log_every >= 1, "log_every", ">= 1", self.log_every)
-        require(self.keep_checkpoints >= 0, "keep_checkpoints", ">= 0 (0: only last.pt)", self.keep_checkpoints)
-        require(self.val_every is None or self.val_every >= 0, "val_every", "null (never) or >= 0 (0: at the end)",
-                self.val_every)
-        require(self.val_batches is None or self.val_batches >= 1, "val_batches", "null (all) or >= 1",
-                self.val_batches)
-        require(self.val_batch_size is None or self.val_batch_size >= 1, "val_batch_size", "null or >= 1",
-                self.val_batch_size)
-        require(self.num_workers >= 0, "num_workers", ">= 0", self.num_workers)
-        require(self.num_threads is None or self.num_threads >= 1, "num_threads", "null or >= 1", self.num_threads)
-        _check_model_options(self.model, self.task)
+        check_options(self)
 
     def lr_at(self, step: int) -> float:
         """The learning rate of optimiser step ``step + 1`` (``step`` steps done)."""
@@ -217,24 +204,57 @@ def _model_choices() -> tuple[tuple[str, ...], tuple[str, ...]]:
     return tuple(VARIANTS), tuple(BACKBONES)
 
 
-def _check_model_options(model: dict, task: str) -> None:
-    """``model:`` holds keyword arguments of the task's network (:class:`~airpose_lib.model.variants.AirPoseNet`,
-    or :class:`~airpose_lib.model.pretrain.PretrainNet` for ``pretrain``): each key one of its
-    parameters, each value of the parameter's annotated type."""
+#: Keys of ``data:`` that the training itself reads (the other keys are the dataset's keywords).
+DATA_KEYS = {"root": str | None, "profile": str | None, "source": str, "fingerprint": str | None,
+             "generation": dict}
+
+
+def option_types(name: str, task: str = "supervised", source: str = "generated") -> tuple[dict[str, Any], dict]:
+    """What a dict field of :class:`TrainConfig` may hold: ``({key: annotation}, {key: Range})``.
+
+    ``model``: the keyword arguments of the task's network (:class:`~airpose_lib.model.variants.AirPoseNet`,
+    or :class:`~airpose_lib.model.pretrain.PretrainNet` for ``pretrain``) and the ranges the
+    network declares (``OPTION_RANGES``); ``data``: :data:`DATA_KEYS` and the keywords of the
+    dataset ``source`` names (the kit's datasets: a training given a dataset factory of its own
+    takes other keys); ``loss``: the fields of :class:`~airpose_lib.losses.LossConfig` (of
+    :class:`~airpose_lib.losses.pretrain.PretrainLossConfig` for ``pretrain``).
+    """
     import inspect
     import typing
 
-    # lazy: model imports torch
+    # lazy: model, data and losses import torch
+    from airpose_lib.config_fields import field_types
+    from airpose_lib.data.official.synthetic import OfficialSyntheticDataset
+    from airpose_lib.data.still.dataset import StillFrameDataset
+    from airpose_lib.losses import LossConfig
+    from airpose_lib.losses.pretrain import PretrainLossConfig
     from airpose_lib.model.pretrain import PretrainNet
     from airpose_lib.model.variants import AirPoseNet
 
-    net = PretrainNet if task == "pretrain" else AirPoseNet
-    hints = typing.get_type_hints(net.__init__)
-    params = [p for p in inspect.signature(net.__init__).parameters if p not in ("self", "variant", "backbone")]
-    for key, value in model.items():
-        if key not in params:
-            raise ConfigError(f"model: unknown option {key!r}; {net.__name__} takes {', '.join(params)}")
-        model[key] = check_type(f"model.{key}", value, hints.get(key, typing.Any))
+    if name == "loss":
+        return field_types(PretrainLossConfig if task == "pretrain" else LossConfig), {}
+    if name == "model":
+        owner, skip, extra = (PretrainNet if task == "pretrain" else AirPoseNet), ("self", "variant", "backbone"), {}
+    else:
+        owner = OfficialSyntheticDataset if source == "official_synthetic" else StillFrameDataset
+        skip, extra = ("self", "root", "split"), DATA_KEYS
+    hints = typing.get_type_hints(owner.__init__)
+    types_ = {p: hints.get(p, typing.Any) for p in inspect.signature(owner.__init__).parameters if p not in skip}
+    return {**extra, **types_}, dict(getattr(owner, "OPTION_RANGES", {}))
+
+
+def check_options(config: TrainConfig, names: tuple[str, ...] = ("model", "loss")) -> None:
+    """The keys and values of dict fields of ``config`` (:func:`option_types`): an unknown key
+    names the closest known one, a value its type or range. ``data`` is checked where the kit's
+    own datasets are chosen (``train.loop.check_data_root``)."""
+    for name in names:
+        options = getattr(config, name)
+        types_, ranges = option_types(name, config.task, options.get("source", "generated") if name == "data" else "")
+        check_keys_in(options, types_, name)
+        for key, value in options.items():
+            options[key] = check_type(f"{name}.{key}", value, types_[key])
+            if key in ranges:
+                require(ranges[key].holds(options[key]), f"{name}.{key}", ranges[key].rule, options[key])
 
 
 def load_train_config(profile: str | Path | None, variant: str, seed: int | None = None,

@@ -78,7 +78,7 @@ from airpose_lib.model.pretrain import PretrainNet
 from airpose_lib.model.record import NETWORK_KEY, network_record
 from airpose_lib.paths import profile_name, run_path
 
-from .config import TrainConfig
+from .config import TrainConfig, check_options
 from .features import FeatureDataset, ensure_features, load_backbone_file
 from .sampling import ResumableBatchSampler, SeededDataset, _mix, seed_everything, worker_init_fn
 
@@ -130,7 +130,9 @@ def check_data_root(cfg: TrainConfig) -> None:
     """A dataset folder the user named (``data.root``) must hold a finished, intact dataset: the kit
     makes and repairs data only in its own folders. Callers run it before they create anything; the
     shards' hashes are then known to this process and not computed again when the data are read.
-    Raises :class:`~airpose_lib.data.still.manifest.DatasetError` (a damaged shard: ``ShardIntegrityError``)."""
+    Raises :class:`~airpose_lib.data.still.manifest.DatasetError` (a damaged shard: ``ShardIntegrityError``),
+    or :class:`~airpose_lib.errors.ConfigError` for a ``data:`` key the kit's datasets do not take."""
+    check_options(cfg, ("data",))
     if cfg.data.get("root") is not None and cfg.data.get("source", "generated") == "generated":
         verify_dataset(Path(cfg.data["root"]))
 

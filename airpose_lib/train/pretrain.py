@@ -408,6 +408,7 @@ def profile_backbone_keys(profile: str, data_root: str | Path) -> list[str]:
 
 def profile_backbone(profile: str, progress: bool = False) -> Path:
     """The backbone of a profile for its own still-frame dataset (generated first if missing)."""
+    pretrain_stages(profile)  # a bad `pretrain:` setting fails before a dataset is made
     root = ensure_still_dataset(profile, progress=progress)
     return ensure_backbone(profile, root, load_manifest(Path(root))["fingerprint"], progress=progress)
 

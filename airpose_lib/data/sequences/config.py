@@ -10,7 +10,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from airpose_lib.body.genders import GENDER_CODES
-from airpose_lib.config_fields import config_from
+from airpose_lib.config_fields import check_fields, config_from, ranged
 from airpose_lib.errors import ConfigError, ProfileError, ProfileSettingError
 from airpose_lib.profiles import profile_section, section_where
 
@@ -190,16 +190,16 @@ class SequenceConfig:
     """
 
     person: str | PersonSpec = "person1"
-    n_frames: int = 120
-    fps: float = 30.0
+    n_frames: int = ranged(120, ge=1)
+    fps: float = ranged(30.0, gt=0)
     video_fps: float | None = None
     time_offsets: tuple[float, ...] = (0.0, 0.007)
     cameras: tuple[CameraSpec, ...] = PAPER_CAMERAS
-    render_scale: float = 0.5
+    render_scale: float = ranged(0.5, gt=0, le=1)
     seed: int = 0
     flight: FlightConfig = dataclasses.field(default_factory=FlightConfig)
-    jpeg_quality: int = 92
-    bbox_margin_px: float = 20.0
+    jpeg_quality: int = ranged(92, ge=1, le=100)
+    bbox_margin_px: float = ranged(20.0, ge=0)
     detector_seed: int | None = None
     anti_aliasing: bool = True
     field: FieldConfig = FieldConfig()
@@ -207,10 +207,7 @@ class SequenceConfig:
     held_out: HeldOutConfig = HeldOutConfig()
 
     def __post_init__(self) -> None:
-        if self.n_frames < 1:
-            raise ConfigError(f"n_frames must be >= 1, got {self.n_frames}")
-        if not self.fps > 0:
-            raise ConfigError(f"fps must be > 0, got {self.fps}")
+        check_fields(self, convert=False)  # types and declared ranges (ints stay ints: the cache key)
         if self.video_fps is not None and not self.video_fps >= self.fps:
             raise ConfigError(f"video_fps must be null or >= fps ({self.fps}): the recording keeps some of the "
                               f"video's frames, got {self.video_fps}")
@@ -218,8 +215,6 @@ class SequenceConfig:
             raise ConfigError(f"{len(self.time_offsets)} time offsets for {len(self.cameras)} cameras")
         if min(self.time_offsets) < 0:
             raise ConfigError("time offsets must be >= 0")
-        if not 0 < self.render_scale <= 1:
-            raise ConfigError(f"render_scale must be in (0, 1], got {self.render_scale}")
 
     @property
     def person_spec(self) -> PersonSpec:
@@ -268,8 +263,8 @@ class SequenceConfig:
         if "cameras" in d:
             d["cameras"] = tuple(c if isinstance(c, CameraSpec) else CameraSpec(**c) for c in d["cameras"])
         if isinstance(d.get("flight"), Mapping):
-            d["flight"] = FlightConfig(**{k: tuple(v) if isinstance(v, list) else v
-                                          for k, v in d["flight"].items()})
+            d["flight"] = config_from(FlightConfig, {k: tuple(v) if isinstance(v, list) else v
+                                                     for k, v in d["flight"].items()}, "flight")
         if "time_offsets" in d:
             d["time_offsets"] = tuple(float(x) for x in d["time_offsets"])
         if isinstance(d.get("field"), Mapping):

@@ -9,6 +9,7 @@ import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from airpose_lib.config_fields import check_fields, check_keys, ranged
 from airpose_lib.errors import ConfigError
 from airpose_lib.paths import cache_dir, profile_name
 from airpose_lib.profiles import ProfileError, profile_path, section_config
@@ -62,37 +63,32 @@ class GenerationConfig:
         appearance: skin, hair and clothing sampling.
     """
 
-    num_samples: int = 300
-    shard_size: int = 50
+    num_samples: int = ranged(300, ge=1)
+    shard_size: int = ranged(50, ge=1)
     seed: int = 0
-    crop_size: int = 224
-    test_fraction: float = 0.1
-    val_fraction: float = 0.1
+    crop_size: int = ranged(224, ge=8)
+    test_fraction: float = ranged(0.1, ge=0, lt=1)
+    val_fraction: float = ranged(0.1, ge=0, lt=1)
     image_format: str = "jpg"
-    jpeg_quality: int = 95
+    jpeg_quality: int = ranged(95, ge=1, le=100)
     anti_aliasing: bool = False
-    blur_sigma: float = 0.5
+    blur_sigma: float = ranged(0.5, ge=0)
     test_crops: str = "jittered"
     tight_test_crops: bool = True
     body_source: str = "open"
-    max_attempts_per_sample: int = 20
+    max_attempts_per_sample: int = ranged(20, ge=1)
     scene: SceneConfig = field(default_factory=SceneConfig)
     appearance: AppearanceConfig = field(default_factory=AppearanceConfig)
 
     def __post_init__(self) -> None:
-        if self.num_samples < 1 or self.shard_size < 1:
-            raise ConfigError("num_samples and shard_size must be positive")
+        check_fields(self, convert=False)  # types and declared ranges (ints stay ints: the fingerprint)
         if self.test_crops not in ("jittered", "tight"):
             raise ConfigError(f"test_crops must be 'jittered' or 'tight', got {self.test_crops!r}")
         if self.image_format not in ("jpg", "png"):
             raise ConfigError(f"image_format must be 'jpg' or 'png', got {self.image_format!r}")
-        if not 0.0 <= self.test_fraction < 1.0:
-            raise ConfigError(f"test_fraction must be in [0, 1), got {self.test_fraction}")
-        if not 0.0 <= self.val_fraction < 1.0 or self.val_fraction + self.test_fraction >= 1.0:
-            raise ConfigError(f"val_fraction must be in [0, 1) with val_fraction + test_fraction < 1, "
-                              f"got {self.val_fraction} (test_fraction {self.test_fraction})")
-        if self.crop_size < 8:
-            raise ConfigError(f"crop_size too small: {self.crop_size}")
+        if self.val_fraction + self.test_fraction >= 1.0:
+            raise ConfigError(f"val_fraction + test_fraction must be < 1, got {self.val_fraction} + "
+                              f"{self.test_fraction}")
 
     # -- shards -----------------------------------------------------------------------------------
     @property
@@ -157,10 +153,7 @@ def _plain(x):
 
 
 def _build(cls, d: dict, where: str, **extra):
-    names = {f.name for f in dataclasses.fields(cls)}
-    unknown = sorted(set(d) - names)
-    if unknown:
-        raise ProfileError(f"unknown {where} setting(s) {unknown}; known: {sorted(names)}")
+    check_keys(d, cls, where)
     return cls(**{k: _tuplify(v) for k, v in d.items()}, **extra)
 
 

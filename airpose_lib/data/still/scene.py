@@ -22,6 +22,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from airpose_lib.body.genders import GENDER_CODES
+from airpose_lib.config_fields import check_fields, ranged
 from airpose_lib.errors import ConfigError
 
 from ..network_input import BOX_JITTER_PX, BOX_MARGIN_PX, NETWORK_FOCAL, NETWORK_IMAGE_SIZE, full_frame_intrinsics
@@ -81,7 +82,7 @@ class SceneConfig:
             camera's line of sight to the person, so that it never hides the person.
     """
 
-    num_views: int = 2
+    num_views: int = ranged(2, ge=1)
     image_size: tuple[int, int] = NETWORK_IMAGE_SIZE
     focal: float = NETWORK_FOCAL
     principal_point: tuple[float, float] | None = None
@@ -104,8 +105,7 @@ class SceneConfig:
     distractor_clearance: float = 1.0
 
     def __post_init__(self) -> None:
-        if self.num_views < 1:
-            raise ConfigError(f"num_views must be >= 1, got {self.num_views}")
+        check_fields(self, convert=False)  # types and declared ranges before the rules below compare them
         if self.bbox_from not in ("joints", "vertices"):
             raise ConfigError(f"bbox_from must be 'joints' or 'vertices', got {self.bbox_from!r}")
         bad = [g for g in self.genders if g not in GENDER_CODES]

@@ -83,7 +83,7 @@ INHERITS = "inherits"
 #: The top-level keys a profile may have, and the sections inside ``data:``: a misspelt one
 #: (``trian:``) would otherwise be ignored while the command runs on the inherited or default one.
 SECTIONS = ("description", "cell_timeout_s", INHERITS, "sequences", "data", "notebooks", "pretrain", "train",
-            "prior", "finetune", "fitting")
+            "prior", "finetune", "fitting", "networks")
 DATA_SECTIONS = ("still",)
 
 

@@ -42,6 +42,7 @@ def test_claims_keep_their_verdicts_or_not():
     run = pd.DataFrame({"claim": ["a", "b"], "gain [%]": [1.1, 0.1], "verdict": ["holds", "not significant"]})
     out = claims_agreement(run, ref)
     assert out["within"].tolist() == [True, False]
+    assert claims_agreement(run.set_index("claim"), ref)["within"].tolist() == [True, False]  # the kit's own table
 
 
 def test_recordings_agreement_and_the_message(tmp_path):

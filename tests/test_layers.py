@@ -17,7 +17,7 @@ ROOT = Path(__file__).resolve().parents[1] / "airpose_lib"
 KIT = "airpose_lib"
 
 # Top-level helper modules (standard library only, no package of the kit): every package may use them.
-BASE = {"_lazy", "atomic", "config_fields", "devices", "errors", "folder_lock", "paths", "process_guard", "progress",
+BASE = {"_lazy", "atomic", "config_fields", "devices", "errors", "folder_lock", "hashing", "paths", "process_guard", "progress",
         "safe_pickle"}
 
 # package -> the packages it may import (BASE aside). The design sketch's table with the changes

@@ -12,11 +12,12 @@ look. Missing optional entries do not make a report fail; damaged files always d
 """
 from __future__ import annotations
 
-import hashlib
 from dataclasses import dataclass
 from pathlib import Path
 
 import yaml
+
+from airpose_lib.hashing import sha256_file
 
 from .locate import AssetLocation, config_path, locate
 from .manifest import AssetManifest, LayoutEntry, ManifestError, load_asset_manifest, parse_manifest
@@ -28,15 +29,6 @@ PRESENT = "present"
 MISSING = "missing"
 SIZE_MISMATCH = "size-mismatch"
 CHECKSUM_MISMATCH = "checksum-mismatch"
-
-
-def sha256_file(path: str | Path, chunk: int = 1 << 20) -> str:
-    """SHA-256 hex digest of a file, read in ``chunk``-byte blocks (constant memory)."""
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        while block := f.read(chunk):
-            h.update(block)
-    return h.hexdigest()
 
 
 @dataclass(frozen=True)

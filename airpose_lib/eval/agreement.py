@@ -83,9 +83,11 @@ def table_agreement(table: pd.DataFrame, reference: pd.DataFrame,
 
 
 def claims_agreement(claims: pd.DataFrame, reference: pd.DataFrame) -> pd.DataFrame:
-    """Each claim's verdict here and in the reference (``within``: the same verdict)."""
-    ref = reference.set_index("claim")["verdict"]
-    out = claims[["claim", "gain [%]", "verdict"]].copy()
+    """Each claim's verdict here and in the reference (``within``: the same verdict); either table
+    may hold the claim as a column or as its index."""
+    as_column = lambda t: t if "claim" in t.columns else t.reset_index()  # noqa: E731
+    ref = as_column(reference).set_index("claim")["verdict"]
+    out = as_column(claims)[["claim", "gain [%]", "verdict"]].copy()
     out["reference verdict"] = out["claim"].map(ref)
     out["within"] = out["verdict"] == out["reference verdict"]
     return out.reset_index(drop=True)

@@ -26,6 +26,7 @@ import torch
 from airpose_lib.data.still.dataset import StillFrameDataset
 from airpose_lib.data.still.generate import default_root
 from airpose_lib.folder_lock import file_lock
+from airpose_lib.hashing import sha256_file
 from airpose_lib.model.onnx_export import OPSET, export_onnx
 from airpose_lib.model.quantize import QuantSettings, calibration_digest, quantize_stage1
 from airpose_lib.paths import cache_dir
@@ -33,13 +34,6 @@ from airpose_lib.paths import cache_dir
 from .backends import ONNX_PRECISIONS, BackendSpec, build_torch_model, checkpoint_settings
 
 __all__ = ["calibration_crops", "default_calibration_root", "export_key", "ensure_export"]
-
-def _sha256_file(path: str | Path) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as fh:
-        for block in iter(lambda: fh.read(1 << 20), b""):
-            h.update(block)
-    return h.hexdigest()
 
 
 def default_calibration_root(checkpoint: str | Path | None = None) -> Path:
@@ -81,7 +75,7 @@ def calibration_crops(root: str | Path, input_size: int, samples: int = 32, spli
 def _network_identity(spec: BackendSpec) -> dict:
     """What fixes the weights: the checkpoint's bytes, or the random initialisation."""
     if spec.checkpoint:
-        return {"checkpoint_sha256": _sha256_file(spec.checkpoint), **checkpoint_settings(spec.checkpoint)}
+        return {"checkpoint_sha256": sha256_file(spec.checkpoint), **checkpoint_settings(spec.checkpoint)}
     return {"random": {"variant": spec.variant, "backbone": spec.backbone, "seed": spec.seed},
             "torch": torch.__version__}
 

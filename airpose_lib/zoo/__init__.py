@@ -15,7 +15,6 @@ ordinary kit checkpoint in the cache, which every loader of the kit reads
 from __future__ import annotations
 
 import hashlib
-import json
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -26,6 +25,7 @@ import yaml
 from airpose_lib.atomic import atomic_path, atomic_torch_save
 from airpose_lib.engine.checkpoint import load_checkpoint, write_checkpoint
 from airpose_lib.errors import DamagedFileError, reading
+from airpose_lib.hashing import sha256_file
 from airpose_lib.paths import cache_dir, profile_name, repo_root
 
 __all__ = ["MANIFEST", "FORMAT", "zoo_dir", "sha256_file", "read_manifest", "write_manifest", "verified",
@@ -47,15 +47,6 @@ def zoo_dir(profile: str) -> Path:
         raise DamagedFileError("results/", "the kit's checkout", "the shipped networks live in a checkout of the "
                                "kit; clone it instead of installing a copy")
     return root / "results" / profile_name(profile) / "networks"
-
-
-def sha256_file(path: str | Path) -> str:
-    """Hex SHA-256 of a file's bytes."""
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        for block in iter(lambda: f.read(1 << 20), b""):
-            h.update(block)
-    return h.hexdigest()
 
 
 def read_manifest(folder: str | Path) -> dict[str, dict]:
@@ -188,8 +179,3 @@ def zoo_table(folder: str | Path) -> str:
         lines.append(f"| `{e['file']}` | {e['kind']} | {e.get('variant', '-')} | {metric} | "
                      f"{int(e['bytes']) / 1e6:.2f} | `{e['sha256'][:16]}` | {e.get('made_by', '-')} |")
     return "\n".join(lines)
-
-
-def dumps(obj: Any) -> str:
-    """JSON of a manifest value (for messages)."""
-    return json.dumps(obj, sort_keys=True, default=str)

@@ -13,7 +13,6 @@ complete or absent, which is what makes interrupted generation resumable shard b
 """
 from __future__ import annotations
 
-import hashlib
 import io
 import json
 import struct
@@ -23,6 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from airpose_lib.atomic import atomic_path
+from airpose_lib.hashing import sha256_file
 
 __all__ = [
     "write_shard",
@@ -68,15 +68,6 @@ def write_shard(path: Path, arrays: dict[str, np.ndarray], meta: dict | None = N
         digest = sha256_file(tmp)
         size = tmp.stat().st_size
     return digest, size
-
-
-def sha256_file(path: Path, chunk: int = 1 << 20) -> str:
-    """SHA-256 hex digest of a file."""
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        while block := f.read(chunk):
-            h.update(block)
-    return h.hexdigest()
 
 
 def read_shard(path: Path, names: list[str] | None = None) -> dict[str, np.ndarray]:

@@ -5,8 +5,14 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from airpose_lib.eval.agreement import (agreement_message, claims_agreement, recordings_agreement,
-                                        sample_standard_errors, table_agreement, write_check)
+from airpose_lib.eval.agreement import (
+    agreement_message,
+    claims_agreement,
+    recordings_agreement,
+    sample_standard_errors,
+    table_agreement,
+    write_check,
+)
 
 
 def _table(mpe, mpjpe, root):

@@ -14,8 +14,15 @@ from airpose_lib.errors import DamagedFileError
 from airpose_lib.model import build_model
 from airpose_lib.model.record import network_record
 from airpose_lib.train.evaluate import load_network
-from airpose_lib.zoo import (export_regressor, kit_checkpoint, read_manifest, sha256_file, verified, write_manifest,
-                             zoo_dir)
+from airpose_lib.zoo import (
+    export_regressor,
+    kit_checkpoint,
+    read_manifest,
+    sha256_file,
+    verified,
+    write_manifest,
+    zoo_dir,
+)
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -74,3 +74,27 @@ def test_probe_interval_resamples_samples_whole():
     assert value == pytest.approx(r2_score(y, pred)) and low < value < high
     exact = probe_interval(r2_score, y, y, n_resamples=50)
     assert exact == pytest.approx((1.0, 1.0, 1.0))
+
+
+def test_probe_rows_score_held_out_samples_and_the_views_errors():
+    from airpose_lib.experiments.mechanism import COLUMNS, probe_rows
+
+    rng = np.random.default_rng(3)
+
+    def split(n):
+        stature = rng.normal(1.7, 0.1, n)
+        gender = rng.integers(1, 3, n)
+        tau = np.stack([rng.normal(0, 1, (n, 2)), rng.normal(0, 1, (n, 2)), rng.uniform(6, 14, (n, 2))], -1)
+        P = rng.normal(size=(n, 2, 3))
+        # features: stature and gender in both views alike, log depth per view, plus noise
+        f = np.concatenate([np.repeat(stature[:, None, None], 2, 1), np.repeat(gender[:, None, None], 2, 1),
+                            np.log(tau[..., 2:]), 0.01 * rng.normal(size=(n, 2, 5))], -1)
+        return f, {"gender": gender, "tau": tau, "P": P}, stature
+
+    rows = probe_rows(split(600), split(300), n_resamples=50, mlp_steps=100, log=lambda _: None)
+    table = {(r["quantity"], r["input"], r["readout"], r["metric"]): r for r in rows}
+    assert len(rows) == 24 and all(set(r) == set(COLUMNS) for r in rows)
+    assert table["stature [m]", "features", "ridge", "R2"]["value"] > 0.99
+    assert table["gender (female = 1)", "features + P", "ridge", "accuracy"]["value"] == 1.0
+    assert table["log depth", "features", "ridge", "R2"]["value"] > 0.99
+    assert all(r["samples"] == 300 and r["CI low"] <= r["value"] <= r["CI high"] for r in rows)

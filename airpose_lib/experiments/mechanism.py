@@ -146,7 +146,7 @@ def _regress(checkpoint: Path, features: np.ndarray, arrays: dict,
     for start in range(0, len(features), batch_size):
         sl = slice(start, start + batch_size)
         P, K = torch.as_tensor(arrays["P"][sl]), torch.as_tensor(arrays["K"][sl])
-        out = model.regress(torch.as_tensor(np.asarray(features[sl], dtype=np.float32)), P)
+        out = model.regress(torch.as_tensor(np.array(features[sl], dtype=np.float32)), P)  # a copy: mmap is read-only
         taus.append(to_smplx_params(out, P, K, input_size=record.input_size)["tau"].double().numpy())
         betas.append(torch.stack([m[..., -10:] for m in out["messages"]]).double().numpy())
     return np.concatenate(taus), np.concatenate(betas, axis=1)
@@ -181,7 +181,7 @@ def variant_rows(variant: str, checkpoint: Path, features: np.ndarray, arrays: d
     rel = relative_depth_error(tau, tau_true)
     rows.append(_row("c", "relative depth error", "final", label, "view error correlation",
                      probe_interval(lambda r, _: view_error_correlation(r), rel, rel, n_resamples), n))
-    rows.append(_row("c", "relative depth error", "final", label, "mean |error| [%]",
+    rows.append(_row("c", "relative depth error", "final", label, "mean absolute error [%]",
                      _mean_interval(100 * np.abs(rel), n_resamples), n))
     err = lambda t: translation_error(torch.as_tensor(t), torch.as_tensor(tau_true)).numpy().mean(1)  # noqa: E731
     measured = err(tau)

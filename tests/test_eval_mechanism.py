@@ -93,8 +93,9 @@ def test_probe_rows_score_held_out_samples_and_the_views_errors():
 
     rows = probe_rows(split(600), split(300), n_resamples=50, mlp_steps=100, log=lambda _: None)
     table = {(r["quantity"], r["input"], r["readout"], r["metric"]): r for r in rows}
-    assert len(rows) == 24 and all(set(r) == set(COLUMNS) for r in rows)
+    assert len(rows) == 28 and all(set(r) == set(COLUMNS) for r in rows)
     assert table["stature [m]", "features", "ridge", "R2"]["value"] > 0.99
+    assert table["stature [m]", "features", "ridge", "R2 of the views' mean"]["value"] > 0.99
     assert table["gender (female = 1)", "features + P", "ridge", "accuracy"]["value"] == 1.0
     assert table["log depth", "features", "ridge", "R2"]["value"] > 0.99
     assert all(r["samples"] == 300 and r["CI low"] <= r["value"] <= r["CI high"] for r in rows)

@@ -94,6 +94,9 @@ def _probe_metrics(quantity: str, truth: np.ndarray, pred: np.ndarray, n_resampl
     elif quantity.startswith("stature"):
         out.append(("view error correlation",
                     probe_interval(lambda t, p: view_error_correlation(p - t), truth, pred, n_resamples)))
+        # what fusing the views' readings (an exchange of the estimate) adds to one view's
+        out.append(("R2 of the views' mean",
+                    probe_interval(lambda t, p: r2_score(t[:, 0], p.mean(1)), truth, pred, n_resamples)))
     else:
         rel = np.exp(pred - truth) - 1.0  # log depth -> (z_pred - z) / z
         out.append(("view error correlation (relative depth)",

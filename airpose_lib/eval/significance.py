@@ -33,7 +33,7 @@ Pure numpy / pandas.
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -42,7 +42,7 @@ import pandas as pd
 from .ablation import PAPER_TABLE_I, VARIANT_LABELS
 
 __all__ = ["PAPER_ORDER", "CLAIM_METRICS", "PAPER_GAIN_SHARE", "BootstrapResult", "paired_sample_errors",
-           "paired_bootstrap", "relative_gain", "paper_relative_gain", "claims_table"]
+           "paired_bootstrap", "bootstrap_interval", "relative_gain", "paper_relative_gain", "claims_table"]
 
 #: The paper's ordering of Table I, largest error first.
 PAPER_ORDER = ("baseline", "multiview", "fullcam", "airpose")
@@ -137,6 +137,28 @@ def paired_bootstrap(diffs: np.ndarray, n_resamples: int = 2000, confidence: flo
     rel_low, rel_high = np.quantile(rel, [alpha, 1.0 - alpha])
     return dataclasses.replace(out, relative=float(d.mean() / base.mean()), relative_low=float(rel_low),
                                relative_high=float(rel_high))
+
+
+def bootstrap_interval(statistic: Callable[[np.ndarray], float], n_units: int, n_resamples: int = 2000,
+                       confidence: float = 0.95, seed: int = 0) -> tuple[float, float, float]:
+    """Percentile interval of any statistic of independent units (two-view samples), for a
+    statistic that is not a mean (an R^2, a correlation); a mean's is :func:`paired_bootstrap`'s.
+
+    Args:
+        statistic: indices ``(n,)`` of the units drawn (with repeats) -> the statistic over them;
+            every value of a unit (both views of a sample) must enter through its one index.
+        n_units: units to draw from (indices ``0 .. n_units - 1``).
+        n_resamples, confidence, seed: as :func:`paired_bootstrap`.
+    Returns:
+        ``(value on all units, low, high)``.
+    """
+    if n_units < 2:
+        raise ValueError(f"bootstrap_interval needs at least two units, got {n_units}")
+    rng = np.random.default_rng(seed)
+    stats = np.array([statistic(rng.integers(0, n_units, size=n_units)) for _ in range(n_resamples)])
+    alpha = (1.0 - confidence) / 2.0
+    low, high = np.nanquantile(stats, [alpha, 1.0 - alpha])
+    return float(statistic(np.arange(n_units))), float(low), float(high)
 
 
 def relative_gain(worse: float, better: float) -> float:

@@ -29,7 +29,7 @@ from airpose_lib.model.backbone import build_backbone
 from airpose_lib.paths import cache_dir
 from airpose_lib.progress import progress_bar
 
-__all__ = ["feature_key", "ensure_features", "compute_features", "FeatureDataset", "load_backbone_file"]
+__all__ = ["feature_key", "features_path", "ensure_features", "compute_features", "FeatureDataset", "load_backbone_file"]
 
 #: Bumped when the same inputs would give other features.
 FEATURES_VERSION = 1
@@ -63,6 +63,13 @@ def feature_key(backbone_file: str | Path, data_root: str | Path, split: str, cr
     return hashlib.sha256(blob.encode()).hexdigest()[:16]
 
 
+def features_path(backbone_file: str | Path, data_root: str | Path, split: str, crops: str = "jittered",
+                  cut: str | None = None) -> Path:
+    """Where the feature file of these inputs lives (:func:`feature_key`), made or not:
+    ``<kit cache>/features/<key>.npy``."""
+    return cache_dir() / "features" / f"{feature_key(backbone_file, data_root, split, crops, cut)}.npy"
+
+
 @torch.no_grad()
 def compute_features(backbone: torch.nn.Module, dataset: StillFrameDataset, batch_size: int = 64,
                      progress: bool = False, cut: str | None = None,
@@ -88,8 +95,7 @@ def ensure_features(backbone_file: str | Path, data_root: str | Path, split: str
 
     Returns ``<kit cache>/features/<key>.npy``.
     """
-    key = feature_key(backbone_file, data_root, split, crops, cut)
-    path = cache_dir() / "features" / f"{key}.npy"
+    path = features_path(backbone_file, data_root, split, crops, cut)
     with file_lock(path.with_suffix(".lock")):
         if not path.is_file():
             backbone, _ = load_backbone_file(backbone_file)

@@ -21,7 +21,7 @@ from airpose_lib.train.evaluate import evaluate_features
 from airpose_lib.zoo import kit_checkpoint, read_manifest, verified, zoo_dir
 
 __all__ = ["NetworksConfig", "networks_config", "shipped_from", "ShippedNetworks", "shipped_networks", "shipped_ablation_tables",
-           "recordings_check", "TUNED", "REBUILD"]
+           "recordings_check", "recordings_reference_dir", "TUNED", "REBUILD"]
 
 #: Recording methods of notebooks 03-05 -> the manifest entry of their network (``{field}``: the
 #: field recordings' fine-tuning adds ``_field``).
@@ -116,10 +116,26 @@ def shipped_ablation_tables(nets: ShippedNetworks, data_root: str | Path, varian
     return out
 
 
+def recordings_reference_dir(profile: str) -> Path:
+    """The recordings' reference of a profile on shipped networks: its own
+    ``results/<profile>/recordings/`` when committed, else the shipping profile's.
+
+    A median over a recording's frames depends on which frames (on the cpu recordings a 200-frame
+    span's medians differ from the 900-frame ones by more than the tolerance), and a 200-frame
+    render is another motion than the first 200 frames of a 900-frame one (its script is drawn
+    for its own length). So a profile that renders shorter recordings keeps its own reference,
+    made by the same networks on the same recordings from a clean commit
+    (``airpose reproduce --profile P --only 05 --write-reference``); it then measures what another
+    machine's render and kernels change.
+    """
+    own = reference_dir(profile) / "recordings"
+    return own if (own / "recording_errors.csv").is_file() else reference_dir(shipped_from(profile)) / "recordings"
+
+
 def recordings_check(profile: str, errors: pd.DataFrame, field_markers: pd.DataFrame | None = None, *,
                      compare: bool = True, out: str | Path | None = None) -> tuple[pd.DataFrame | None, str]:
-    """UAV2 in UAV1 on this profile's recordings against the shipping profile's reference
-    (``results/<shipped>/recordings/``): the clean recordings' error table and the field
+    """UAV2 in UAV1 on this profile's recordings against their reference
+    (:func:`recordings_reference_dir`): the clean recordings' error table and the field
     recordings' marker table (rows against the generated cameras), AirPose and AirPose+.
 
     Returns:
@@ -140,7 +156,7 @@ def _recordings_check(profile: str, errors: pd.DataFrame, field_markers: pd.Data
         return None, "no comparison with a reference: this profile's networks train a few steps"
     if source is None:
         return None, "networks trained here: `airpose reproduce` compares the recordings' claims with the reference"
-    ref = reference_dir(source) / "recordings"
+    ref = recordings_reference_dir(profile)
     parts = {"clean recordings": recordings_agreement(errors, pd.read_csv(ref / "recording_errors.csv"))}
     if field_markers is not None and not field_markers.empty and (ref / "field_markers.csv").is_file():
         cameras = lambda t: t[t["reference"] == "generated cameras"]  # noqa: E731

@@ -64,7 +64,7 @@ def test_a_bad_value_or_key_in_a_profile_names_the_file_and_the_field(tmp_path):
 
 def test_errors_name_the_file_and_the_fix(tmp_path):
     with pytest.raises(ProfileError, match=r"unknown profile 'nope' \(no .*nope\.yaml\); "
-                                           r"available: cpu, cpu_paper_layout, paper, smoke"):
+                                           r"available: cpu, cpu_paper_layout, demo, paper, smoke"):
         read_profile("nope")
     with pytest.raises(ValueError, match="missing.yaml does not exist"):  # a ValueError, as before
         profile_section(tmp_path / "missing.yaml", "train")

@@ -119,8 +119,9 @@ FAKES = dict(dataset_factory=fake_dataset_factory, loss_factory=cached_loss_fact
 
 
 def tiny_config(**kw) -> TrainConfig:
-    """ResNet-18 at 32 px with a frozen backbone (the regressor trains; keeps the tests fast)."""
-    base = dict(variant="airpose", steps=4, batch_size=4, backbone="resnet18", freeze_backbone=True,
+    """ResNet-18 at 32 px with a frozen backbone (the regressor trains; keeps the tests fast), in
+    fp32 on every CPU (``auto`` would pick bf16 on some: the tests compare exact numbers)."""
+    base = dict(variant="airpose", steps=4, batch_size=4, backbone="resnet18", freeze_backbone=True, precision="fp32",
                 checkpoint_every=2, keep_checkpoints=0, log_every=1, val_every=2, val_batches=1, seed=7,
                 progress=False, data={"n": 12}, loss={"vertex_subsample": 300}, model={"num_iterations": 2})
     base.update(kw)

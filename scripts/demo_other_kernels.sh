@@ -33,7 +33,7 @@ a, b = (pd.read_csv(f, index_col=0) for f in sys.argv[1:3])
 rows = [m for m in a.index if pd.notna(a.loc[m, "MPJPE [m]"])]
 for col in ("MPE [m]", "MPJPE [m]"):
     rel = ((b.loc[rows, col] - a.loc[rows, col]) / a.loc[rows, col]).abs().max()
-    print(f"{col}: largest relative difference between the kernel paths {100 * rel:.4f} % (tolerance 5 %)")
+    print(f"{col}: largest relative difference between the kernel paths {100 * rel:.2g} % (tolerance 5 %)")
 deg = (b.loc[rows, "root orient. median [deg]"] - a.loc[rows, "root orient. median [deg]"]).abs().max()
-print(f"root orient. median: largest difference {deg:.4f} deg (tolerance 1 deg)")
+print(f"root orient. median: largest difference {deg:.2g} deg (tolerance 1 deg)")
 PY

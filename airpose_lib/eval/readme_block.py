@@ -69,10 +69,30 @@ def _claim_lines(claims: pd.DataFrame) -> list[str]:
     return lines
 
 
+def _bound_lines(ref: Path, profile: str, claims: pd.DataFrame) -> list[str]:
+    """The measured bound of what an exchange could buy (``results/<profile>/mechanism/``, when
+    made) beside the paper's Fullcam -> AirPose gain; none without that table."""
+    path = ref / "mechanism" / "mechanism.csv"
+    if not path.is_file():
+        return []
+    m = pd.read_csv(path)
+    row = m[(m["part"] == "c") & (m["readout"] == "Baseline + Fullcam") & (m["metric"] == "gain over measured [%]")
+            & m["input"].str.contains("shared scalar")]
+    paper = claims.loc[claims["claim"] == "MPE: Baseline + Fullcam > AirPose", "paper gain [%]"]
+    if row.empty or paper.empty:
+        return []
+    r = row.iloc[0]
+    return ["", f"What an exchange could buy on this data (`results/{profile}/mechanism/`, validation split): one "
+                f"depth scale shared by the two views, the most a shared body number could give, would cut Baseline "
+                f"+ Fullcam's MPE by at most {r['value']:.1f} % ({r['CI low']:.1f}, {r['CI high']:.1f}), against the "
+                f"paper's Fullcam -> AirPose gain of {float(paper.iloc[0]):.1f} %."]
+
+
 def results_block(profile: str, root: str | Path | None = None) -> str:
     """The block's Markdown (markers included) made from ``results/<profile>/``: Table I (kit mean
-    ± seed spread, the paper's), the claims with their intervals and gains, and the provenance
-    (commit, date, command).
+    ± seed spread, the paper's), the claims with their intervals and gains, the measured bound of
+    what an exchange could buy (when ``mechanism/`` is there), and the provenance (commit, date,
+    command).
 
     Raises:
         FileNotFoundError: the bundle lacks ``table1.csv``, ``claims.csv`` or ``provenance.json``.
@@ -90,7 +110,7 @@ def results_block(profile: str, root: str | Path | None = None) -> str:
              "Kit: mean ± standard deviation over seeds; paper: its Table I.", "",
              *_table_lines(table), "",
              "The paper's orderings (\"A > B\": A's error is larger), paired over the test samples:", "",
-             *_claim_lines(claims), closing]
+             *_claim_lines(claims), *_bound_lines(ref, profile, claims), closing]
     return "\n".join(lines)
 
 

@@ -217,7 +217,12 @@ def test_pool_workers_die_with_a_killed_parent(tmp_path, open_model_files):
     assert not alive, f"orphans left: {alive}"
 
 
-SLEEPER = "import os, time\ndef job(args):\n    print('WORKER', os.getpid(), flush=True)\n    time.sleep(300)\n"
+# A run that takes long: the worker leaves a file named by its PID (a file, not a line on the parent's
+# stdout, so that nothing about inherited pipes decides the test), then sleeps.
+SLEEPER = ("import os, pathlib, time\n"
+           "def job(args):\n"
+           "    (pathlib.Path(args[3]) / f'worker_{os.getpid()}').touch()\n"
+           "    time.sleep(300)\n")
 ABLATION_PARENT = ("import sys\n"
                    "sys.path.insert(0, sys.argv[2])\n"
                    "import sleeper\n"
@@ -232,19 +237,21 @@ def test_ablation_training_workers_die_with_a_killed_parent(tmp_path):
     """SIGKILL the parent of `run_ablation(workers=2)` while both runs train: the two spawned
     training processes exit too (each would otherwise train on for minutes to hours)."""
     (tmp_path / "sleeper.py").write_text(SLEEPER)
+    runs = tmp_path / "runs"
+    runs.mkdir()
     err = open(tmp_path / "stderr.txt", "w")
-    proc = subprocess.Popen([sys.executable, "-c", ABLATION_PARENT, str(tmp_path / "runs"), str(tmp_path)],
-                            stdout=subprocess.PIPE, stderr=err, text=True, env=_env())
-    workers = set()
+    proc = subprocess.Popen([sys.executable, "-c", ABLATION_PARENT, str(runs), str(tmp_path)],
+                            stdout=subprocess.DEVNULL, stderr=err, text=True, env=_env())
+    workers: set[int] = set()
     try:
+        deadline = time.monotonic() + 120
         while len(workers) < 2:
-            line = proc.stdout.readline()  # the parent prints nothing else; EOF if it fails
-            if not line:  # the parent (and any worker) closed stdout: say how it ended
-                code = proc.wait(30)
-                pytest.fail(f"the parent ended (exit status {code}; negative: killed by that signal) before both "
-                            f"workers started; its stderr: {(tmp_path / 'stderr.txt').read_text()!r}")
-            if line.startswith("WORKER"):
-                workers.add(int(line.split()[1]))
+            workers = {int(f.name.split("_")[1]) for f in runs.glob("worker_*")}
+            if proc.poll() is not None:  # say how it ended
+                pytest.fail(f"the parent ended (exit status {proc.returncode}; negative: killed by that signal) "
+                            f"before both workers started; its stderr: {(tmp_path / 'stderr.txt').read_text()!r}")
+            assert time.monotonic() < deadline, f"only {len(workers)} of 2 workers started in 120 s"
+            time.sleep(0.2)
         kids = _children(proc.pid)
         assert workers <= kids
     finally:

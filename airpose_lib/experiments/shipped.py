@@ -9,6 +9,7 @@ recordings, and every table is compared with the shipping profile's committed re
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 from pathlib import Path
 
 import pandas as pd
@@ -71,8 +72,9 @@ class ShippedNetworks:
     folder: Path
     seed: int
 
-    @property
+    @cached_property
     def backbone(self) -> Path:
+        """The backbone file, verified once per set (every regressor is joined with it)."""
         return verified(self.folder, "backbone")
 
     def checkpoint(self, name: str) -> Path:

@@ -18,7 +18,8 @@ recording becomes a copy made of links: every other file of the recording is lin
 ``load_sequence(out, detectors=("openpose", "alphapose", "mediapipe"))`` reads it as the
 recording plus the new detector, and the recording is left untouched.
 
-    /work/venv-mp/bin/python scripts/mediapipe_detect.py RECORDING --out OUT --crop openpose
+    .venv-mediapipe/bin/python scripts/mediapipe_detect.py RECORDING --out OUT --crop openpose
+    .venv-mediapipe/bin/python scripts/mediapipe_detect.py RECORDING --crop track   # no detector at hand
 """
 from __future__ import annotations
 
@@ -40,6 +41,7 @@ from airpose_lib.data.sequences.mediapipe_pose import (  # noqa: E402
     crop_image,
     from_crop,
     square_crop,
+    track_person,
     write_body25,
 )
 from airpose_lib.data.sequences.reader import load_sequence  # noqa: E402
@@ -98,7 +100,7 @@ def main(argv=None) -> int:
     try:
         seq = load_sequence(src, detectors=(args.crop,) if args.crop in DETECTOR_FILES else (),
                             ground_truth=args.crop == "truth", missing_detections="zero")
-        boxes = crop_boxes(seq, args.crop)
+        boxes = None if args.crop == "track" else crop_boxes(seq, args.crop)
     except UserError as e:
         print(f"mediapipe_detect: error: {e}", file=sys.stderr)
         return 2
@@ -110,6 +112,15 @@ def main(argv=None) -> int:
     for v in range(V):
         with mp_pose.Pose(static_image_mode=True, model_complexity=args.model_complexity,
                           min_detection_confidence=args.min_detection_confidence) as det:
+            if boxes is None:  # no box to start from: find the person in tiles, then follow it
+                def detect(image, crop, det=det):
+                    return landmarks_px(det.process(crop_image(image, crop, args.input_size)), crop, args.input_size)
+
+                h, w = seq.image(0, v).shape[:2]
+                landmarks[:, v], counts = track_person((seq.image(f, v) for f in range(F)), detect, (w, h),
+                                                       crop_scale=args.crop_scale)
+                print(f"view {v + 1}: {counts}")
+                continue
             for f in range(F):
                 if not np.isfinite(boxes[f, v]).all():
                     continue  # no box in this view at all: nothing to crop

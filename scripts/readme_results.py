@@ -4,7 +4,8 @@
     python scripts/readme_results.py --check    # exit 1 when a page and its bundle disagree
 
 A block is Table I (``<!-- results:<profile> -->``), the recordings' UAV2 in UAV1
-(``<!-- recordings:<profile> -->``) or the shipped networks' manifest (``<!-- zoo:<profile> -->``);
+(``<!-- recordings:<profile> -->``), the shipped networks' manifest (``<!-- zoo:<profile> -->``) or
+the video route on known truth (``<!-- video:<profile> -->``);
 :data:`BLOCKS` says which page holds which.
 """
 from __future__ import annotations
@@ -13,7 +14,14 @@ import argparse
 import sys
 from pathlib import Path
 
-from airpose_lib.eval.readme_block import block_markers, readme_block, recordings_block, replace_block, results_block
+from airpose_lib.eval.readme_block import (
+    block_markers,
+    readme_block,
+    recordings_block,
+    replace_block,
+    results_block,
+    video_block,
+)
 from airpose_lib.zoo import zoo_dir, zoo_table
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -21,7 +29,8 @@ ROOT = Path(__file__).resolve().parents[1]
 BLOCKS = (("README.md", "cpu", "results"),
           ("docs/findings.md", "cpu_paper_layout", "results"),
           ("docs/recordings.md", "cpu", "recordings"),
-          ("docs/model_zoo.md", "cpu", "zoo"))
+          ("docs/model_zoo.md", "cpu", "zoo"),
+          ("docs/own_videos.md", "demo", "video"))
 
 
 def block(profile: str, kind: str) -> str:
@@ -31,6 +40,12 @@ def block(profile: str, kind: str) -> str:
         folder = zoo_dir(profile)
         return (f"{opening}\nThe `{profile}` profile's shipped networks (`{folder.relative_to(ROOT)}/manifest.yaml`; "
                 f"`airpose zoo verify --profile {profile}` checks them):\n\n{zoo_table(folder)}\n{closing}")
+    if kind == "video":
+        made = video_block(profile)
+        if made is None:
+            raise SystemExit(f"results/{profile}/video/ has no known_truth.csv: make it with write_video_reference "
+                             "(docs/own_videos.md)")
+        return made
     made = results_block(profile) if kind == "results" else recordings_block(profile)
     if made is None:
         raise SystemExit(f"results/{profile}/recordings/ has no marker table (markers.csv): make it with "

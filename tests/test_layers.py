@@ -48,7 +48,7 @@ ALLOWED: dict[str, set[str]] = {
 
 # data's wings, bottom first: a module of data imports data's modules of its own wing or of a wing
 # before it, never one after it (LAYERS.md gives the reasons).
-DATA_WINGS = ("network_input", "still", "sequences", "official")
+DATA_WINGS = ("network_input", "still", "sequences", "video", "official")
 
 # The most kit modules one module of experiments imports: a module there is one stage of an
 # experiment, and one that needs more does several jobs (split it by stage).

@@ -8,7 +8,7 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
-from airpose_lib.eval.readme_block import readme_block, recordings_block, replace_block, results_block
+from airpose_lib.eval.readme_block import readme_block, recordings_block, replace_block, results_block, video_block
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -73,14 +73,39 @@ def test_the_recordings_block_is_the_marker_tables(tmp_path):
     assert readme_block(new, "toy", "recordings") == "\n".join(block) and readme_block(new, "toy") == readme_block(text, "toy")
 
 
+def test_the_video_block_is_the_known_truth_table(tmp_path):
+    ref = tmp_path / "toy" / "video"
+    ref.mkdir(parents=True)
+    rows = [{"recordings": rec, "route": route, "method": "AirPose+", "frames": 193, "mpjpe_median_m": m,
+             "uav2_in_uav1_position_median_m": 1.5, "uav2_in_uav1_orientation_median_deg": 6.25,
+             "offset_frames": -7 if route == "recording" else found}
+            for rec, found in (("clean", -8), ("field", -7)) for route, m in (("video", 0.0712), ("recording", 0.07))]
+    pd.DataFrame(rows).to_csv(ref / "known_truth.csv", index=False)
+    (ref / "provenance.json").write_text(json.dumps({
+        "git": {"commit": "abcdef0123"}, "created_at": "2026-12-07T01:00", "command": "python -c ...", "shift": 7,
+        "recordings": {"clean": "person2", "field": "person2"},
+        "timing": {"clean": {"seconds_per_100_frames": 61.4}, "field": {"seconds_per_100_frames": 40.0}}}))
+    block = video_block("toy", tmp_path).splitlines()
+    assert block[0] == "<!-- video:toy -->" and block[-1] == "<!-- /video:toy -->"
+    assert "commit abcdef0, 2026-12-07; `python -c ...`" in block[1] and "started 7 frames late" in block[1]
+    assert block[-3:-1] == ["| clean | AirPose+ | 193 | 0.0712 / 0.0700 | 1.500 / 1.500 | 6.25 / 6.25 | -8 (-7) | 61 |",
+                            "| field | AirPose+ | 193 | 0.0712 / 0.0700 | 1.500 / 1.500 | 6.25 / 6.25 | given (-7) | 40 |"]
+    assert video_block("toy", tmp_path / "elsewhere") is None
+
+
+def _made(profile, kind):
+    return {"results": results_block, "recordings": recordings_block, "video": video_block}[kind](profile)
+
+
 @pytest.mark.parametrize(("page", "profile", "kind"), [("README.md", "cpu", "results"),
                                                      ("docs/findings.md", "cpu_paper_layout", "results"),
-                                                     ("docs/recordings.md", "cpu", "recordings")])
+                                                     ("docs/recordings.md", "cpu", "recordings"),
+                                                     ("docs/own_videos.md", "demo", "video")])
 def test_the_blocks_match_the_committed_results(page, profile, kind):
     # `python scripts/readme_results.py` after a new results/<profile>/ (airpose reproduce --write-reference)
     block = readme_block((ROOT / page).read_text(), profile, kind)
     assert block is not None, f"{page} lost its <!-- {kind}:{profile} --> block"
-    made = results_block(profile) if kind == "results" else recordings_block(profile)
+    made = _made(profile, kind)
     assert block == made, f"{page}'s {profile} {kind} block differs from results/{profile}/: " \
                           "run python scripts/readme_results.py"
 
@@ -92,7 +117,8 @@ def test_the_writer_knows_every_block_the_tests_check():
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     assert set(module.BLOCKS) == {("README.md", "cpu", "results"), ("docs/findings.md", "cpu_paper_layout", "results"),
-                                  ("docs/recordings.md", "cpu", "recordings"), ("docs/model_zoo.md", "cpu", "zoo")}
+                                  ("docs/recordings.md", "cpu", "recordings"), ("docs/model_zoo.md", "cpu", "zoo"),
+                                  ("docs/own_videos.md", "demo", "video")}
 
 
 def test_the_model_zoo_page_lists_every_shipped_file_with_its_hash():

@@ -43,6 +43,7 @@ from .prior import add_prior
 from .report import add_report
 from .reproduce import add_reproduce
 from .train import add_pretrain, add_train
+from .video import add_video
 from .zoo import add_zoo
 
 __all__ = ["CLIError", "build_parser", "main"]
@@ -50,7 +51,7 @@ __all__ = ["CLIError", "build_parser", "main"]
 # Subcommand builders, in help order; each adds its parser to the group.
 _SUBCOMMANDS: tuple[Callable, ...] = (add_body, add_data, add_pretrain, add_backbone, add_train, add_eval, add_prior,
                                        add_fit, add_finetune, add_predict, add_node, add_launch, add_export,
-                                       add_keys, add_reproduce, add_report, add_zoo)
+                                       add_keys, add_reproduce, add_report, add_zoo, add_video)
 
 
 def build_parser() -> argparse.ArgumentParser:

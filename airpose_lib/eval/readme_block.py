@@ -17,7 +17,7 @@ import pandas as pd
 
 from .reference import reference_dir
 
-__all__ = ["block_markers", "results_block", "recordings_block", "replace_block", "readme_block"]
+__all__ = ["block_markers", "results_block", "recordings_block", "video_block", "replace_block", "readme_block"]
 
 #: Table I's columns shown in the README: the kit's mean (± its seed spread) next to the paper's.
 _TABLE_COLUMNS = (("MPE", "MPE [m]", "MPE std [m]", "MPE paper [m]"),
@@ -142,6 +142,38 @@ def recordings_block(profile: str, root: str | Path | None = None) -> str | None
                                         str(int(r["frames"])), _fmt(r["rel_t_median_m"]),
                                         _fmt(r["rel_rot_median_deg"], 2)]) + " |")
     return "\n".join(lines + [block_markers(profile, "recordings")[1]])
+
+
+def video_block(profile: str, root: str | Path | None = None) -> str | None:
+    """The video route on known truth (``results/<profile>/video/``, written by
+    :func:`airpose_lib.experiments.video_check.write_video_reference`): per recording and method,
+    the median errors of ``airpose video`` next to the same networks on the recording's frames,
+    the offset found, and the seconds per 100 frames; None without that folder."""
+    ref = reference_dir(profile, root) / "video"
+    if not (ref / "known_truth.csv").is_file():
+        return None
+    t = pd.read_csv(ref / "known_truth.csv")
+    prov = json.loads((ref / "provenance.json").read_text())
+    commit = (prov.get("git") or {}).get("commit") or "unknown"
+    opening, closing = block_markers(profile, "video")
+    lines = [opening, f"`airpose video` on known truth (`results/{profile}/video/`: commit {commit[:7]}, "
+             f"{prov.get('created_at', '')[:10]}; `{prov.get('command', '')}`): UAV2's video started "
+             f"{prov.get('shift')} frames late; medians over the paired frames, the video route against the same "
+             "networks on the recording's own frames.", "",
+             "| recordings | method | frames | MPJPE video / recording [m] | UAV2 in UAV1 position video / recording [m] "
+             "| orientation video / recording [deg] | offset found (true) | s per 100 frames |",
+             "|---|---|---|---|---|---|---|---|"]
+    for (name, method), g in t.groupby(["recordings", "method"], sort=False):
+        v, r = g[g["route"] == "video"].iloc[0], g[g["route"] == "recording"].iloc[0]
+        timing = prov.get("timing", {}).get(name, {})
+        found = f"{int(v['offset_frames']):+d}" if name == next(iter(prov["recordings"])) else "given"
+        lines.append(f"| {name} | {method} | {int(v['frames'])} | {_fmt(v['mpjpe_median_m'], 4)} / "
+                     f"{_fmt(r['mpjpe_median_m'], 4)} | {_fmt(v['uav2_in_uav1_position_median_m'])} / "
+                     f"{_fmt(r['uav2_in_uav1_position_median_m'])} | {_fmt(v['uav2_in_uav1_orientation_median_deg'], 2)}"
+                     f" / {_fmt(r['uav2_in_uav1_orientation_median_deg'], 2)} | {found} ({int(r['offset_frames']):+d}) | "
+                     f"{_fmt(timing.get('seconds_per_100_frames'), 0)} |")
+    lines.append(closing)
+    return "\n".join(lines)
 
 
 def replace_block(text: str, block: str, profile: str, kind: str = "results") -> str:

@@ -47,6 +47,9 @@ from .detector_files import write_detector_file
 from .layout import DETECTOR_FILES
 
 __all__ = [
+    "search_crops",
+    "box_from_landmarks",
+    "track_person",
     "MEDIAPIPE_NAMES",
     "BODY_25_FROM_MEDIAPIPE",
     "CROP_SOURCES",
@@ -84,10 +87,11 @@ BODY_25_FROM_MEDIAPIPE: tuple[tuple[int, ...], ...] = tuple(
     tuple(MEDIAPIPE_NAMES.index(n) for n in _LANDMARKS_OF[name]) for name in BODY_25_NAMES)
 """Per BODY_25 keypoint, the MediaPipe landmarks it is the mean of (empty: MediaPipe lacks it)."""
 
-CROP_SOURCES = ("openpose", "alphapose", "truth", "none")
+CROP_SOURCES = ("openpose", "alphapose", "truth", "none", "track")
 """Where the detector's crop comes from: a simulated detector's person box (the drones' rule:
 ``data.network_input.person_box`` and the previous box when it misses), the generated
-recording's true box (``ground_truth.npz`` ``bbox``), or ``none`` (the whole frame)."""
+recording's true box (``ground_truth.npz`` ``bbox``), ``none`` (the whole frame), or ``track``
+(no box given: :func:`track_person` finds the person in tiles of the frame and follows it)."""
 
 
 def body25_from_landmarks(landmarks: np.ndarray) -> np.ndarray:
@@ -127,8 +131,8 @@ def crop_boxes(sequence, source: str, *, margin_px: float = 20.0, min_confidence
         ``(F, V, 4)`` ``[x0, y0, x1, y1]`` full-frame pixels; NaN where there is no box (a view
         whose detector never finds the person).
     """
-    if source not in CROP_SOURCES:
-        raise ConfigError(f"crop source must be one of {CROP_SOURCES}, got {source!r}")
+    if source not in CROP_SOURCES or source == "track":
+        raise ConfigError(f"crop source must be one of {CROP_SOURCES[:-1]} (track: track_person), got {source!r}")
     F, V = sequence.num_frames, sequence.num_views
     sizes = [sequence.image(0, v).shape[1::-1] for v in range(V)]  # (W, H) per view
     if source == "none":
@@ -182,3 +186,70 @@ def write_body25(path: str | Path, frames, keypoints: np.ndarray) -> None:
     if kp.shape != (len(frames), DETECTOR_FILES["mediapipe"][1], 3):
         raise ValueError(f"keypoints must be ({len(frames)}, 25, 3), got {kp.shape}")
     write_detector_file("mediapipe", Path(path), list(frames), kp)  # the one BODY_25 pickle writer
+
+
+def search_crops(width: int, height: int, side_share: float = 0.5, overlap: float = 0.5) -> list[tuple[float, float, float]]:
+    """Square tiles ``(x0, y0, side)`` covering a ``width`` x ``height`` frame, each ``side_share``
+    of its height, overlapping by at least ``overlap``: where a person a few per cent of the frame tall
+    fills enough of the detector's input to be found."""
+    side = max(1.0, side_share * height)
+    step = side * (1 - overlap)
+
+    def starts(length: float) -> np.ndarray:  # evenly spread, the last tile flush with the far edge
+        span = max(length - side, 0.0)
+        return np.linspace(0.0, span, int(np.ceil(span / step)) + 1)
+
+    xs, ys = starts(width), starts(height)
+    return [(float(x), float(y), float(side)) for y in ys for x in xs]
+
+
+def box_from_landmarks(landmarks: np.ndarray, min_visibility: float = 0.5) -> np.ndarray | None:
+    """``[x0, y0, x1, y1]`` around the landmarks seen with ``visibility >= min_visibility``
+    (``(33, 3)`` full-frame pixels); None with fewer than 4."""
+    lm = np.asarray(landmarks, np.float64)
+    seen = np.isfinite(lm[:, 0]) & (np.nan_to_num(lm[:, 2]) >= min_visibility)
+    if seen.sum() < 4:
+        return None
+    xy = lm[seen, :2]
+    return np.concatenate([xy.min(0), xy.max(0)])
+
+
+def track_person(images, detect, image_size: tuple[int, int], *, crop_scale: float = 1.5,
+                 min_visibility: float = 0.5) -> tuple[np.ndarray, dict]:
+    """Find a person without a given box and follow it: each frame is cropped around the previous
+    frame's landmarks; where there are none (the first frame, or the person was lost) the frame's
+    :func:`search_crops` are tried and the detection seen best is kept.
+
+    Args:
+        images: the frames, ``(H, W, 3)`` uint8, in order.
+        detect: ``detect(image, crop) -> (33, 3)`` landmarks ``[x, y, visibility]`` in full-frame
+            pixels of the square ``crop`` (:func:`square_crop`), NaN where nobody was found.
+        image_size: ``(W, H)`` of the frames.
+
+    Returns:
+        ``(F, 33, 3)`` landmarks (NaN: not found) and counts: ``followed``, ``searched`` (frames
+        that needed the tiles), ``found``.
+    """
+    W, H = image_size
+    tiles = search_crops(W, H)
+    out, prev = [], None
+    counts = {"followed": 0, "searched": 0, "found": 0}
+    for image in images:
+        lm = np.full((33, 3), np.nan)
+        if prev is not None:
+            lm = detect(image, square_crop(prev, crop_scale))
+            counts["followed"] += 1
+        if box_from_landmarks(lm, min_visibility) is None:
+            counts["searched"] += 1
+            best, best_score = np.full((33, 3), np.nan), -1.0
+            for crop in tiles:
+                cand = detect(image, crop)
+                if box_from_landmarks(cand, min_visibility) is not None:
+                    score = float(np.nanmean(cand[:, 2]))
+                    if score > best_score:
+                        best, best_score = cand, score
+            lm = best
+        prev = box_from_landmarks(lm, min_visibility)
+        counts["found"] += prev is not None
+        out.append(lm)
+    return (np.stack(out) if out else np.zeros((0, 33, 3))), counts

@@ -384,3 +384,4 @@ def run_video(cfg: VideoConfig, nets: VideoNetworks, *, fit_config: AirPosePlusC
             tmp.write_text(json.dumps(summary, indent=1, default=str))
         files["summary"] = out / "summary.json"
     return VideoRun(out, files, off, int(len(seq_frames)), seconds, warns)
+

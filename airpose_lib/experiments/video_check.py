@@ -101,9 +101,9 @@ def write_video_reference(out_dir: str | Path, recordings: dict[str, Path], netw
     from airpose_lib.data.video.export import export_videos
     from airpose_lib.eval.reference import machine_description, require_clean_checkout
     from airpose_lib.prior import load_prior
-    from airpose_lib.viz.video import plot_overlay_stills
 
     from .video import VideoConfig, run_video
+    from .video_outputs import overlay_stills
 
     git = require_clean_checkout()
     out = Path(out_dir)
@@ -124,7 +124,7 @@ def write_video_reference(out_dir: str | Path, recordings: dict[str, Path], netw
         table.insert(0, "recordings", name)
         tables.append(table)
         if n == 0:
-            fig = plot_overlay_stills([run.files["overlay_uav1"], run.files["overlay_uav2"]], 3)
+            fig = overlay_stills(run, 3)
             fig.savefig(out / "video_overlays.jpg", dpi=110, pil_kwargs={"quality": 85})
             plt.close(fig)
     pd.concat(tables, ignore_index=True).to_csv(out / "known_truth.csv", index=False, float_format="%.5f")

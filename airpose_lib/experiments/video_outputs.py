@@ -16,9 +16,9 @@ from airpose_lib.geometry import matrix_to_axis_angle
 from airpose_lib.model.smplx_params import posed_joints_and_vertices
 from airpose_lib.viz.style import save_figure
 from airpose_lib.viz.trajectories import plot_person_positions, plot_relative_camera
-from airpose_lib.viz.video import write_overlay_video
+from airpose_lib.viz.video import plot_overlay_stills, write_overlay_video
 
-__all__ = ["write_outputs"]
+__all__ = ["write_outputs", "overlay_stills"]
 
 
 def _axis_angle(R: np.ndarray) -> np.ndarray:
@@ -86,3 +86,11 @@ def write_outputs(out: Path, infos, cams, seq_frames: np.ndarray, off: int, esti
                 pairs(v), faces, cams[v].K, (infos[v].width, infos[v].height), fps / every,
                 out / f"overlay_uav{v + 1}.mp4")
     return files
+
+
+def overlay_stills(run, n: int = 3, title: str | None = None):
+    """:func:`airpose_lib.viz.video.plot_overlay_stills` of a run's overlay videos (``run``: a
+    :class:`~airpose_lib.experiments.video.VideoRun`), each still cut around the person's box."""
+    with np.load(run.out / "airpose.npz") as z:
+        boxes = [z["boxes"][:, 0], z["boxes"][:, 1]]
+    return plot_overlay_stills([run.files["overlay_uav1"], run.files["overlay_uav2"]], n, title=title, boxes=boxes)

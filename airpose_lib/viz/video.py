@@ -46,9 +46,11 @@ def write_overlay_video(frames: Iterable[tuple[np.ndarray, np.ndarray | None]], 
     return out
 
 
-def plot_overlay_stills(videos: list[str | Path], n: int = 3, title: str | None = None, zoom: float = 0.6):
-    """``n`` frames spread over each overlay video (one row per video), cropped to the middle
-    ``zoom`` of the frame's width where the drones keep the person.
+def plot_overlay_stills(videos: list[str | Path], n: int = 3, title: str | None = None,
+                        boxes: list[np.ndarray] | None = None, scale: float = 1.1):
+    """``n`` frames spread over each overlay video (one row per video), each cut to a square of
+    ``scale`` times the person's box around it (``boxes``: per video ``(F, 4)`` ``[x0, y0, x1, y1]``
+    of its frames; None: the whole frame).
 
     Returns:
         the figure.
@@ -56,7 +58,7 @@ def plot_overlay_stills(videos: list[str | Path], n: int = 3, title: str | None 
     import cv2
     import matplotlib.pyplot as plt
 
-    fig, ax = plt.subplots(len(videos), n, figsize=(3.2 * n, 2.2 * len(videos) + 0.4), squeeze=False,
+    fig, ax = plt.subplots(len(videos), n, figsize=(2.6 * n, 2.6 * len(videos) + 0.4), squeeze=False,
                            layout="constrained")
     for r, path in enumerate(videos):
         cap = cv2.VideoCapture(str(path))
@@ -68,10 +70,15 @@ def plot_overlay_stills(videos: list[str | Path], n: int = 3, title: str | None 
             a.set_xticks([])
             a.set_yticks([])
             if ok:
-                h, w = frame.shape[:2]
-                x0, y0 = int(w * (1 - zoom) / 2), int(h * (1 - zoom) / 2)
-                a.imshow(frame[y0:h - y0, x0:w - x0, ::-1])
-            a.set_title(f"{Path(path).stem}, frame {i}", fontsize=9)
+                img = frame[..., ::-1]
+                if boxes is not None and np.isfinite(boxes[r][i]).all():
+                    x0, y0, x1, y1 = boxes[r][i]
+                    half = 0.5 * scale * max(x1 - x0, y1 - y0)
+                    cx, cy = 0.5 * (x0 + x1), 0.5 * (y0 + y1)
+                    h, w = img.shape[:2]
+                    img = img[int(max(cy - half, 0)):int(min(cy + half, h)), int(max(cx - half, 0)):int(min(cx + half, w))]
+                a.imshow(img)
+            a.set_title(f"UAV{r + 1}, paired frame {i}", fontsize=9)
         cap.release()
     if title:
         fig.suptitle(title)

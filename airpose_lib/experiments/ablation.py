@@ -111,10 +111,12 @@ class AblationExperiment:
             what = f"the kit's networks on its own data, profile '{self.profile}', seeds {list(self.seeds)}"
         return f"Table I reproduced by the kit: {what}; paper columns from Saini et al. (RA-L 2022), Table I."
 
-    def smoke_warning(self) -> str | None:
-        """The warning a smoke run's numbers need (None otherwise)."""
-        if self.profile == "smoke" and not self.official:
-            return "SMOKE NUMBERS: a few dozen training steps; they only show that the pipeline runs."
+    def few_steps_warning(self, compare_reference: bool = True) -> str | None:
+        """The warning the numbers of networks trained a few steps need (None otherwise): the
+        profile says so with ``compare_reference: false`` (the notebook's parameter), whatever its
+        name."""
+        if not compare_reference and not self.official:
+            return "FEW-STEP NUMBERS: a few dozen training steps; they only show that the pipeline runs."
         return None
 
 

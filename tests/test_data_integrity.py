@@ -21,6 +21,7 @@ from airpose_lib.data.still.manifest import ShardIntegrityError, record_manifest
 from airpose_lib.data.still.scene import SceneConfig
 from airpose_lib.data.still.shards import shard_name
 from airpose_lib.folder_lock import FolderBusyError, folder_lock
+from airpose_lib.reproduce.configs import kit_configs
 from airpose_lib.train.features import FeatureDataset
 
 CFG = GenerationConfig(num_samples=8, shard_size=4, crop_size=64, seed=11,
@@ -141,10 +142,10 @@ def test_the_tracked_smoke_record_is_what_the_generator_makes_now():
     """The record says which data the smoke results were made from: a change of the generator or
     of the smoke profile's `data: still:` fails here until the record is made again
     (`airpose data generate --profile smoke --record-manifest`)."""
-    from airpose_lib.data.still.config import GENERATOR_VERSION, SPLITS, profile_config
+    from airpose_lib.data.still.config import GENERATOR_VERSION, SPLITS
 
     record = yaml.safe_load((ROOT / "data_manifests" / "generated_smoke.yaml").read_text())
-    cfg = profile_config("smoke")
+    cfg = kit_configs("smoke").still
     assert (record["generator_version"], record["fingerprint"]) == (GENERATOR_VERSION, cfg.fingerprint())
     assert record["config"] == cfg.to_dict() and record["num_shards"] == cfg.num_shards
     splits = {s: [k for k in range(cfg.num_shards) if cfg.shard_split(k) == s] for s in SPLITS}

@@ -227,10 +227,11 @@ ABLATION_PARENT = ("import sys\n"
                    "sys.path.insert(0, sys.argv[2])\n"
                    "import sleeper\n"
                    "import airpose_lib.train.ablation as A\n"
+                   "from airpose_lib.reproduce.configs import kit_configs\n"
                    "A._train_single_thread = sleeper.job  # a run that takes long: it sleeps\n"
-                   "A.prepare_data = A.load_train_config = lambda *a, **k: None\n"
+                   "A.prepare_data = lambda *a, **k: None\n"
                    "A._finished_run = lambda *a: None\n"
-                   "A._train_parallel('smoke', ['airpose', 'baseline'], [0], sys.argv[1], 2)\n")
+                   "A._train_parallel(kit_configs('smoke').train_inputs(), ['airpose', 'baseline'], [0], sys.argv[1], 2)\n")
 
 
 def test_ablation_training_workers_die_with_a_killed_parent(tmp_path):

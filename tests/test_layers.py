@@ -28,20 +28,21 @@ ALLOWED: dict[str, set[str]] = {
     "assets": set(),
     "engine": set(),
     "zoo": {"engine"},
-    "body": {"geometry", "assets", "profiles"},
+    "body": {"geometry", "assets"},
     "losses": {"geometry", "body"},
     "model": {"geometry", "body"},
     "viz": {"geometry", "body"},
-    "data": {"geometry", "body", "viz", "profiles"},
+    "data": {"geometry", "body", "viz"},
     "eval": {"geometry", "body", "model"},
-    "prior": {"geometry", "body", "data", "profiles", "engine"},
-    "fitting": {"geometry", "body", "prior", "losses", "profiles"},
-    "train": {"geometry", "body", "assets", "data", "model", "losses", "eval", "profiles", "engine"},
-    "runtime": {"geometry", "body", "data", "model", "profiles"},
-    "finetune": {"geometry", "body", "data", "model", "losses", "prior", "train", "profiles", "engine"},
-    "experiments": {"geometry", "profiles", "body", "assets", "data", "model", "losses", "eval", "viz", "prior", "fitting",
+    "prior": {"geometry", "body", "data", "engine"},
+    "fitting": {"geometry", "body", "prior", "losses"},
+    "train": {"geometry", "body", "assets", "data", "model", "losses", "eval", "engine"},
+    "runtime": {"geometry", "body", "data", "model"},
+    "finetune": {"geometry", "body", "data", "model", "losses", "prior", "train", "engine"},
+    "experiments": {"geometry", "body", "assets", "data", "model", "losses", "eval", "viz", "prior", "fitting",
                     "train", "finetune", "runtime", "engine", "zoo"},
-    "reproduce": {"assets", "viz", "profiles"},
+    # the entry: the runner, the notebooks' set-up, and the profile typed once (reproduce.configs)
+    "reproduce": {"assets", "viz", "profiles", "data", "train", "prior", "finetune", "fitting", "experiments"},
     "cli": {"geometry", "profiles", "body", "assets", "data", "model", "losses", "eval", "viz", "prior", "fitting", "train",
             "finetune", "runtime", "experiments", "reproduce", "engine", "zoo"},
 }
@@ -254,3 +255,4 @@ def test_experiment_modules_import_few_of_the_kit():
     heavy = {m: n for m, n in heavy.items() if n > EXPERIMENT_MAX_IMPORTS}
     assert not heavy, f"modules of experiments importing more than {EXPERIMENT_MAX_IMPORTS} of the kit's (split " \
         f"them by stage): {heavy}"
+

@@ -15,6 +15,8 @@ from pathlib import Path
 
 import pandas as pd
 
+from airpose_lib.paths import RunFolders
+
 from .reference import reference_dir
 
 __all__ = ["block_markers", "results_block", "recordings_block", "replace_block", "readme_block"]
@@ -97,7 +99,7 @@ def results_block(profile: str, root: str | Path | None = None) -> str:
     Raises:
         FileNotFoundError: the bundle lacks ``table1.csv``, ``claims.csv`` or ``provenance.json``.
     """
-    ref = reference_dir(profile, root)
+    ref = reference_dir(RunFolders.of(profile), root)
     table = pd.read_csv(ref / "table1.csv", index_col=0)
     claims = pd.read_csv(ref / "claims.csv")
     prov = json.loads((ref / "provenance.json").read_text())
@@ -123,7 +125,7 @@ def recordings_block(profile: str, root: str | Path | None = None) -> str | None
     markers, from ``results/<profile>/recordings/`` (``markers.csv``, ``field_markers.csv``):
     per recording and person, the markers against the generated cameras, then each method against
     both references, medians. None when the bundle has no marker table."""
-    ref = reference_dir(profile, root) / "recordings"
+    ref = reference_dir(RunFolders.of(profile), root) / "recordings"
     parts = [pd.read_csv(ref / name).assign(recordings=tag) for name, tag in _MARKER_TABLES if (ref / name).is_file()]
     if not parts:
         return None

@@ -40,7 +40,7 @@ import pandas as pd
 from airpose_lib import __version__
 from airpose_lib.atomic import atomic_path
 from airpose_lib.errors import UserError
-from airpose_lib.paths import profile_name
+from airpose_lib.paths import RunFolders, profile_name
 
 from .ablation import PER_SEED_METRICS, table_to_markdown
 
@@ -59,9 +59,9 @@ RESULTS_ROOT = Path(__file__).resolve().parents[2] / "results"
 COMPARED_METRICS = (*PER_SEED_METRICS, "mpe_tight_m", "mpjpe_tight_m")
 
 
-def reference_dir(profile: str, root: str | Path | None = None) -> Path:
-    """``results/<name>`` of the checkout (or of ``root``; ``<name>``: :func:`~airpose_lib.paths.profile_name`)."""
-    return Path(root if root is not None else RESULTS_ROOT) / profile_name(profile)
+def reference_dir(folders: RunFolders, root: str | Path | None = None) -> Path:
+    """``results/<name>`` of the checkout (or of ``root``; ``<name>``: ``folders.name``)."""
+    return Path(root if root is not None else RESULTS_ROOT) / folders.name
 
 
 # -- provenance -----------------------------------------------------------------------------------
@@ -426,7 +426,7 @@ def install_reference(bundle: str | Path, profile: str, command: str | None = No
         ProvenanceError: the checkout ``root`` belongs to has changes (:func:`require_clean_checkout`),
             or the bundle's provenance has :func:`provenance_problems` against it.
     """
-    src, dst = Path(bundle), reference_dir(profile, root)
+    src, dst = Path(bundle), reference_dir(RunFolders.of(profile), root)
     if not (src / "per_seed.csv").is_file():
         raise FileNotFoundError(f"{src}: no results bundle (per_seed.csv); run notebook 02 first")
     checkout = _checkout_of(root)
@@ -490,7 +490,7 @@ def reference_report(bundle: str | Path, profile: str, write: bool = False, comm
     Returns:
         a few lines of text ("" when there is nothing to say: no bundle, or no reference).
     """
-    bundle, ref = Path(bundle), reference_dir(profile, root)
+    bundle, ref = Path(bundle), reference_dir(RunFolders.of(profile), root)
     if not (bundle / "per_seed.csv").is_file():
         return f"reference: notebook 02 wrote no {bundle / 'per_seed.csv'}; nothing compared" if write else ""
     if write:
@@ -538,7 +538,7 @@ def install_recordings_reference(notebook_dir: str | Path, profile: str, command
         FileNotFoundError: a file of :data:`RECORDING_FILES` is missing (notebook 05 did not finish).
         ProvenanceError: the checkout ``root`` belongs to has changes (:func:`require_clean_checkout`).
     """
-    src, dst = Path(notebook_dir), reference_dir(profile, root) / "recordings"
+    src, dst = Path(notebook_dir), reference_dir(RunFolders.of(profile), root) / "recordings"
     missing = [n for n in RECORDING_FILES if not (src / n).is_file()]
     if missing:
         raise FileNotFoundError(f"{src}: no {', '.join(missing)}; run notebook 05_airpose_plus first")
@@ -557,7 +557,7 @@ def recordings_report(notebook_dir: str | Path, profile: str, write: bool = Fals
                       root: str | Path | None = None) -> str:
     """What ``airpose reproduce`` prints after notebook 05: the claims' verdicts that differ from
     the committed ``results/<profile>/recordings/paper_claims.csv`` (or the install, with ``write``)."""
-    src, ref = Path(notebook_dir), reference_dir(profile, root) / "recordings"
+    src, ref = Path(notebook_dir), reference_dir(RunFolders.of(profile), root) / "recordings"
     if write:
         return f"reference: wrote {install_recordings_reference(src, profile, command or '', root)}"
     new_path, old_path = src / "paper_claims.csv", ref / "paper_claims.csv"

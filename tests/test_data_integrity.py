@@ -32,7 +32,7 @@ ROOT = Path(__file__).resolve().parents[1]
 @pytest.fixture(scope="module")
 def intact(module_tmp) -> Path:
     root = module_tmp("integrity") / "data"
-    generate_still_dataset(CFG, root, workers=1, progress=False, profile="test")
+    generate_still_dataset(CFG, root, workers=1, progress=False, label="test")
     return root
 
 
@@ -88,7 +88,7 @@ def test_the_kit_rebuilds_a_damaged_shard_of_its_own_dataset_and_says_so(copy, i
 def test_generate_says_which_finished_shard_it_rebuilds(copy, capfd):
     (copy / shard_name(0)).write_bytes(b"cut")
     capfd.readouterr()
-    generate_still_dataset(CFG, copy, workers=1, progress=False, profile="test")
+    generate_still_dataset(CFG, copy, workers=1, progress=False, label="test")
     err = capfd.readouterr().err
     assert f"airpose: shard {copy / shard_name(0)} is damaged" in err and "rebuilding it" in err
 
@@ -209,7 +209,7 @@ def test_ensure_waits_for_a_dataset_being_generated_and_does_not_make_it_again(t
         with folder_lock({str(root)!r}, "dataset folder"):
             print("held", flush=True)
             time.sleep(1.0)
-            generate_still_dataset(cfg, {str(root)!r}, workers=1, progress=False, profile="test")
+            generate_still_dataset(cfg, {str(root)!r}, workers=1, progress=False, label="test")
     """)
     proc = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, text=True, cwd=ROOT)
     try:

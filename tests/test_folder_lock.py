@@ -301,9 +301,9 @@ def test_generation_elsewhere_leaves_the_tracked_manifest_alone(tmp_path, monkey
     tracked = ROOT / "data_manifests" / "generated_smoke.yaml"
     before = tracked.read_bytes()
     cfg = GenerationConfig(num_samples=2, shard_size=2, crop_size=32, seed=3, scene=SceneConfig(num_distractors=(0, 0)))
-    m = generate_still_dataset(cfg, tmp_path / "d", workers=1, progress=False, profile="smoke")
+    m = generate_still_dataset(cfg, tmp_path / "d", workers=1, progress=False, label="smoke")
     assert m["status"] == "complete" and tracked.read_bytes() == before
-    generate_still_dataset(cfg, tmp_path / "d", workers=1, progress=False, profile="smoke", record=tmp_path / "rec")
+    generate_still_dataset(cfg, tmp_path / "d", workers=1, progress=False, label="smoke", record=tmp_path / "rec")
     assert (tmp_path / "rec" / "generated_smoke.yaml").is_file() and tracked.read_bytes() == before
     # the CLI records only with --record-manifest
     seen = {}

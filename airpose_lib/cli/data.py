@@ -61,7 +61,7 @@ def _cmd_data_generate(args: argparse.Namespace) -> int:
     config = configs.still
     root = args.out if args.out is not None else configs.folders.still
     workers = args.workers if args.workers is not None else (os.cpu_count() or 1)
-    manifest = generate_still_dataset(config, root, workers=workers, profile=args.profile,
+    manifest = generate_still_dataset(config, root, workers=workers, label=args.profile,
                                       progress=not args.quiet, record=args.record_manifest)
     t = manifest["totals"]
     print(f"{root}: {t['train_samples']} train + {t.get('val_samples', 0)} val + {t['test_samples']} test samples "

@@ -235,7 +235,7 @@ def write_ablation_bundle(exp: AblationExperiment, folder: str | Path, *, table:
     steps = {**exp.wall, **{f"train {v} seed {s}": w for (v, s), w in exp.train_wall().items()}}
     training = {f"{v} seed {s}": t for (v, s), t in train_settings(exp.runs).items()}
     return write_reference(folder, table=table, per_seed=exp.per_seed(), claims=claims, references=references,
-                           profile=exp.profile,
+                           label=exp.profile,
                            command=f"airpose reproduce --profile {exp.profile} --only 02_ablation_table",
                            step_wall_s=steps, extra={"seeds": list(exp.seeds), "variants": list(exp.variants),
                                                      "data_source": exp.source,

@@ -84,12 +84,12 @@ def _body_model_hashes(config: GenerationConfig) -> dict[str, str]:
             for g in config.scene.genders}                                            # is named as such
 
 
-def _new_manifest(config: GenerationConfig, profile: str | None, body_models: dict) -> dict:
+def _new_manifest(config: GenerationConfig, label: str | None, body_models: dict) -> dict:
     return {
         "kind": DATASET_KIND,
         "generator_version": GENERATOR_VERSION,
         "kit_version": __version__,
-        "profile": profile,
+        "profile": label,
         "seed": config.seed,
         "fingerprint": config.fingerprint(),
         "status": "incomplete",
@@ -128,7 +128,7 @@ def generate_still_dataset(
     root: Path | str,
     *,
     workers: int = 1,
-    profile: str | None = None,
+    label: str | None = None,
     progress: bool = True,
     record: bool | Path = False,
     stop_after_shards: int | None = None,
@@ -143,7 +143,7 @@ def generate_still_dataset(
         root: dataset folder (created if needed).
         workers: processes rendering shards in parallel, each with its own renderer (1 = in
             this process). The result does not depend on it.
-        profile: profile name recorded in the manifest (and used for the repair hint).
+        label: the profile's name recorded in the manifest (and used for the repair hint).
         progress: show a tqdm bar over samples.
         record: when the dataset is complete, copy the manifest to the checkout's
             ``data_manifests/generated_<profile>.yaml`` (True) or into the given folder.
@@ -170,9 +170,9 @@ def generate_still_dataset(
             f"(see body_models in {root / 'manifest.yaml'}); delete the folder or choose another "
             f"--out to generate the dataset again with the current model")
     if manifest is None:
-        manifest = _new_manifest(config, profile, body_models)
-    if profile is not None:
-        manifest["profile"] = profile
+        manifest = _new_manifest(config, label, body_models)
+    if label is not None:
+        manifest["profile"] = label
 
     kept, todo = [], []
     records = {r["index"]: r for r in manifest.get("shards") or []}
@@ -335,7 +335,7 @@ def ensure_still_dataset(config: GenerationConfig, root: Path | str, *, label: s
         if not record and _finished_and_intact(root, config):
             return root
         workers = workers if workers is not None else max(1, min(os.cpu_count() or 1, 4))
-        manifest = generate_still_dataset(config, root, workers=workers, profile=label,
+        manifest = generate_still_dataset(config, root, workers=workers, label=label,
                                           progress=progress, record=record)
     if manifest["status"] != "complete":
         raise DatasetError(f"dataset in {root} is incomplete; resume with "

@@ -48,10 +48,10 @@ def _manifest(root: str | Path | None) -> dict | None:
         return None
 
 
-def _profile_manifest(profile: str | None) -> dict | None:
+def _profile_manifest(name: str | None) -> dict | None:
     """The manifest of the dataset in the default folder of the profile an old config names
-    (where its training generated the data when the config named no folder)."""
-    return _manifest(RunFolders.of(profile).still) if profile else None
+    (``name``: where its training generated the data when the config named no folder)."""
+    return _manifest(RunFolders.of(name).still) if name else None
 
 
 def _camera(scene: Mapping[str, Any]) -> np.ndarray:

@@ -13,9 +13,11 @@ This module imports nothing else of the kit.
 from __future__ import annotations
 
 import os
+from dataclasses import dataclass
 from pathlib import Path
 
-__all__ = ["CACHE_ENV", "RUNS_ENV", "cache_dir", "repo_root", "runs_root", "run_path", "figures_root", "profile_name"]
+__all__ = ["CACHE_ENV", "RUNS_ENV", "RunFolders", "cache_dir", "repo_root", "runs_root", "run_path", "figures_root",
+           "profile_name"]
 
 #: Environment variable naming the runs folder (overrides the checkout's ``runs/``).
 RUNS_ENV = "AIRPOSE_RUNS"
@@ -32,9 +34,14 @@ def profile_name(profile: str | os.PathLike) -> str:
 
 def cache_dir() -> Path:
     """The kit's cache folder (``$AIRPOSE_CACHE`` or ``~/.cache/airpose``), created on demand."""
-    root = Path(os.environ.get(CACHE_ENV, Path.home() / ".cache" / "airpose")).expanduser()
+    root = _cache_root()
     root.mkdir(parents=True, exist_ok=True)
     return root
+
+
+def _cache_root() -> Path:
+    """The kit's cache folder, not created (a folder named is not a folder made)."""
+    return Path(os.environ.get(CACHE_ENV, Path.home() / ".cache" / "airpose")).expanduser()
 
 
 def repo_root() -> Path | None:
@@ -65,3 +72,71 @@ def figures_root() -> Path:
     figures, one sub-folder per profile."""
     root = repo_root()
     return (root / "figures") if root is not None else (Path.cwd() / "figures").resolve()
+
+
+@dataclass(frozen=True)
+class RunFolders:
+    """The folders of one profile's runs, caches and results, named once at the entry.
+
+    Built from the profile by the command, ``airpose reproduce`` or a notebook's set-up
+    (:meth:`of`) and passed down, so that the code below names no folder from a profile: a
+    training takes ``folders.train(variant, seed)``, a dataset ``folders.still``. The folders are
+    not created (not even the cache), and each is resolved when asked for (``$AIRPOSE_RUNS`` and ``$AIRPOSE_CACHE`` as
+    they are then).
+
+    Attributes:
+        name: what the folders are named after (:func:`profile_name`: ``"cpu"``; a profile file of
+            one's own, its stem).
+    """
+
+    name: str
+
+    @classmethod
+    def of(cls, profile: str | os.PathLike) -> RunFolders:
+        """The folders of a profile (a name or the path of a profile file)."""
+        return cls(profile_name(profile))
+
+    @property
+    def runs(self) -> Path:
+        """``<runs>/<name>``: the notebooks' outputs and the reproduction's report."""
+        return runs_root() / self.name
+
+    def train(self, variant: str, seed: int) -> Path:
+        """``<runs>/train/<name>/<variant>/seed<seed>``: one training run."""
+        return run_path("train", self.name, variant, f"seed{seed}")
+
+    @property
+    def pretrain(self) -> Path:
+        """``<runs>/pretrain/<name>``: the backbone's pretraining runs."""
+        return run_path("pretrain", self.name)
+
+    def recordings(self, field: bool = False) -> Path:
+        """``<runs>/recordings/<name>`` (``<name>_field`` on the field recordings): the recordings
+        experiment."""
+        return run_path("recordings", f"{self.name}_field" if field else self.name)
+
+    @property
+    def still(self) -> Path:
+        """``<cache>/data/still_<name>``: the still-frame dataset."""
+        return _cache_root() / "data" / f"still_{self.name}"
+
+    def sequences(self, field: bool = False) -> Path:
+        """``<cache>/data/sequences_<name>`` (``..._field``: the field recordings)."""
+        return _cache_root() / "data" / (f"sequences_{self.name}_field" if field else f"sequences_{self.name}")
+
+    @property
+    def prior(self) -> Path:
+        """``<cache>/prior/<name>/vposer.pt``: the kit's pose prior."""
+        return _cache_root() / "prior" / self.name / "vposer.pt"
+
+    @property
+    def results(self) -> Path:
+        """``<checkout>/results/<name>`` (``./results/<name>`` for an installed kit): the committed
+        tables, provenance and shipped networks."""
+        root = repo_root()
+        return (root if root is not None else Path.cwd().resolve()) / "results" / self.name
+
+    @property
+    def figures(self) -> Path:
+        """``<checkout>/figures/<name>``: the figures ``reproduce`` collects."""
+        return figures_root() / self.name

@@ -51,16 +51,17 @@ def _sequence(args) -> tuple[str, bool]:
         return args.source, False
     if args.source != "generate":
         return args.source, (Path(args.source) / "ground_truth.npz").is_file()
-    from airpose_lib.data.sequences import PAPER_CAMERAS, CameraSpec, ensure_sequences, profile_sequences
+    from airpose_lib.data.sequences import PAPER_CAMERAS, CameraSpec, ensure_sequences
+    from airpose_lib.reproduce.configs import kit_configs
 
     # The smoke profile's person 2 with a third drone (a copy of the second camera, 13 ms behind)
     # so that the same recording serves the 2- and the 3-drone runs.
     name = f"person2_{args.sequence_frames}_3views"
     third = CameraSpec("cam2", 1361.11, 1378.80, 978.02, 667.23)
-    cfg = dataclasses.replace(profile_sequences("smoke")["person2"], n_frames=args.sequence_frames,
+    cfg = dataclasses.replace(kit_configs("smoke").sequences["person2"], n_frames=args.sequence_frames,
                               cameras=(*PAPER_CAMERAS, third), time_offsets=(0.0, 0.007, 0.013))
     t = time.time()
-    path = ensure_sequences(configs={name: cfg}, root=Path(args.out) / "sequences", progress=True)[name]
+    path = ensure_sequences({name: cfg}, Path(args.out) / "sequences", progress=True)[name]
     print(f"sequence {path} ({args.sequence_frames} frames; {time.time() - t:.0f} s)")
     return str(path), True
 

@@ -14,8 +14,8 @@ from pathlib import Path
 import torch
 
 from airpose_lib.engine.checkpoint import load_checkpoint
+from airpose_lib.reproduce.configs import kit_configs
 from airpose_lib.train import train
-from airpose_lib.train.config import load_train_config
 
 
 def main(argv=None) -> int:
@@ -25,12 +25,13 @@ def main(argv=None) -> int:
     ap.add_argument("--precision", default="bf16")
     ap.add_argument("--steps", type=int, default=40)
     args = ap.parse_args(argv)
-    cfg = load_train_config("smoke", "airpose", steps=args.steps, device=args.device, precision=args.precision,
-                            checkpoint_every=args.steps // 2, progress=False)
-    straight = train("airpose", config=cfg, out_dir=args.runs / "straight", resume=False)
-    first = train("airpose", config=cfg, out_dir=args.runs / "resumed", resume=False, stop_at=args.steps // 2)
+    smoke = kit_configs("smoke").train_inputs()
+    cfg = smoke.section.config("airpose", steps=args.steps, device=args.device, precision=args.precision,
+                               checkpoint_every=args.steps // 2, progress=False)
+    straight = train("airpose", smoke, config=cfg, out_dir=args.runs / "straight", resume=False)
+    first = train("airpose", smoke, config=cfg, out_dir=args.runs / "resumed", resume=False, stop_at=args.steps // 2)
     assert first.stopped_early and first.step == args.steps // 2
-    resumed = train("airpose", config=cfg, out_dir=args.runs / "resumed")
+    resumed = train("airpose", smoke, config=cfg, out_dir=args.runs / "resumed")
     a, b = load_checkpoint(straight.checkpoint), load_checkpoint(resumed.checkpoint)
     differ = [k for k in a["model"] if not torch.equal(a["model"][k], b["model"][k])]
     moments = [(k, n) for k, s in a["optimizer"]["state"].items() for n, v in s.items()

@@ -321,7 +321,7 @@ def test_an_internal_value_error_stays_a_traceback(command, debug, inputs, monke
     if command == "train":
         import airpose_lib.train as lib
 
-        monkeypatch.setattr(lib, "load_train_config", _raise_internal)
+        monkeypatch.setattr(lib, "train", _raise_internal)
         argv = ["train", "--variant", "airpose", "--out", out]
     elif command == "fit":
         import airpose_lib.fitting as lib

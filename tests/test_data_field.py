@@ -10,7 +10,7 @@ import cv2
 import numpy as np
 import pytest
 
-from airpose_lib.data.sequences import SequenceConfig, profile_sequences, sequence_configs_from_profile
+from airpose_lib.data.sequences import SequenceConfig, sequence_configs_from_profile
 from airpose_lib.data.sequences.field import (
     RENDER_GAMMA,
     FieldConfig,
@@ -27,6 +27,7 @@ from airpose_lib.data.sequences.field import (
     to_linear,
 )
 from airpose_lib.errors import ProfileSettingError
+from airpose_lib.reproduce.configs import kit_configs
 
 
 def _textured(h: int = 96, w: int = 128, seed: int = 0) -> np.ndarray:
@@ -190,7 +191,7 @@ def test_off_by_default_keeps_the_recordings_keys():
     assert _key(SequenceConfig()) == "8c759625ec8a5cb0"
     # smoke and cpu put ArUco markers on their field recordings only (`sequences: field_markers: {}`):
     # the clean recordings keep the keys of 462ba9f
-    recs = {p: profile_sequences(p) for p in ("smoke", "cpu", "paper")}
+    recs = {p: kit_configs(p).sequences for p in ("smoke", "cpu", "paper")}
     assert all(c.markers is None for r in recs.values() for c in r.values())
     assert {p: {k: _key(c) for k, c in r.items()} for p, r in recs.items()} == {
         "smoke": {"person1": "d2012b0c0901be57", "person2": "78765eac4941ace4"},

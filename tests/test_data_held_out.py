@@ -15,8 +15,6 @@ from airpose_lib.data.sequences import (
     HeldOutConfig,
     SequenceConfig,
     field_variant,
-    profile_field_sequences,
-    profile_sequences,
     sequence_configs_from_profile,
 )
 from airpose_lib.data.sequences.held_out import (
@@ -37,9 +35,10 @@ from airpose_lib.data.still.appearance import (
     training_saturation_bound,
     vertex_colors,
 )
-from airpose_lib.data.still.config import profile_config
 from airpose_lib.data.still.scene import SceneConfig
 from airpose_lib.errors import ConfigError, ProfileSettingError
+from airpose_lib.paths import RunFolders
+from airpose_lib.reproduce.configs import kit_configs
 
 
 def _saturation(rgb: np.ndarray) -> np.ndarray:
@@ -52,7 +51,7 @@ def _saturation(rgb: np.ndarray) -> np.ndarray:
 # -- clothing -------------------------------------------------------------------------------------
 @pytest.mark.parametrize("profile", ["smoke", "cpu", "cpu_paper_layout", "paper"])
 def test_no_still_profile_can_draw_the_held_out_saturation(profile):
-    bound = training_saturation_bound(profile_config(profile).appearance)
+    bound = training_saturation_bound(kit_configs(profile).still.appearance)
     assert bound < HELD_OUT_SATURATION[0], (profile, bound)
 
 
@@ -129,7 +128,7 @@ def test_held_out_betas_leave_the_training_box():
     out = held_out_betas(betas, HeldOutConfig(enabled=True, betas_max=3.5))
     assert np.abs(out).max() == pytest.approx(3.5)
     # Beyond every still profile's clip (the draw is np.clip(N(0, std), -beta_clip, beta_clip)).
-    assert all(3.5 > profile_config(p).scene.beta_clip for p in ("smoke", "cpu", "cpu_paper_layout", "paper"))
+    assert all(3.5 > kit_configs(p).still.scene.beta_clip for p in ("smoke", "cpu", "cpu_paper_layout", "paper"))
     assert SceneConfig().beta_clip == 3.0
     np.testing.assert_allclose(out / np.linalg.norm(out), betas / np.linalg.norm(betas))  # same direction
     np.testing.assert_array_equal(held_out_betas(betas, HeldOutConfig(betas_max=3.5)), betas)  # not enabled
@@ -159,7 +158,7 @@ def test_off_keeps_the_recordings_keys_and_on_round_trips():
 
 @pytest.mark.parametrize("profile", ["smoke", "cpu"])
 def test_profile_field_recordings_are_the_clean_ones_through_the_preset(profile):
-    clean, field = profile_sequences(profile), profile_field_sequences(profile)
+    clean, field = kit_configs(profile).sequences, kit_configs(profile).field_sequences
     assert list(field) == list(clean) == ["person1", "person2"]
     cam, held = FIELD_PRESETS["dji"]
     for name, c in clean.items():
@@ -175,7 +174,7 @@ def test_profile_field_recordings_are_the_clean_ones_through_the_preset(profile)
 def test_field_recordings_setting():
     section = {"recordings": {"person1": {"n_frames": 5}}}
     assert field_sequence_configs_from_profile(section) == {}
-    assert profile_field_sequences("paper") == {}
+    assert kit_configs("paper").field_sequences == {}
     with pytest.raises(ProfileSettingError, match="unknown preset 'gopro'"):
         field_sequence_configs_from_profile({**section, "field_recordings": "gopro"})
     with pytest.raises(ConfigError, match="unknown field preset"):
@@ -230,12 +229,13 @@ def test_ensure_sequences_makes_the_field_recordings_in_their_own_folder(tmp_pat
         root.mkdir(parents=True)
 
     monkeypatch.setattr(cache, "generate_sequence", fake_generate)
-    out = cache.ensure_sequences("smoke", field=True)
+    smoke = kit_configs("smoke")
+    out = cache.ensure_sequences(smoke.recordings(field=True), smoke.folders.sequences(field=True))
     assert out == {n: tmp_path / "data" / "sequences_smoke_field" / n for n in ("person1", "person2")}
-    assert made == {f"{n}.partial": c for n, c in profile_field_sequences("smoke").items()}
-    assert cache.default_sequence_root("smoke") == tmp_path / "data" / "sequences_smoke"
+    assert made == {f"{n}.partial": c for n, c in kit_configs("smoke").field_sequences.items()}
+    assert RunFolders.of("smoke").sequences() == tmp_path / "data" / "sequences_smoke"
     with pytest.raises(ConfigError, match="no field recordings"):
-        cache.ensure_sequences("paper", field=True)
+        kit_configs("paper").recordings(field=True)
 
 
 def test_cli_makes_the_field_recordings_or_says_there_are_none(tmp_path, monkeypatch, capsys):
@@ -246,7 +246,7 @@ def test_cli_makes_the_field_recordings_or_says_there_are_none(tmp_path, monkeyp
     monkeypatch.setattr(cache, "generate_sequence", lambda config, root, progress=False: (made.append(config),
                                                                                          root.mkdir(parents=True)))
     assert cli.main(["data", "sequence", "--profile", "smoke", "--field", "--quiet", "--out", str(tmp_path)]) == 0
-    assert made == list(profile_field_sequences("smoke").values())
+    assert made == list(kit_configs("smoke").field_sequences.values())
     capsys.readouterr()
     assert cli.main(["data", "sequence", "--profile", "paper", "--field", "--out", str(tmp_path / "p")]) == 2
     err = capsys.readouterr().err.strip().splitlines()

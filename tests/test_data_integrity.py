@@ -21,6 +21,7 @@ from airpose_lib.data.still.manifest import ShardIntegrityError, record_manifest
 from airpose_lib.data.still.scene import SceneConfig
 from airpose_lib.data.still.shards import shard_name
 from airpose_lib.folder_lock import FolderBusyError, folder_lock
+from airpose_lib.reproduce.configs import kit_configs
 from airpose_lib.train.features import FeatureDataset
 
 CFG = GenerationConfig(num_samples=8, shard_size=4, crop_size=64, seed=11,
@@ -31,7 +32,7 @@ ROOT = Path(__file__).resolve().parents[1]
 @pytest.fixture(scope="module")
 def intact(module_tmp) -> Path:
     root = module_tmp("integrity") / "data"
-    generate_still_dataset(CFG, root, workers=1, progress=False, profile="test")
+    generate_still_dataset(CFG, root, workers=1, progress=False, label="test")
     return root
 
 
@@ -87,7 +88,7 @@ def test_the_kit_rebuilds_a_damaged_shard_of_its_own_dataset_and_says_so(copy, i
 def test_generate_says_which_finished_shard_it_rebuilds(copy, capfd):
     (copy / shard_name(0)).write_bytes(b"cut")
     capfd.readouterr()
-    generate_still_dataset(CFG, copy, workers=1, progress=False, profile="test")
+    generate_still_dataset(CFG, copy, workers=1, progress=False, label="test")
     err = capfd.readouterr().err
     assert f"airpose: shard {copy / shard_name(0)} is damaged" in err and "rebuilding it" in err
 
@@ -141,10 +142,10 @@ def test_the_tracked_smoke_record_is_what_the_generator_makes_now():
     """The record says which data the smoke results were made from: a change of the generator or
     of the smoke profile's `data: still:` fails here until the record is made again
     (`airpose data generate --profile smoke --record-manifest`)."""
-    from airpose_lib.data.still.config import GENERATOR_VERSION, SPLITS, profile_config
+    from airpose_lib.data.still.config import GENERATOR_VERSION, SPLITS
 
     record = yaml.safe_load((ROOT / "data_manifests" / "generated_smoke.yaml").read_text())
-    cfg = profile_config("smoke")
+    cfg = kit_configs("smoke").still
     assert (record["generator_version"], record["fingerprint"]) == (GENERATOR_VERSION, cfg.fingerprint())
     assert record["config"] == cfg.to_dict() and record["num_shards"] == cfg.num_shards
     splits = {s: [k for k in range(cfg.num_shards) if cfg.shard_split(k) == s] for s in SPLITS}
@@ -208,7 +209,7 @@ def test_ensure_waits_for_a_dataset_being_generated_and_does_not_make_it_again(t
         with folder_lock({str(root)!r}, "dataset folder"):
             print("held", flush=True)
             time.sleep(1.0)
-            generate_still_dataset(cfg, {str(root)!r}, workers=1, progress=False, profile="test")
+            generate_still_dataset(cfg, {str(root)!r}, workers=1, progress=False, label="test")
     """)
     proc = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, text=True, cwd=ROOT)
     try:

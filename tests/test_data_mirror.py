@@ -21,7 +21,7 @@ M = np.diag([-1.0, 1.0, 1.0])
 @pytest.fixture(scope="module")
 def dataset(module_tmp):
     root = module_tmp("mirror") / "still"
-    generate_still_dataset(CFG, root, workers=1, progress=False, profile="test")
+    generate_still_dataset(CFG, root, workers=1, progress=False, label="test")
     return StillFrameDataset(root, "train", augment=False)  # one shard: all training data
 
 

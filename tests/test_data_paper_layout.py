@@ -8,14 +8,14 @@ import torch
 
 from airpose_lib.body import load_body_model, stature
 from airpose_lib.body.forward import rest_body
-from airpose_lib.data.still.config import profile_config
 from airpose_lib.data.still.scene import SceneConfig, sample_cameras, sample_person
 from airpose_lib.errors import ConfigError
+from airpose_lib.reproduce.configs import kit_configs
 
 
 @pytest.fixture(scope="module")
 def configs():
-    return profile_config("cpu"), profile_config("cpu_paper_layout")
+    return kit_configs("cpu").still, kit_configs("cpu_paper_layout").still
 
 
 def test_only_the_scene_differs_from_cpu(configs):

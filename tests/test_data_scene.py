@@ -9,8 +9,7 @@ import pytest
 import torch
 
 from airpose_lib.data.still.appearance import REGIONS, BodyPaint, body_regions, sample_appearance
-from airpose_lib.data.still.generate import GenerationConfig, profile_config
-from airpose_lib.data.still.manifest import DatasetError
+from airpose_lib.data.still.generate import GenerationConfig
 from airpose_lib.data.still.scene import (
     PersonSample,
     SceneConfig,
@@ -23,7 +22,9 @@ from airpose_lib.data.still.scene import (
     sample_person,
     tight_bbox,
 )
+from airpose_lib.errors import ProfileError
 from airpose_lib.geometry import camera_center
+from airpose_lib.reproduce.configs import kit_configs
 
 
 def _project_cv(X_world, R, t, K):
@@ -184,12 +185,12 @@ def test_generation_config_round_trip_and_splits():
 def test_profiles_define_the_dataset_sizes():
     """paper: the paper's size; cpu: more samples than paper's (its regressors train on a frozen
     backbone's cached features and need many distinct crops) but fewer pixels, about 0.6 GB."""
-    smoke, cpu, paper = (profile_config(p) for p in ("smoke", "cpu", "paper"))
+    smoke, cpu, paper = (kit_configs(p).still for p in ("smoke", "cpu", "paper"))
     assert paper.num_samples == 30000 and paper.crop_size == 224
     assert smoke.num_samples < cpu.num_samples
     assert cpu.num_samples * cpu.crop_size ** 2 < paper.num_samples * paper.crop_size ** 2 / 2
     assert 6000 <= cpu.num_samples <= 40000
     for c in (smoke, cpu, paper):
         assert c.scene == SceneConfig() and 0.05 <= c.num_test_shards / c.num_shards <= 0.15
-    with pytest.raises(DatasetError, match="unknown profile"):
-        profile_config("nope")
+    with pytest.raises(ProfileError, match="unknown profile"):  # at the entry, before any section
+        kit_configs("nope")

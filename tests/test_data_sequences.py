@@ -15,7 +15,6 @@ from airpose_lib.data.sequences import (
     PAPER_CAMERAS,
     PERSONS,
     SequenceConfig,
-    profile_sequences,
     scale_intrinsics,
     simulate_sequence,
 )
@@ -23,6 +22,7 @@ from airpose_lib.data.sequences.layout import SequenceFormatError, read_camera_c
 from airpose_lib.data.sequences.motions import MotionScript, Segment, evaluate_motion, sample_script
 from airpose_lib.data.sequences.reader import load_sequence
 from airpose_lib.data.sequences.writer import OfficialLayoutWriter
+from airpose_lib.reproduce.configs import kit_configs
 
 N_FRAMES = 75  # 2.5 s at 30 fps
 
@@ -206,10 +206,10 @@ def test_config_round_trip_and_profiles():
     assert back == SequenceConfig.from_dict(cfg.to_dict())
     assert back.person_spec == PERSONS["person2"] and back.cameras == PAPER_CAMERAS
     for prof in ("smoke", "cpu", "paper"):
-        recs = profile_sequences(prof)
+        recs = kit_configs(prof).sequences
         assert set(recs) == {"person1", "person2"}
         assert recs["person1"].person_spec.gender != recs["person2"].person_spec.gender
-    assert 60 <= profile_sequences("smoke")["person1"].n_frames <= 120
+    assert 60 <= kit_configs("smoke").sequences["person1"].n_frames <= 120
     with pytest.raises(ValueError):
         SequenceConfig(time_offsets=(0.0,))
     with pytest.raises(ValueError, match="unknown sequence setting"):

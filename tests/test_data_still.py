@@ -35,7 +35,7 @@ CFG = GenerationConfig(num_samples=12, shard_size=4, crop_size=64, seed=7, val_f
 
 
 def _generate(root, config=CFG, **kw):
-    return generate_still_dataset(config, root, workers=1, progress=False, profile="test", **kw)
+    return generate_still_dataset(config, root, workers=1, progress=False, label="test", **kw)
 
 
 def _shard_bytes(root, n=CFG.num_shards):
@@ -330,7 +330,7 @@ def test_cli_offers_data_generate():
 @pytest.mark.slow
 def test_worker_count_does_not_change_the_bytes(reference, tmp_path):
     root = tmp_path / "two_workers"
-    generate_still_dataset(CFG, root, workers=2, progress=False, profile="test")
+    generate_still_dataset(CFG, root, workers=2, progress=False, label="test")
     assert _shard_bytes(root) == _shard_bytes(reference[0])
 
 
@@ -344,7 +344,7 @@ def test_a_render_worker_that_dies_costs_only_its_shard(reference, tmp_path, mon
     monkeypatch.setenv("AIRPOSE_TEST_CRASH_FLAG", str(tmp_path / "crashed"))
     monkeypatch.setattr(G, "_worker_shard", crashing_worker.crash_once)  # the workers are given this one
     root = tmp_path / "two_workers"
-    manifest = generate_still_dataset(CFG, root, workers=2, progress=False, profile="test")
+    manifest = generate_still_dataset(CFG, root, workers=2, progress=False, label="test")
     assert (tmp_path / "crashed").exists(), "no worker died: the test tested nothing"
     assert "a render worker died" in capsys.readouterr().err
     assert manifest["status"] == "complete" and _shard_bytes(root) == _shard_bytes(reference[0])
@@ -355,7 +355,7 @@ def test_a_render_worker_that_dies_costs_only_its_shard(reference, tmp_path, mon
 def crop_protocol(module_tmp):
     cfg = GenerationConfig(num_samples=40, shard_size=10, crop_size=16, seed=3)
     root = module_tmp("crops") / "ds"
-    generate_still_dataset(cfg, root, workers=1, progress=False, profile="test")
+    generate_still_dataset(cfg, root, workers=1, progress=False, label="test")
     return root
 
 

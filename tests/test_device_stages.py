@@ -23,6 +23,8 @@ from airpose_lib.prior import PriorTrainConfig, VPoser, train_prior
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from test_fitting_airpose_plus import _one_thread, _perturbed, _scene  # noqa: E402, F401 - autouse fixture
 
+from airpose_lib.reproduce.configs import kit_configs
+
 # the modules (their package re-exports functions of the same names)
 plus_module = importlib.import_module("airpose_lib.fitting.airpose_plus")
 prior_train_module = importlib.import_module("airpose_lib.prior.train")
@@ -91,9 +93,10 @@ def test_an_ablation_worker_trains_on_its_own_gpu(monkeypatch):
     monkeypatch.setattr(ablation, "trained_checkpoint", lambda *a, device=None: asked.append(device) or "x.pt")
     monkeypatch.setattr(ablation, "_WORKER_INDEX", 3)
     _gpus(monkeypatch, 2)
-    assert ablation._train_single_thread(("smoke", "airpose", 123, None)) == "x.pt"
+    smoke = kit_configs("smoke").train_inputs()
+    assert ablation._train_single_thread((smoke, "airpose", 123, None)) == "x.pt"
     _gpus(monkeypatch, 0)
-    ablation._train_single_thread(("smoke", "airpose", 123, None))
+    ablation._train_single_thread((smoke, "airpose", 123, None))
     assert asked == ["cuda:1", None]
 
 

@@ -111,16 +111,17 @@ def test_a_finished_run_is_reused_only_with_the_same_config(tmp_path):
     import yaml
 
     from airpose_lib.data.still.manifest import DATASET_KIND
+    from airpose_lib.reproduce.configs import kit_configs
     from airpose_lib.train.ablation import _finished_run
-    from airpose_lib.train.config import load_train_config
     from airpose_lib.train.pretrain import profile_backbone_key
 
-    cfg = load_train_config("smoke", "airpose", 7).to_dict()
+    smoke = kit_configs("smoke").train_inputs()
+    cfg = smoke.section.config("airpose", 7).to_dict()
     assert cfg["pretrained"] == "profile"  # resolved to the profile's backbone file when training
     data = tmp_path / "data"
     data.mkdir()
     (data / "manifest.yaml").write_text(yaml.safe_dump({"kind": DATASET_KIND, "fingerprint": "abc", "shards": []}))
-    backbone = tmp_path / f"{profile_backbone_key('smoke', data)}.pt"
+    backbone = tmp_path / f"{profile_backbone_key(smoke.pretrain, data)}.pt"
     backbone.write_bytes(b"x")
     ckpt = tmp_path / "checkpoints" / "last.pt"
     ckpt.parent.mkdir()
@@ -129,18 +130,18 @@ def test_a_finished_run_is_reused_only_with_the_same_config(tmp_path):
               "val_losses": None, "tensorboard": False, "stopped_early": False,
               "config": {**cfg, "data": {"root": str(data)}, "progress": False, "pretrained": str(backbone)}}
     (tmp_path / "result.json").write_text(json.dumps(result))
-    assert _finished_run(tmp_path, "smoke", "airpose", 7) is not None
+    assert _finished_run(tmp_path, smoke, "airpose", 7) is not None
     # the device a run resolved `auto` to, or a parallel worker's own GPU, does not make it another run
     (tmp_path / "result.json").write_text(json.dumps({**result, "config": {**result["config"], "device": "cuda:1"}}))
-    assert _finished_run(tmp_path, "smoke", "airpose", 7) is not None
+    assert _finished_run(tmp_path, smoke, "airpose", 7) is not None
     other = tmp_path / "0123456789abcdef.pt"  # a backbone of other pretraining settings
     other.write_bytes(b"x")
     (tmp_path / "result.json").write_text(json.dumps({**result, "config": {**result["config"], "pretrained": str(other)}}))
-    assert _finished_run(tmp_path, "smoke", "airpose", 7) is None
+    assert _finished_run(tmp_path, smoke, "airpose", 7) is None
     (tmp_path / "result.json").write_text(json.dumps(result))
-    assert _finished_run(tmp_path, "smoke", "airpose", 8) is None  # another seed
+    assert _finished_run(tmp_path, smoke, "airpose", 8) is None  # another seed
     (tmp_path / "result.json").write_text(json.dumps({**result, "step": cfg["steps"] - 1}))
-    assert _finished_run(tmp_path, "smoke", "airpose", 7) is None  # unfinished: resume instead
+    assert _finished_run(tmp_path, smoke, "airpose", 7) is None  # unfinished: resume instead
 
 
 def test_paper_gaps_are_ratios_to_the_paper_and_the_references():

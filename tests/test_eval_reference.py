@@ -96,7 +96,7 @@ def _references(n=40):
 def _bundle(tmp_path, runs, name="bundle"):
     per_seed = per_seed_table(runs, wall_s={k: 1.5 for k in runs})
     return write_reference(tmp_path / name, table=ablation_table(runs, references=_references()), per_seed=per_seed,
-                           claims=claims_table(runs, n_resamples=200), references=_references(), profile="smoke",
+                           claims=claims_table(runs, n_resamples=200), references=_references(), label="smoke",
                            command="airpose reproduce --profile smoke --only 02_ablation_table",
                            step_wall_s={"train and evaluate": 12.34, "mean-body references": None}, extra={"seeds": [1, 2, 3]})
 

@@ -6,6 +6,9 @@ import numpy as np
 import pytest
 import torch
 
+from airpose_lib.paths import RunFolders
+from airpose_lib.reproduce.configs import kit_configs
+
 
 @pytest.fixture(scope="module")
 def official(module_tmp, open_model_files):
@@ -39,7 +42,7 @@ def test_official_recordings_and_networks_run_without_training(official, tmp_pat
     assert nets["AirPose"].parent.name == "copenet_twoview_real_ckpt"
     seqs = official_recordings(official / "real")
     assert [s.frames.tolist() for s in seqs.values()] == [[0, 1, 2], [8000, 8001, 8002]]
-    exp = run_recording_experiment("smoke", tmp_path / "exp", sequences=seqs, networks=nets)
+    exp = run_recording_experiment(kit_configs("smoke"), tmp_path / "exp", sequences=seqs, networks=nets)
     assert exp.tables.empty and not exp.finetune_info  # no ground truth, nothing fine-tuned
     for person in ("person1", "person2"):
         assert list(exp.estimates[person]) == list(METHODS)
@@ -51,7 +54,7 @@ def test_official_recordings_and_networks_run_without_training(official, tmp_pat
     assert not np.allclose(a["tau"], b["tau"])
     cached = sorted((tmp_path / "exp" / "estimates").rglob("*.npz"))
     stamps = [p.stat().st_mtime_ns for p in cached]
-    again = run_recording_experiment("smoke", tmp_path / "exp", sequences=seqs, networks=nets)
+    again = run_recording_experiment(kit_configs("smoke"), tmp_path / "exp", sequences=seqs, networks=nets)
     assert [p.stat().st_mtime_ns for p in cached] == stamps  # every step came from the cache
     np.testing.assert_array_equal(again.estimates["person1"]["AirPose+"]["tau"],
                                   exp.estimates["person1"]["AirPose+"]["tau"])
@@ -76,10 +79,10 @@ def test_recording_prior_uses_vposer_when_installed(tmp_path, monkeypatch):
     root = tmp_path / "vposer"
     _write_fake_ckpt(root / "V02_05" / "snapshots" / "V02_05_epoch=08_val_loss=0.03.ckpt", seed=1)
     monkeypatch.setenv("AIRPOSE_VPOSER_DIR", str(root))
-    prior, info = recording_prior("smoke")
+    prior, info = recording_prior(kit_configs("smoke"))
     assert info["source"] == "vposer" and "VPoser V02_05" in info["message"] and info["file"].endswith(".ckpt")
     monkeypatch.setenv("AIRPOSE_VPOSER_DIR", str(tmp_path / "absent"))
-    prior, info = recording_prior("smoke")
+    prior, info = recording_prior(kit_configs("smoke"))
     assert info["source"] == "kit" and "not installed" in info["message"]
 
 
@@ -117,16 +120,17 @@ def test_field_experiment_reads_the_field_recordings_into_its_own_folder(tmp_pat
     class Stop(Exception):
         pass
 
-    def fake_ensure(profile, **kw):
-        asked.append((profile, kw.get("field", False)))
+    def fake_ensure(configs, root, **kw):
+        asked.append((configs, root.name))
         raise Stop
 
     monkeypatch.setattr(rec, "ensure_sequences", fake_ensure)
-    assert rec.default_experiment_dir("smoke", field=True) == rec.default_experiment_dir("smoke").with_name("smoke_field")
+    assert RunFolders.of("smoke").recordings(True) == RunFolders.of("smoke").recordings().with_name("smoke_field")
+    smoke = kit_configs("smoke")
     for field in (False, True):
         with pytest.raises(Stop):
-            rec.run_recording_experiment("smoke", field=field)
-    assert asked == [("smoke", False), ("smoke", True)]
+            rec.run_recording_experiment(smoke, field=field)
+    assert asked == [(smoke.sequences, "sequences_smoke"), (smoke.field_sequences, "sequences_smoke_field")]
     assert (tmp_path / "recordings" / "smoke_field").is_dir()
 
 
@@ -236,13 +240,14 @@ def test_runs_field_follows_the_profile_and_the_data_source():
     from airpose_lib.experiments.recordings import runs_field
 
     generated, official = SimpleNamespace(source="generated"), SimpleNamespace(source="official")
-    assert runs_field(generated, "smoke") and runs_field(generated, "cpu")
-    assert not runs_field(official, "smoke") and not runs_field(generated, "smoke", False)
-    assert not runs_field(generated, "paper")  # no field recordings
+    smoke, cpu, paper = (kit_configs(p) for p in ("smoke", "cpu", "paper"))
+    assert runs_field(generated, smoke) and runs_field(generated, cpu)
+    assert not runs_field(official, smoke) and not runs_field(generated, smoke, False)
+    assert not runs_field(generated, paper)  # no field recordings
     with pytest.raises(ConfigError, match="field footage"):
-        runs_field(official, "smoke", True)
+        runs_field(official, smoke, True)
     with pytest.raises(ConfigError, match="paper has none"):
-        runs_field(generated, "paper", True)
+        runs_field(generated, paper, True)
 
 
 def _rotation_z(deg: float) -> np.ndarray:
@@ -330,7 +335,8 @@ def test_official_marker_poses_give_the_relative_camera_reference(official, tmp_
     from airpose_lib.experiments.recordings import official_networks, official_recordings, run_recording_experiment
 
     seqs = official_recordings(official / "real")
-    exp = run_recording_experiment("smoke", tmp_path / "exp", sequences=seqs, networks=official_networks(official / "ckpt"))
+    exp = run_recording_experiment(kit_configs("smoke"), tmp_path / "exp", sequences=seqs,
+                                   networks=official_networks(official / "ckpt"))
     assert sorted(exp.markers) == ["person1", "person2"]
     t = marker_table(exp)
     assert set(t["reference"]) == {"markers"} and len(t) == 2 * 3  # no generated cameras on real data

@@ -30,6 +30,7 @@ from airpose_lib.finetune import (
 )
 from airpose_lib.finetune.selection import Selection, select_step
 from airpose_lib.geometry import axis_angle_to_matrix, matrix_to_axis_angle
+from airpose_lib.reproduce.configs import kit_configs
 
 S = 64  # crop side of the tiny network
 
@@ -46,7 +47,8 @@ def _one_thread():
 def smoke_root():
     from airpose_lib.data.sequences import ensure_sequences
 
-    return ensure_sequences("smoke", only=["person1"])["person1"]
+    smoke = kit_configs("smoke")
+    return ensure_sequences(smoke.sequences, smoke.folders.sequences(), only=["person1"])["person1"]
 
 
 def _save_tiny(folder, variant: str):
@@ -604,15 +606,15 @@ def test_finetune_bad_input(tiny_ckpt, smoke_root, tmp_path, body32, tiny_prior)
 
 def test_finetune_config_from_profiles(tmp_path):
     assert finetune_config(None) == FineTuneConfig()
-    cfg = finetune_config("smoke")  # with or without a `finetune:` section
+    cfg = kit_configs("smoke").finetune  # with or without a `finetune:` section
     assert isinstance(cfg, FineTuneConfig)
     prof = tmp_path / "p.yaml"
     prof.write_text("finetune:\n  steps: 5\n  frames: [0, 7000]\n  loss: {w_vposer: 0.5}\n")
-    cfg = finetune_config(prof, seed=7)
+    cfg = finetune_config(kit_configs(prof).finetune, seed=7)
     assert (cfg.steps, cfg.frames, cfg.loss, cfg.seed, cfg.lr) == (5, [0, 7000], {"w_vposer": 0.5}, 7, 5e-5)
     prof.write_text("finetune:\n  stepz: 5\n")
     with pytest.raises(ValueError, match="p.yaml.*stepz"):
-        finetune_config(prof)
+        assert kit_configs(prof).finetune is None  # raises first
 
 
 def test_cli_predict_and_finetune(tiny_ckpt, smoke_root, tmp_path, body32, capsys):

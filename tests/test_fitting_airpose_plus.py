@@ -1,6 +1,7 @@
 """AirPose+: keypoint kinematics, the loss terms, the frame rule, bad input and a synthetic fit."""
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -15,11 +16,11 @@ from airpose_lib.fitting import (
     AirPosePlusLoss,
     airpose_plus,
     fit_sequence,
-    fitting_profile,
     init_from_views,
 )
 from airpose_lib.geometry import matrix_to_rot6d, relative_camera_pose
 from airpose_lib.prior import PriorTrainConfig, VPoser, train_prior
+from airpose_lib.reproduce.configs import kit_configs
 
 F_SEQ = 16
 SIGMA = 30.0
@@ -323,8 +324,8 @@ def test_init_from_views_averages_the_views():
 
 
 def test_profiles_have_fitting_sections():
-    assert fitting_profile("cpu").iterations == 300 and fitting_profile("cpu").latent_start == 100
-    assert fitting_profile("smoke").iterations < 300
-    assert fitting_profile("smoke", iterations=5).iterations == 5
+    assert kit_configs("cpu").fitting.iterations == 300 and kit_configs("cpu").fitting.latent_start == 100
+    assert kit_configs("smoke").fitting.iterations < 300
+    assert dataclasses.replace(kit_configs("smoke").fitting, iterations=5).iterations == 5
     with pytest.raises(ValueError):
-        fitting_profile("nope")
+        kit_configs("nope")

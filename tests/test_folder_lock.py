@@ -227,10 +227,11 @@ ABLATION_PARENT = ("import sys\n"
                    "sys.path.insert(0, sys.argv[2])\n"
                    "import sleeper\n"
                    "import airpose_lib.train.ablation as A\n"
+                   "from airpose_lib.reproduce.configs import kit_configs\n"
                    "A._train_single_thread = sleeper.job  # a run that takes long: it sleeps\n"
-                   "A.prepare_data = A.load_train_config = lambda *a, **k: None\n"
+                   "A.prepare_data = lambda *a, **k: None\n"
                    "A._finished_run = lambda *a: None\n"
-                   "A._train_parallel('smoke', ['airpose', 'baseline'], [0], sys.argv[1], 2)\n")
+                   "A._train_parallel(kit_configs('smoke').train_inputs(), ['airpose', 'baseline'], [0], sys.argv[1], 2)\n")
 
 
 def test_ablation_training_workers_die_with_a_killed_parent(tmp_path):
@@ -300,9 +301,9 @@ def test_generation_elsewhere_leaves_the_tracked_manifest_alone(tmp_path, monkey
     tracked = ROOT / "data_manifests" / "generated_smoke.yaml"
     before = tracked.read_bytes()
     cfg = GenerationConfig(num_samples=2, shard_size=2, crop_size=32, seed=3, scene=SceneConfig(num_distractors=(0, 0)))
-    m = generate_still_dataset(cfg, tmp_path / "d", workers=1, progress=False, profile="smoke")
+    m = generate_still_dataset(cfg, tmp_path / "d", workers=1, progress=False, label="smoke")
     assert m["status"] == "complete" and tracked.read_bytes() == before
-    generate_still_dataset(cfg, tmp_path / "d", workers=1, progress=False, profile="smoke", record=tmp_path / "rec")
+    generate_still_dataset(cfg, tmp_path / "d", workers=1, progress=False, label="smoke", record=tmp_path / "rec")
     assert (tmp_path / "rec" / "generated_smoke.yaml").is_file() and tracked.read_bytes() == before
     # the CLI records only with --record-manifest
     seen = {}

@@ -13,18 +13,15 @@ LAB = sorted((PROFILES_DIR / "lab").glob("*.yaml"))
 
 
 def _readers():
-    from airpose_lib.data.sequences.config import profile_sequences
-    from airpose_lib.data.still.config import profile_config
-    from airpose_lib.finetune.config import finetune_config
-    from airpose_lib.fitting.airpose_plus import fitting_profile
     from airpose_lib.fitting.recording import fit_config
-    from airpose_lib.prior.train import prior_profile
-    from airpose_lib.train.config import load_train_config
+    from airpose_lib.reproduce.configs import kit_configs
     from airpose_lib.train.pretrain import pretrain_stages
 
-    return [lambda p: [load_train_config(p, v) for v in ("baseline", "multiview", "fullcam", "airpose")],
-            pretrain_stages, finetune_config, prior_profile, fitting_profile, fit_config, profile_config,
-            profile_sequences]
+    return [lambda p: [kit_configs(p).train.config(v) for v in ("baseline", "multiview", "fullcam", "airpose")],
+            lambda p: pretrain_stages(kit_configs(p).pretrain), lambda p: kit_configs(p).finetune,
+            lambda p: kit_configs(p).prior, lambda p: kit_configs(p).fitting,
+            lambda p: fit_config(kit_configs(p).fitting), lambda p: kit_configs(p).still,
+            lambda p: kit_configs(p).sequences]
 
 
 def test_the_lab_folder_has_profiles_and_they_are_not_kit_profiles():

@@ -28,20 +28,21 @@ ALLOWED: dict[str, set[str]] = {
     "assets": set(),
     "engine": set(),
     "zoo": {"engine"},
-    "body": {"geometry", "assets", "profiles"},
+    "body": {"geometry", "assets"},
     "losses": {"geometry", "body"},
     "model": {"geometry", "body"},
     "viz": {"geometry", "body"},
-    "data": {"geometry", "body", "viz", "profiles"},
+    "data": {"geometry", "body", "viz"},
     "eval": {"geometry", "body", "model"},
-    "prior": {"geometry", "body", "data", "profiles", "engine"},
-    "fitting": {"geometry", "body", "prior", "losses", "profiles"},
-    "train": {"geometry", "body", "assets", "data", "model", "losses", "eval", "profiles", "engine"},
-    "runtime": {"geometry", "body", "data", "model", "profiles"},
-    "finetune": {"geometry", "body", "data", "model", "losses", "prior", "train", "profiles", "engine"},
-    "experiments": {"geometry", "profiles", "body", "assets", "data", "model", "losses", "eval", "viz", "prior", "fitting",
+    "prior": {"geometry", "body", "data", "engine"},
+    "fitting": {"geometry", "body", "prior", "losses"},
+    "train": {"geometry", "body", "assets", "data", "model", "losses", "eval", "engine"},
+    "runtime": {"geometry", "body", "data", "model"},
+    "finetune": {"geometry", "body", "data", "model", "losses", "prior", "train", "engine"},
+    "experiments": {"geometry", "body", "assets", "data", "model", "losses", "eval", "viz", "prior", "fitting",
                     "train", "finetune", "runtime", "engine", "zoo"},
-    "reproduce": {"assets", "viz", "profiles"},
+    # the entry: the runner, the notebooks' set-up, and the profile typed once (reproduce.configs)
+    "reproduce": {"assets", "viz", "profiles", "data", "train", "prior", "finetune", "fitting", "experiments"},
     "cli": {"geometry", "profiles", "body", "assets", "data", "model", "losses", "eval", "viz", "prior", "fitting", "train",
             "finetune", "runtime", "experiments", "reproduce", "engine", "zoo"},
 }
@@ -254,3 +255,34 @@ def test_experiment_modules_import_few_of_the_kit():
     heavy = {m: n for m, n in heavy.items() if n > EXPERIMENT_MAX_IMPORTS}
     assert not heavy, f"modules of experiments importing more than {EXPERIMENT_MAX_IMPORTS} of the kit's (split " \
         f"them by stage): {heavy}"
+
+
+# -- configuration typed once, at the entry -------------------------------------------------------
+# The layers that read a profile: the profile files' own package, the command line and the runner
+# with the notebooks' set-up (reproduce.configs.kit_configs turns every section into its config).
+ENTRY = {"profiles", "cli", "reproduce"}
+# The functions of airpose_lib.profiles that read a profile (a file, a section, a config of one).
+SECTION_READERS = {"loaded", "read_profile", "profile_path", "profile_section", "section_where", "section_config"}
+
+
+def _calls_outside_the_entry(names: set[str]) -> list[str]:
+    found = []
+    for path in sorted(ROOT.rglob("*.py")):
+        rel = path.relative_to(ROOT)
+        if rel.parts[0] in ENTRY:
+            continue
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.Call):
+                f = node.func
+                name = f.id if isinstance(f, ast.Name) else f.attr if isinstance(f, ast.Attribute) else None
+                if name in names:
+                    found.append(f"{rel}:{node.lineno} {name}")
+    return found
+
+
+def test_no_section_is_read_below_the_entry():
+    """The entry types the profile once; below it, code takes the config it needs: no call of a
+    profile reader outside profiles/, cli/ and reproduce/, and no package there imports profiles."""
+    assert not _calls_outside_the_entry(SECTION_READERS)
+    importers = {src for src, edges in package_graph().items() for dst in edges if dst == "profiles"}
+    assert importers <= ENTRY, f"packages below the entry that import profiles: {sorted(importers - ENTRY)}"

@@ -14,11 +14,23 @@ from airpose_lib.train.loop import run_network_entry
 PAPER_K = np.array([[1475.0, 0.0, 959.5], [0.0, 1475.0, 539.5], [0.0, 0.0, 1.0]])
 
 
-def _old_checkpoint(path, **config):
-    """A checkpoint as the kit wrote them before the record: config only (no weights needed here)."""
-    cfg = TrainConfig(variant="fullcam", backbone="resnet18", **config).to_dict()
+def _old_checkpoint(path, profile=None, **config):
+    """A checkpoint as the kit wrote them before the record: config only (no weights needed here),
+    which then named its profile."""
+    cfg = {**TrainConfig(variant="fullcam", backbone="resnet18", **config).to_dict(), "profile": profile}
     torch.save({"model": {}, "config": cfg, "step": 0}, path)
     return path
+
+
+def _profile_dataset(monkeypatch, tmp_path, name="smoke", crop_size=128):
+    """The manifest of a profile's default dataset folder (``RunFolders.still``) in a cache of its own."""
+    from airpose_lib.paths import CACHE_ENV, RunFolders
+
+    monkeypatch.setenv(CACHE_ENV, str(tmp_path / "cache"))
+    folder = RunFolders(name).still
+    folder.mkdir(parents=True)
+    (folder / "manifest.yaml").write_text(yaml.safe_dump({"kind": "airpose-still-frames", "crop_size": crop_size,
+                                                          "config": {"scene": {}}}))
 
 
 def test_record_round_trips_through_a_weights_only_checkpoint(tmp_path):
@@ -36,8 +48,9 @@ def test_record_round_trips_through_a_weights_only_checkpoint(tmp_path):
         network_record("airpose", "resnet34", {}, 96, K, normalisation="none")
 
 
-def test_old_checkpoints_fall_back_to_their_data(tmp_path):
-    # profile only: the smoke profile's still-frame crops (128 px) and the paper's camera
+def test_old_checkpoints_fall_back_to_their_data(tmp_path, monkeypatch):
+    # profile only: the data the smoke profile made in its default folder (128 px crops) and the paper's camera
+    _profile_dataset(monkeypatch, tmp_path)
     state = torch.load(_old_checkpoint(tmp_path / "a.pt", profile="smoke"), weights_only=True)
     net = read_network(state, legacy=training_input)
     assert (net.variant, net.backbone, net.input_size) == ("fullcam", "resnet18", 128)
@@ -57,19 +70,21 @@ def test_old_checkpoints_fall_back_to_their_data(tmp_path):
     assert training_input({"profile": "smoke", "data": {"root": str(root), "crop_size": 40,
                                                         "scene": {"image_size": [640, 480]}}})[0] == 40
     # an old fine-tuning checkpoint's input_size and camera_K win over the reconstruction
-    state = {"config": TrainConfig(profile="smoke").to_dict(), "input_size": 64, "camera_K": (2 * PAPER_K).tolist()}
+    state = {"config": {**TrainConfig().to_dict(), "profile": "smoke"}, "input_size": 64, "camera_K": (2 * PAPER_K).tolist()}
     net = read_network(state, legacy=training_input)
     assert net.input_size == 64
     np.testing.assert_array_equal(net.camera_K, 2 * PAPER_K)
 
 
-def test_a_run_records_its_datasets_crop_size(tmp_path):
+def test_a_run_records_its_datasets_crop_size(tmp_path, monkeypatch):
     class Crops:
         crop_size = 72
 
-    cfg = TrainConfig(variant="baseline", backbone="resnet18", profile="smoke").to_dict()
+    cfg = TrainConfig(variant="baseline", backbone="resnet18").to_dict()
     rec = run_network_entry(cfg, Crops())[NETWORK_KEY]
     assert (rec["variant"], rec["input_size"], rec["model"]) == ("baseline", 72, {})
     np.testing.assert_array_equal(rec["camera_K"], PAPER_K)
-    assert run_network_entry(cfg, object())[NETWORK_KEY]["input_size"] == 128  # no crop_size: the data's
+    _profile_dataset(monkeypatch, tmp_path)  # the run's data: a dataset folder with its manifest
+    with_data = dict(cfg, data={"root": str(tmp_path / "cache" / "data" / "still_smoke")})
+    assert run_network_entry(with_data, object())[NETWORK_KEY]["input_size"] == 128  # no crop_size: the data's
     assert run_network_entry(dict(cfg, task="pretrain"), Crops()) == {}  # not a variant's network

@@ -20,6 +20,8 @@ from airpose_lib.train import default_model_factory, load_checkpoint, train
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from test_train_loop import FAKES, tiny_config  # noqa: E402
 
+from airpose_lib.reproduce.configs import kit_configs
+
 
 def _watched(seen: dict):
     """A model factory that records every module output's device and dtype."""
@@ -188,10 +190,10 @@ def test_a_backbone_of_auto_precision_is_found_whichever_precision_made_it():
     """The committed cpu backbone was trained in bf16: auto finds it on a CPU that would pick fp32."""
     from airpose_lib.train.pretrain import own_backbone_keys, stage_key_options
 
-    keys = own_backbone_keys("cpu")
+    keys = own_backbone_keys(kit_configs("cpu").pretrain)
     committed = json.loads((Path(__file__).resolve().parents[1] / "results/cpu/pretrained_backbone.json").read_text())
     assert committed["key"] in keys and len(keys) == 2
     from airpose_lib.train.pretrain import pretrain_stages
 
-    fixed = [c.replace(precision="fp32") for c in pretrain_stages("cpu")]
+    fixed = [c.replace(precision="fp32") for c in pretrain_stages(kit_configs("cpu").pretrain)]
     assert len(stage_key_options(fixed, "fp")) == 1  # a forced precision has one key

@@ -8,14 +8,14 @@ import dataclasses
 import numpy as np
 import pytest
 
-from airpose_lib.data.sequences.config import profile_sequences
 from airpose_lib.data.sequences.motions import ACTIVITIES, sample_script
 from airpose_lib.data.sequences.simulate import recording_script
 from airpose_lib.data.still.poses import sample_body_pose
 from airpose_lib.errors import ConfigError
 from airpose_lib.prior.build import motion_poses, prior_corpus, prior_is_current, train_and_save_prior
 from airpose_lib.prior.checkpoint import load_prior
-from airpose_lib.prior.train import CorpusConfig, prior_profile
+from airpose_lib.prior.train import CorpusConfig
+from airpose_lib.reproduce.configs import kit_configs
 
 CPU_HELD_OUT = ("walk", "reach", "squat", "stand", "bend", "turn", "twist")
 
@@ -71,8 +71,8 @@ def test_unchanged_corpus_without_held_out_motions():
 
 @pytest.mark.parametrize("profile", ["cpu", "smoke"])
 def test_profile_holds_out_every_activity_of_its_recordings(profile):
-    _, corpus = prior_profile(profile)
-    shown = {s.activity for c in profile_sequences(profile).values() for s in recording_script(c).segments}
+    corpus = kit_configs(profile).prior.corpus
+    shown = {s.activity for c in kit_configs(profile).sequences.values() for s in recording_script(c).segments}
     assert shown <= set(corpus.held_out_motions), shown - set(corpus.held_out_motions)
     assert set(corpus.held_out_motions) < set(ACTIVITIES)  # motion poses remain to train on
     if profile == "cpu":
@@ -83,7 +83,7 @@ def test_bad_held_out_motions_name_the_profile(tmp_path):
     prof = tmp_path / "p.yaml"
     prof.write_text("prior:\n  steps: 1\n  held_out_motions: [twirl]\n")
     with pytest.raises(ConfigError, match="p.yaml.*twirl"):
-        train_and_save_prior(str(prof), tmp_path / "prior.pt")
+        train_and_save_prior(kit_configs(str(prof)).prior, tmp_path / "prior.pt")
 
 
 def test_record_states_the_held_out_motions(tmp_path, monkeypatch):
@@ -92,13 +92,13 @@ def test_record_states_the_held_out_motions(tmp_path, monkeypatch):
     prof.write_text("prior:\n  steps: 2\n  batch_size: 16\n  kl_anneal_steps: 1\n  n_poses: 40\n"
                     "  n_motion_poses: 40\n  n_val: 20\n  w_joints: 0.0\n  log_every: 1\n"
                     "  held_out_motions: [twist, walk]\n")
-    path, report = train_and_save_prior(str(prof), tmp_path / "prior.pt")
+    path, report = train_and_save_prior(kit_configs(str(prof)).prior, tmp_path / "prior.pt")
     _, prov = load_prior("kit", path, return_provenance=True)
     assert prov["corpus"]["held_out_motions"] == ["twist", "walk"]
     assert report["train_poses"] == 80
-    assert prior_is_current(path, str(prof))
+    assert prior_is_current(path, kit_configs(str(prof)).prior)
     # A profile with another corpus (here none held out) does not take this prior as its own.
     other = tmp_path / "q.yaml"
     other.write_text(prof.read_text().replace("  held_out_motions: [twist, walk]\n", ""))
-    assert not prior_is_current(path, str(other))
-    assert dataclasses.asdict(prior_profile(str(other))[1])["held_out_motions"] == ()
+    assert not prior_is_current(path, kit_configs(str(other)).prior)
+    assert dataclasses.asdict(kit_configs(str(other)).prior.corpus)["held_out_motions"] == ()

@@ -48,7 +48,10 @@ def test_an_empty_file_or_a_missing_section_is_an_error_not_the_defaults(tmp_pat
 
 def test_a_bad_value_or_key_in_a_profile_names_the_file_and_the_field(tmp_path):
     from airpose_lib.errors import ConfigError
-    from airpose_lib.train import load_train_config
+    from airpose_lib.reproduce.configs import kit_configs
+
+    def load_train_config(path, variant):
+        return kit_configs(path).train.config(variant)
 
     path = tmp_path / "mine.yaml"
     path.write_text("train:\n  steps: thirty\n")
@@ -107,31 +110,27 @@ def _with_key(tmp_path, section: str, key: str, value) -> object:
 
 
 def _helpers():
-    from airpose_lib.data.sequences.config import profile_sequences
-    from airpose_lib.data.still.config import profile_config
-    from airpose_lib.finetune.config import finetune_config
-    from airpose_lib.fitting.airpose_plus import fitting_profile
     from airpose_lib.fitting.recording import fit_config
-    from airpose_lib.prior.train import prior_profile
-    from airpose_lib.train.config import load_train_config
+    from airpose_lib.reproduce.configs import kit_configs
     from airpose_lib.train.pretrain import pretrain_config
 
-    # (helper, section, a misspelt key, the field it should suggest, the section as messages name it)
+    # (what reads the section from the typed configs, section, a misspelt key, the field it should
+    # suggest, the section as messages name it)
     return [
-        (lambda p: load_train_config(p, "airpose"), "train", "stepz", "steps", "train:"),
-        (pretrain_config, "pretrain", "stepz", "steps", "pretrain:"),
-        (finetune_config, "finetune", "stepz", "steps", "finetune:"),
-        (prior_profile, "prior", "n_posez", "n_poses", "prior:"),
-        (fitting_profile, "fitting", "iterationz", "iterations", "fitting:"),
-        (fit_config, "fitting", "iterationz", "iterations", "fitting:"),
-        (profile_config, "data.still", "num_samplez", "num_samples", "data: still:"),
-        (profile_sequences, "sequences", "fpz", "fps", "sequences:"),
+        (lambda p: kit_configs(p).train.config("airpose"), "train", "stepz", "steps", "train:"),
+        (lambda p: pretrain_config(kit_configs(p).pretrain), "pretrain", "stepz", "steps", "pretrain:"),
+        (lambda p: kit_configs(p).finetune, "finetune", "stepz", "steps", "finetune:"),
+        (lambda p: kit_configs(p).prior, "prior", "n_posez", "n_poses", "prior:"),
+        (lambda p: kit_configs(p).fitting, "fitting", "iterationz", "iterations", "fitting:"),
+        (lambda p: fit_config(kit_configs(p).fitting), "fitting", "iterationz", "iterations", "fitting:"),
+        (lambda p: kit_configs(p).still, "data.still", "num_samplez", "num_samples", "data: still:"),
+        (lambda p: kit_configs(p).sequences, "sequences", "fpz", "fps", "sequences:"),
     ]
 
 
 @pytest.mark.parametrize("case", range(8))
 def test_every_section_reader_names_an_unknown_key_the_file_and_the_closest_key(tmp_path, case):
-    """The eight section-to-config helpers share one check (profiles.section_config /
+    """The eight section-to-config readers (at the entry, reproduce.configs) share one check (profiles.section_config /
     config_fields.config_from): the file, the section, the key and the closest known one."""
     from airpose_lib.errors import ConfigError, UserError
 
@@ -150,14 +149,15 @@ def test_every_section_reader_names_an_unknown_key_the_file_and_the_closest_key(
 def test_a_bad_value_in_a_section_names_the_file_and_a_bad_option_the_options(tmp_path):
     from airpose_lib.errors import ConfigError, ProfileSettingError
     from airpose_lib.finetune.config import finetune_config
-    from airpose_lib.prior.train import prior_profile
+    from airpose_lib.reproduce.configs import kit_configs
 
     path = _with_key(tmp_path, "finetune", "steps", "thirty")
     with pytest.raises(ProfileSettingError, match=r"mine\.yaml, section `finetune:`: steps: expected int"):
-        finetune_config(path)
+        assert kit_configs(path).finetune is None  # raises first
     with pytest.raises(ConfigError, match=r"^fine-tuning options: unknown key 'stepz'"):
-        finetune_config("smoke", stepz=3)
-    train, corpus = prior_profile(_with_key(tmp_path, "prior", "seed", 7))
+        finetune_config(kit_configs("smoke").finetune, stepz=3)
+    prior = kit_configs(_with_key(tmp_path, "prior", "seed", 7)).prior
+    train, corpus = prior.train, prior.corpus
     assert train.seed == 7 and corpus.seed == 7  # a key of both configs goes to each
 
 
@@ -271,14 +271,12 @@ def test_a_command_reads_its_profile_once_and_passes_the_reading_down(monkeypatc
 def test_a_profile_given_as_a_file_names_its_folders_by_its_stem(tmp_path, monkeypatch):
     """A profile file outside the kit (e.g. results/cpu/selection/cpu_more.yaml) gets one folder
     per cache and run kind, named as a kit profile's would be: not a tree under its path."""
-    from airpose_lib.data.sequences.cache import default_sequence_root
-    from airpose_lib.data.still.config import default_root
     from airpose_lib.eval.reference import reference_dir
-    from airpose_lib.experiments.recordings import default_experiment_dir
-    from airpose_lib.paths import profile_name
+    from airpose_lib.paths import RunFolders, profile_name
     from airpose_lib.prior import build
     from airpose_lib.prior.checkpoint import kit_prior_path
     from airpose_lib.profiles import loaded
+    from airpose_lib.reproduce.configs import kit_configs
 
     monkeypatch.setenv("AIRPOSE_CACHE", str(tmp_path / "cache"))
     monkeypatch.setenv("AIRPOSE_RUNS", str(tmp_path / "runs"))
@@ -288,10 +286,13 @@ def test_a_profile_given_as_a_file_names_its_folders_by_its_stem(tmp_path, monke
     path.write_text("inherits: smoke\n")
     for given in (str(path), loaded(str(path))):
         assert profile_name(given) == "cpu_more"
-        assert default_sequence_root(given) == tmp_path / "cache" / "data" / "sequences_cpu_more"
-        assert default_sequence_root(given, field=True) == tmp_path / "cache" / "data" / "sequences_cpu_more_field"
-        assert default_experiment_dir(given, field=True) == tmp_path / "runs" / "recordings" / "cpu_more_field"
-        assert default_root(given) == tmp_path / "cache" / "data" / "still_cpu_more"
-        assert build.ensure_prior(given) == kit_prior_path("cpu_more")  # it used to raise on the path
-        assert reference_dir(given).name == "cpu_more"
-    assert profile_name("cpu") == "cpu" and default_sequence_root("cpu").name == "sequences_cpu"
+        folders = kit_configs(given).folders
+        assert folders == RunFolders.of(given) == RunFolders("cpu_more")
+        assert folders.sequences() == tmp_path / "cache" / "data" / "sequences_cpu_more"
+        assert folders.sequences(field=True) == tmp_path / "cache" / "data" / "sequences_cpu_more_field"
+        assert folders.recordings(field=True) == tmp_path / "runs" / "recordings" / "cpu_more_field"
+        assert folders.still == tmp_path / "cache" / "data" / "still_cpu_more"
+        assert folders.train("airpose", 7) == tmp_path / "runs" / "train" / "cpu_more" / "airpose" / "seed7"
+        assert build.ensure_prior(kit_configs(given).prior) == kit_prior_path("cpu_more")  # it used to raise on the path
+        assert reference_dir(folders).name == "cpu_more"
+    assert profile_name("cpu") == "cpu" and RunFolders.of("cpu").sequences().name == "sequences_cpu"

@@ -165,7 +165,7 @@ def test_write_reference_builds_the_capped_report_only_after_a_whole_run(run, ca
     monkeypatch.setattr(reproduce, "load_catalog", lambda: catalog)
     monkeypatch.setattr(report, "CATALOG_PATH", run["kw"]["catalog_path"])
     monkeypatch.setattr(report, "FIGURES_README", run["kw"]["readme"])
-    monkeypatch.setattr(reference, "reference_dir", lambda profile: tmp_path / "results" / profile)
+    monkeypatch.setattr(reference, "reference_dir", lambda folders: tmp_path / "results" / folders.name)
     done = RunReport("smoke", "", "0.1.0", "python3", "", str(run["run_dir"]), str(run["figures"]),
                      results=[NotebookResult("01_second", "01_second.ipynb", status="ok")])
     assert _write_reference_report(done) == 0

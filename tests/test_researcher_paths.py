@@ -11,6 +11,7 @@ import pytest
 
 from airpose_lib import cli, paths
 from airpose_lib.cli.common import parse_sets
+from airpose_lib.paths import RunFolders
 from airpose_lib.progress import LOG_INTERVAL_S, progress_bar
 from airpose_lib.reproduce import notebook_defaults
 
@@ -19,16 +20,14 @@ REPO = Path(__file__).resolve().parents[1]
 
 # -- one runs folder --------------------------------------------------------------------------------
 def test_runs_root_does_not_depend_on_the_working_directory(monkeypatch, tmp_path):
-    from airpose_lib.experiments.recordings import default_experiment_dir
-    from airpose_lib.train.loop import default_out_dir
 
     monkeypatch.delenv(paths.RUNS_ENV, raising=False)
     monkeypatch.chdir(tmp_path)  # e.g. notebooks/, the kernel's folder in JupyterLab
     assert paths.runs_root() == REPO / "runs"
-    assert default_out_dir("cpu", "airpose", 123) == REPO / "runs" / "train" / "cpu" / "airpose" / "seed123"
-    assert default_experiment_dir("smoke") == REPO / "runs" / "recordings" / "smoke"
+    assert RunFolders.of("cpu").train("airpose", 123) == REPO / "runs" / "train" / "cpu" / "airpose" / "seed123"
+    assert RunFolders.of("smoke").recordings() == REPO / "runs" / "recordings" / "smoke"
     monkeypatch.setenv(paths.RUNS_ENV, str(tmp_path / "elsewhere"))
-    assert default_out_dir("cpu", "airpose", 123) == tmp_path / "elsewhere" / "train" / "cpu" / "airpose" / "seed123"
+    assert RunFolders.of("cpu").train("airpose", 123) == tmp_path / "elsewhere" / "train" / "cpu" / "airpose" / "seed123"
     assert paths.figures_root() == REPO / "figures"
 
 

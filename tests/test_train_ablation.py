@@ -2,9 +2,13 @@
 same checkpoints as sequential training, and finished runs are reused."""
 from __future__ import annotations
 
+import dataclasses
+
 import pytest
 import torch
 import yaml
+
+from airpose_lib.reproduce.configs import kit_configs
 
 
 @pytest.fixture(scope="module")
@@ -19,7 +23,7 @@ def tiny_profile(module_tmp, open_model_files):
         "steps": 3, "batch_size": 2, "backbone": "resnet18", "seed": 1, "checkpoint_every": 3,
         "val_every": 100, "log_every": 1, "num_workers": 0, "data": {"root": str(root)},
         "loss": {"vertex_subsample": 200}}}))
-    return profile
+    return kit_configs(profile).train_inputs()
 
 
 def test_parallel_training_equals_sequential_and_is_reused(tiny_profile, tmp_path):
@@ -51,10 +55,9 @@ def test_a_run_left_by_other_settings_is_trained_afresh(tiny_profile, tmp_path, 
     from airpose_lib.train.ablation import trained_checkpoint
 
     first = load_checkpoint(trained_checkpoint(tiny_profile, "baseline", 1, tmp_path))
-    changed = tmp_path / "changed.yaml"
-    settings = yaml.safe_load(tiny_profile.read_text())
-    settings["train"]["lr"] = first["config"]["lr"] * 2
-    changed.write_text(yaml.safe_dump(settings))
+    lr = first["config"]["lr"] * 2
+    changed = dataclasses.replace(tiny_profile, section=dataclasses.replace(
+        tiny_profile.section, values={**tiny_profile.section.values, "lr": lr}))
     again = load_checkpoint(trained_checkpoint(changed, "baseline", 1, tmp_path))
-    assert again["config"]["lr"] == settings["train"]["lr"] and again["step"] == 3
+    assert again["config"]["lr"] == lr and again["step"] == 3
     assert "trained with other lr than the profile asks for now; training it afresh" in capsys.readouterr().out

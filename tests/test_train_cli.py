@@ -26,8 +26,8 @@ def test_train_dispatch_merges_profile_and_options(monkeypatch, tmp_path):
 
     seen = {}
 
-    def fake_train(variant, profile, out_dir=None, resume=True, config=None):
-        seen.update(variant=variant, profile=profile, out_dir=out_dir, resume=resume, config=config)
+    def fake_train(variant, inputs, out_dir=None, resume=True, config=None):
+        seen.update(variant=variant, inputs=inputs, out_dir=out_dir, resume=resume, config=config)
         return T.TrainResult(out_dir=Path(out_dir or "."), step=config.steps, checkpoint=None, train_loss=1.0)
 
     monkeypatch.setattr(T, "train", fake_train)
@@ -36,7 +36,8 @@ def test_train_dispatch_merges_profile_and_options(monkeypatch, tmp_path):
                    "loss.w_tau=3", "official_loss=true"])
     assert rc == 0
     cfg = seen["config"]
-    assert (seen["variant"], seen["profile"], seen["resume"], seen["out_dir"]) == ("fullcam", "smoke", False, tmp_path)
+    assert (seen["variant"], seen["resume"], seen["out_dir"]) == ("fullcam", False, tmp_path)
+    assert seen["inputs"].folders.name == "smoke" and seen["inputs"].section.config("fullcam").backbone == "resnet18"
     assert (cfg.variant, cfg.seed, cfg.steps, cfg.lr, cfg.official_loss) == ("fullcam", 5, 7, 1e-4, True)
     assert cfg.model == {"dropout": 0.0}
     assert cfg.loss == {"vertex_subsample": 2000, "w_tau": 3}  # merged into the profile's dict

@@ -15,6 +15,7 @@ import pytest
 import torch
 from torch.utils.data import Dataset
 
+from airpose_lib.reproduce.configs import kit_configs
 from airpose_lib.train import (
     ResumableBatchSampler,
     SeededDataset,
@@ -317,14 +318,14 @@ def test_load_train_config_from_profile(tmp_path):
     prof = tmp_path / "p.yaml"
     prof.write_text("train:\n  steps: 11\n  batch_size: 6\n  lr: 1.0e-4\n"
                     "  variants:\n    baseline: {lr: 2.0e-4}\n")
-    cfg = load_train_config(prof, "airpose")
+    cfg = kit_configs(prof).train.config("airpose")
     assert (cfg.steps, cfg.batch_size, cfg.lr, cfg.amsgrad, cfg.seed) == (11, 6, 1e-4, True, 123)
-    cfg = load_train_config(prof, "baseline", seed=5, steps=3)
+    cfg = kit_configs(prof).train.config("baseline", seed=5, steps=3)
     assert (cfg.variant, cfg.lr, cfg.seed, cfg.steps) == ("baseline", 2e-4, 5, 3)
     assert load_train_config(None, "fullcam").lr == 5e-5
     prof.write_text("train:\n  stepz: 11\n")
     with pytest.raises(ValueError, match="stepz"):
-        load_train_config(prof, "airpose")
+        kit_configs(prof).train.config("airpose")
     TrainConfig(batch_size=5, world_size=2)  # an uneven split is fine
     with pytest.raises(ValueError, match="at least world_size"):
         TrainConfig(batch_size=2, world_size=3)
@@ -335,12 +336,12 @@ def test_load_train_config_from_profile(tmp_path):
 @pytest.mark.parametrize("profile", ["smoke", "cpu", "paper"])
 def test_kit_profiles_have_train_sections(profile):
     for variant in ("baseline", "multiview", "fullcam", "airpose"):
-        cfg = load_train_config(profile, variant)
+        cfg = kit_configs(profile).train.config(variant)
         assert cfg.steps > 0 and cfg.batch_size > 0
-    paper = load_train_config("paper", "airpose")
+    paper = kit_configs("paper").train.config("airpose")
     if profile == "paper":
         assert (paper.lr, paper.batch_size, paper.seed, paper.backbone) == (5e-5, 30, 123, "resnet50")
-        assert paper.grad_clip == 1.0 == load_train_config("cpu", "multiview").grad_clip  # the cpu profile's evidence
+        assert paper.grad_clip == 1.0 == kit_configs("cpu").train.config("multiview").grad_clip  # the cpu profile's evidence
 
 
 def test_learning_rate_schedules_by_hand():

@@ -81,12 +81,12 @@ def test_missing_checkpoint_names_the_folder_and_the_manifest(tmp_path):
 
 def test_training_config_switches_to_the_official_dataset(official_assets):
     from airpose_lib.data.official.synthetic import OfficialSyntheticDataset
-    from airpose_lib.train.config import load_train_config
+    from airpose_lib.reproduce.configs import kit_configs
     from airpose_lib.train.loop import default_dataset_factory
     from airpose_lib.train.run import prepare_data
 
     data, _, _ = official_assets
-    cfg = load_train_config("smoke", "airpose", task="supervised", pretrained=None)  # end to end on the images
+    cfg = kit_configs("smoke").train.config("airpose", task="supervised", pretrained=None)  # end to end on the images
     official = cfg.replace(data={"source": "official_synthetic", "root": str(data), "input_size": 64,
                                  "body_source": "open"})
     with pytest.raises(ValueError, match="body_source='smplx'"):

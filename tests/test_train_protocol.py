@@ -17,6 +17,8 @@ from airpose_lib.geometry import axis_angle_to_matrix, matrix_to_rot6d, project_
 from airpose_lib.losses import BaselineLossConfig, SupervisedLoss
 from airpose_lib.losses.pretrain import PretrainLoss, heading_bin, heading_of
 from airpose_lib.model.pretrain import PretrainNet
+from airpose_lib.paths import RunFolders
+from airpose_lib.reproduce.configs import kit_configs
 from airpose_lib.train.evaluate import predict
 from airpose_lib.train.features import feature_key
 from airpose_lib.train.loop import MIN_WEAK_SCALE, _supervised_terms
@@ -235,17 +237,17 @@ def test_a_second_pretraining_stage_starts_from_the_first(tmp_path, monkeypatch,
     profile = tmp_path / "two.yaml"
     profile.write_text(yaml.safe_dump({"pretrain": {**section, "continue_from": {"steps": 2}}}))
     fp = load_manifest(root)["fingerprint"]
-    stages = pretrain_stages(str(profile))
+    stages = pretrain_stages(kit_configs(str(profile)).pretrain)
     assert [c.steps for c in stages] == [2, 1]
     keys = stage_keys(stages, fp)
     one = tmp_path / "one.yaml"
     one.write_text(yaml.safe_dump({"pretrain": {**section, "steps": 2}}))
-    assert stage_keys(pretrain_stages(str(one)), fp) == keys[:1]  # the first stage alone: same key
+    assert stage_keys(pretrain_stages(kit_configs(str(one)).pretrain), fp) == keys[:1]  # the first stage alone: same key
     other = tmp_path / "other.yaml"
     other.write_text(yaml.safe_dump({"pretrain": {**section, "continue_from": {"steps": 3}}}))
-    assert stage_keys(pretrain_stages(str(other)), fp)[-1] != keys[-1]  # another start, another key
+    assert stage_keys(pretrain_stages(kit_configs(str(other)).pretrain), fp)[-1] != keys[-1]  # another start, another key
 
-    path = ensure_backbone(str(profile), root, fp, out_root=tmp_path / "runs")
+    path = ensure_backbone(kit_configs(str(profile)).pretrain, root, fp, out_root=tmp_path / "runs")
     assert path.stem == keys[-1]
     record = json.loads(path.with_suffix(".json").read_text())
     assert record["steps"] == 1 and record["total_steps"] == 3
@@ -259,7 +261,7 @@ def test_a_second_pretraining_stage_starts_from_the_first(tmp_path, monkeypatch,
     assert float((fresh.conv1.weight.detach() - w1).abs().max()) > 10 * step
 
     monkeypatch.setattr(pretrain, "start_training", lambda *a, **k: pytest.fail("trained again"))
-    assert ensure_backbone(str(profile), root, fp, out_root=tmp_path / "runs") == path
+    assert ensure_backbone(kit_configs(str(profile)).pretrain, root, fp, out_root=tmp_path / "runs") == path
 
 
 def test_earlier_stages_keep_their_dataset_when_the_profile_data_grow(tmp_path, private_cache):
@@ -268,7 +270,7 @@ def test_earlier_stages_keep_their_dataset_when_the_profile_data_grow(tmp_path, 
     cache when needed); the last stage trains on the dataset it is given."""
     import yaml
 
-    from airpose_lib.data.still.generate import GenerationConfig, default_root, generate_still_dataset
+    from airpose_lib.data.still.generate import GenerationConfig, generate_still_dataset
     from airpose_lib.data.still.manifest import load_manifest
     from airpose_lib.train.pretrain import ensure_backbone, pretrain_stages, stage_keys
 
@@ -279,16 +281,16 @@ def test_earlier_stages_keep_their_dataset_when_the_profile_data_grow(tmp_path, 
     before.write_text(yaml.safe_dump({"data": {"still": small},
                                       "pretrain": {**section, "continue_from": {"steps": 2}}}))
     small_fp = GenerationConfig(**small).fingerprint()
-    old_keys = stage_keys(pretrain_stages(str(before)), small_fp)
+    old_keys = stage_keys(pretrain_stages(kit_configs(str(before)).pretrain), small_fp)
 
     after = tmp_path / "grown" / "grow.yaml"  # the dataset grew; a third stage was added
     after.parent.mkdir()
     after.write_text(yaml.safe_dump({"data": {"still": {**small, "num_samples": 10}}, "pretrain": {
         **section, "continue_from": {"steps": 1, "data": {"still": {"num_samples": 8}}, "continue_from": {"steps": 2}}}}))
-    stages = pretrain_stages(str(after))
+    stages = pretrain_stages(kit_configs(str(after)).pretrain)
     assert [c.steps for c in stages] == [2, 1, 1]
     assert [c.data.get("fingerprint") for c in stages] == [small_fp, small_fp, None]
-    assert stages[0].data["root"] == str(default_root("grow").with_name(f"still_grow-{small_fp[:12]}"))
+    assert stages[0].data["root"] == str(RunFolders.of("grow").still.with_name(f"still_grow-{small_fp[:12]}"))
     root = tmp_path / "data"
     generate_still_dataset(GenerationConfig(**{**small, "num_samples": 10}), root, workers=1, progress=False,
                            record=False)
@@ -296,7 +298,7 @@ def test_earlier_stages_keep_their_dataset_when_the_profile_data_grow(tmp_path, 
     keys = stage_keys(stages, fp)
     assert keys[:2] == old_keys and keys[2] not in old_keys
 
-    path = ensure_backbone(str(after), root, fp, out_root=tmp_path / "runs")
+    path = ensure_backbone(kit_configs(str(after)).pretrain, root, fp, out_root=tmp_path / "runs")
     assert path.stem == keys[-1]
     record = json.loads(path.with_suffix(".json").read_text())
     assert record["data_fingerprint"] == fp and record["total_steps"] == 4
@@ -366,8 +368,8 @@ def test_the_committed_cpu_backbone_keeps_its_key():
     retrain both stages, hours on a 2-core machine, on a user's first cpu run)."""
     from airpose_lib.train.pretrain import pretrain_stages, reference_backbone_path, stage_keys
 
-    record = json.loads(reference_backbone_path("cpu").with_suffix(".json").read_text())
-    keys = stage_keys(pretrain_stages("cpu"), record["data_fingerprint"])
+    record = json.loads(reference_backbone_path(RunFolders.of("cpu")).with_suffix(".json").read_text())
+    keys = stage_keys(pretrain_stages(kit_configs("cpu").pretrain), record["data_fingerprint"])
     chain = []  # the committed record names the stages it continued, last to first
     while record:
         chain.append(record["key"])
@@ -388,11 +390,11 @@ def test_training_and_pretraining_never_read_the_test_split(tmp_path, monkeypatc
     from airpose_lib.model.variants import VARIANTS
     from airpose_lib.profiles import profile_names
     from airpose_lib.train import train
-    from airpose_lib.train.config import TrainConfig, load_train_config
+    from airpose_lib.train.config import TrainConfig
     from airpose_lib.train.pretrain import ensure_backbone, pretrain_stages
 
     for name in profile_names():
-        configs = [load_train_config(name, v) for v in VARIANTS] + pretrain_stages(name)
+        configs = [kit_configs(name).train.config(v) for v in VARIANTS] + pretrain_stages(kit_configs(name).pretrain)
         assert all("test" not in (c.train_split, c.val_split) for c in configs), name
     for field in ("train_split", "val_split"):
         with pytest.raises(ConfigError, match=field):
@@ -413,7 +415,7 @@ def test_training_and_pretraining_never_read_the_test_split(tmp_path, monkeypatc
     profile.write_text(yaml.safe_dump({"pretrain": {
         "steps": 1, "batch_size": 2, "backbone": "resnet18", "lr": 1e-3, "seed": 0, "checkpoint_every": 1,
         "val_every": 1, "log_every": 1, "num_workers": 0, "model": {"n_heading_bins": 12}}}))
-    backbone = ensure_backbone(str(profile), root, load_manifest(root)["fingerprint"], out_root=tmp_path / "runs")
+    backbone = ensure_backbone(kit_configs(str(profile)).pretrain, root, load_manifest(root)["fingerprint"], out_root=tmp_path / "runs")
     assert json.loads(backbone.with_suffix(".json").read_text())["gate_split"] == "val"
     cfg = TrainConfig(variant="airpose", task="regressor", pretrained=str(backbone), backbone="resnet18", steps=1,
                       batch_size=2, lr=1e-3, data={"root": str(root)}, val_every=1, checkpoint_every=1, log_every=1,

@@ -13,6 +13,8 @@ from airpose_lib.engine.checkpoint import write_checkpoint
 from airpose_lib.errors import DamagedFileError
 from airpose_lib.model import build_model
 from airpose_lib.model.record import network_record
+from airpose_lib.paths import RunFolders
+from airpose_lib.reproduce.configs import kit_configs
 from airpose_lib.train.evaluate import load_network
 from airpose_lib.zoo import (
     export_regressor,
@@ -109,7 +111,7 @@ def test_the_manifest_refuses_a_damaged_or_foreign_file_in_one_line(exported):
 
 
 def test_the_committed_cpu_set_is_whole_and_intact():
-    folder = zoo_dir("cpu")
+    folder = zoo_dir(RunFolders.of("cpu"))
     if not (folder / "manifest.yaml").is_file():
         pytest.skip("no shipped cpu networks in this checkout")
     entries = read_manifest(folder)
@@ -125,11 +127,10 @@ def test_the_committed_cpu_set_is_whole_and_intact():
 
 
 def test_the_demo_profile_runs_the_cpu_networks_on_a_test_split_of_its_own():
-    from airpose_lib.data.still.config import profile_config
     from airpose_lib.experiments.shipped import shipped_from
 
-    demo, cpu = profile_config("demo"), profile_config("cpu")
-    assert shipped_from("demo") == "cpu" and shipped_from("cpu") is None
+    demo, cpu = kit_configs("demo").still, kit_configs("cpu").still
+    assert shipped_from(kit_configs("demo").networks) == "cpu" and shipped_from(kit_configs("cpu").networks) is None
     assert demo.seed != cpu.seed and demo.fingerprint() != cpu.fingerprint()
     assert demo.num_test_shards * demo.shard_size >= 1000  # two-view test samples
 
@@ -146,5 +147,5 @@ def test_a_copied_set_is_found_through_the_profile_folder(exported, tmp_path):
     write_manifest(folder, [entry], {"profile": "x"})
     profile = tmp_path / "mine.yaml"
     profile.write_text(yaml.safe_dump({"inherits": "smoke", "networks": {"shipped": "smoke", "folder": str(folder)}}))
-    nets = shipped_networks(str(profile))
+    nets = shipped_networks(kit_configs(str(profile)).networks)
     assert nets.seed == 5 and nets.folder == folder

@@ -20,15 +20,14 @@ __all__ = ['add_data']
 
 
 def _cmd_data_sequence(args: argparse.Namespace) -> int:
-    from airpose_lib.data.sequences import default_sequence_root, ensure_sequences
-    from airpose_lib.data.sequences.config import profile_sequences
-    from airpose_lib.data.sequences.presets import profile_field_sequences
+    from airpose_lib.data.sequences import ensure_sequences
+    from airpose_lib.reproduce.configs import kit_configs
 
-    (profile_field_sequences if args.field else profile_sequences)(args.profile)  # a bad setting: no folder made
-    root = args.out if args.out is not None else default_sequence_root(args.profile, args.field)
+    configs = kit_configs(args.profile)
+    recordings = configs.recordings(args.field)  # a bad setting: no folder made
+    root = args.out if args.out is not None else configs.folders.sequences(args.field)
     with folder_lock(root, "recordings folder"):  # one writer; a killed one's temp files go
-        paths = ensure_sequences(args.profile, root, only=args.only, force=args.force, progress=not args.quiet,
-                                 field=args.field)
+        paths = ensure_sequences(recordings, root, only=args.only, force=args.force, progress=not args.quiet)
     for name, path in paths.items():
         print(f"{name:<10} {path}")
     return 0
@@ -55,11 +54,14 @@ def _add_data_sequence(dsub) -> None:
 
 
 def _cmd_data_generate(args: argparse.Namespace) -> int:
-    from airpose_lib.data.still.generate import default_root, generate_still_dataset, profile_config
-    config = profile_config(args.profile)
-    root = args.out if args.out is not None else default_root(args.profile)
+    from airpose_lib.data.still.generate import generate_still_dataset
+    from airpose_lib.reproduce.configs import kit_configs
+
+    configs = kit_configs(args.profile)
+    config = configs.still
+    root = args.out if args.out is not None else configs.folders.still
     workers = args.workers if args.workers is not None else (os.cpu_count() or 1)
-    manifest = generate_still_dataset(config, root, workers=workers, profile=args.profile,
+    manifest = generate_still_dataset(config, root, workers=workers, label=args.profile,
                                       progress=not args.quiet, record=args.record_manifest)
     t = manifest["totals"]
     print(f"{root}: {t['train_samples']} train + {t.get('val_samples', 0)} val + {t['test_samples']} test samples "

@@ -28,6 +28,7 @@ def _cmd_finetune(args: argparse.Namespace) -> int:
     from airpose_lib.finetune.config import FineTuneConfig, finetune_config
     from airpose_lib.finetune.loss import FineTuneLossConfig
     from airpose_lib.finetune.train import finetune
+    from airpose_lib.reproduce.configs import kit_configs
 
     overrides = parse_sets(args.set, FineTuneConfig, {"loss": field_types(FineTuneLossConfig)})
     for name, field in (("steps", "steps"), ("batch_size", "batch_size"), ("seed", "seed"), ("threads", "num_threads"),
@@ -41,7 +42,7 @@ def _cmd_finetune(args: argparse.Namespace) -> int:
         if None in frames:
             raise CLIError("--frames for fine-tuning needs both ends, e.g. 0:7000")
         overrides["frames"] = list(frames)
-    cfg = finetune_config(args.profile, **{k: v for k, v in overrides.items() if not isinstance(v, dict)})
+    cfg = finetune_config(kit_configs(args.profile).finetune, **{k: v for k, v in overrides.items() if not isinstance(v, dict)})
     for k, v in overrides.items():  # dict fields (loss.w_vposer=0.5): merge into the profile's
         if isinstance(v, dict):
             cfg = cfg.replace(**{k: {**getattr(cfg, k), **v}})

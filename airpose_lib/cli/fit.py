@@ -32,7 +32,9 @@ def _cmd_fit(args: argparse.Namespace) -> int:
     if unknown or not detectors:
         raise CLIError(f"--detectors {args.detectors}: give one or more of {', '.join(DETECTOR_FILES)}, "
                        "comma-separated")
-    cfg = fit_config(args.profile, official_temporal=args.official_temporal, iterations=args.iterations,
+    from airpose_lib.reproduce.configs import kit_configs
+
+    cfg = fit_config(kit_configs(args.profile).fitting, official_temporal=args.official_temporal, iterations=args.iterations,
                      threads=args.threads, device=args.device)
     require_folder(args.sequence, "--sequence", SEQUENCE_FOLDER)
     require_file(args.init, "--init", "the .npz of `airpose predict`")
@@ -45,7 +47,7 @@ def _cmd_fit(args: argparse.Namespace) -> int:
     prior, prior_prov = load_prior(args.prior, args.prior_path, return_provenance=True)
     res = fit_sequence(seq, init, prior=prior, config=cfg, progress=not args.quiet)
     out = save_refinement(args.out or refined_path(args.init), seq.frames, res, sequence=args.sequence,
-                          init=args.init, profile=args.profile, prior=prior_prov)
+                          init=args.init, label=str(args.profile), prior=prior_prov)
     print(f"{len(seq.frames)} frames, {int(res.kept.sum())} fitted, {len(res.skipped_frames)} skipped "
           f"(confidence < {cfg.min_frame_confidence}); {cfg.iterations} iterations in {res.seconds:.1f} s")
     print(f"written {out}")

@@ -18,10 +18,11 @@ def _cmd_prior_train(args: argparse.Namespace) -> int:
     import torch
 
     from airpose_lib.prior.build import train_and_save_prior
+    from airpose_lib.reproduce.configs import kit_configs
 
     if args.threads:
         torch.set_num_threads(args.threads)
-    out, val = train_and_save_prior(args.profile, args.out, steps=args.steps, seed=args.seed,
+    out, val = train_and_save_prior(kit_configs(args.profile).prior, args.out, steps=args.steps, seed=args.seed,
                                     device=args.device, progress=not args.quiet)
     print(f"corpus: {val['train_poses']} training poses, {val['val_poses']} held out")
     print(f"trained {val['steps']} steps in {val['seconds']:.0f} s")

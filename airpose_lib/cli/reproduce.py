@@ -43,18 +43,22 @@ def _cmd_reproduce(args: argparse.Namespace) -> int:
         print(report.figures_dir)
     else:
         print(f"figures collected in {report.figures_dir}")
-    differs = _check_reference(report, args.write_reference)
+    from airpose_lib.reproduce.configs import kit_configs
+
+    configs = kit_configs(args.profile)  # the reading the run started with (checked unchanged by the runner)
+    differs = _check_reference(report, args.write_reference, configs.networks)
     if args.require_agreement and differs:
         print(f"\nreproduction DIFFERS from the committed reference in {', '.join(differs)} "
               f"(the notebooks' reference_check.md under {report.run_dir})", file=sys.stderr)
         return 1
-    return _write_reference_report(report) if args.write_reference else 0
+    return _write_reference_report(report, configs.folders) if args.write_reference else 0
 
 
-def _check_reference(report, write: bool) -> list[str]:
+def _check_reference(report, write: bool, networks=None) -> list[str]:
     """After notebook 02 (Table I) and notebook 05 (the recordings' claims): their results against
     ``results/<profile>/``, or installed there with ``--write-reference``. Here, not in the
-    runner: the runner imports nothing of the kit.
+    runner: the runner imports nothing of the kit. ``networks``: the profile's ``networks:``
+    section (None: it trains its own).
 
     Returns:
         the notebooks whose own check (shipped networks) found this run outside its tolerances.
@@ -77,7 +81,7 @@ def _check_reference(report, write: bool) -> list[str]:
             continue
         out = Path(done[name].parameters["output_dir"])
         check = out / CHECK_FILE
-        if not write and (done[name].parameters.get("compare_reference") is False or shipped_from(report.profile)):
+        if not write and (done[name].parameters.get("compare_reference") is False or shipped_from(networks)):
             # the notebook's own check: no comparison, or the agreement of shipped networks
             line = check.read_text().splitlines()[0] if check.is_file() else "no check"
             messages.append(f"{name}: {line}")
@@ -90,10 +94,11 @@ def _check_reference(report, write: bool) -> list[str]:
     return differs
 
 
-def _write_reference_report(report) -> int:
+def _write_reference_report(report, folders=None) -> int:
     """With ``--write-reference`` after a run of every catalogued notebook: the run's HTML report
     into ``results/<profile>/report/``, size-capped, beside the reference tables it shows."""
     from airpose_lib.eval.reference import reference_dir
+    from airpose_lib.paths import RunFolders
     from airpose_lib.reproduce import load_catalog
     from airpose_lib.reproduce.report import REFERENCE_MAX_BYTES, REFERENCE_MAX_IMAGE_PX, build_report
 
@@ -101,7 +106,7 @@ def _write_reference_report(report) -> int:
 
     ran = {r.name for r in report.results if r.status == "ok"}
     missing = [e.name for e in load_catalog() if e.name not in ran]
-    out = reference_dir(report.profile) / "report"
+    out = reference_dir(folders if folders is not None else RunFolders.of(report.profile)) / "report"
     if missing:
         print(f"reference report: {out} not written: it shows a whole run, and {missing} did not run in this "
               f"call (run the profile without --only to write it)")

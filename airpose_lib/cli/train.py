@@ -20,7 +20,8 @@ __all__ = ['add_pretrain', 'add_train']
 
 def _cmd_train(args: argparse.Namespace) -> int:
     from airpose_lib.engine.launch import launch_env
-    from airpose_lib.train import TrainConfig, default_out_dir, load_train_config
+    from airpose_lib.reproduce.configs import kit_configs, train_inputs
+    from airpose_lib.train import TrainConfig
     from airpose_lib.train.config import option_types
     from airpose_lib.train.loop import check_data_root
 
@@ -31,14 +32,15 @@ def _cmd_train(args: argparse.Namespace) -> int:
     for name in ("steps", "batch_size", "world_size", "num_workers", "device"):
         if getattr(args, name) is not None:
             overrides[name] = getattr(args, name)
-    cfg = load_train_config(args.profile, args.variant, args.seed, **{
-        k: v for k, v in overrides.items() if not isinstance(v, dict)})
+    configs = kit_configs(args.profile)
+    cfg = configs.train.config(args.variant, args.seed, **{k: v for k, v in overrides.items() if not isinstance(v, dict)})
     for k, v in overrides.items():  # dict fields: merge into the profile's dicts
         if isinstance(v, dict):
             cfg = cfg.replace(**{k: {**getattr(cfg, k), **v}})
     check_data_root(cfg)  # inputs before the run folder exists
+    inputs = train_inputs(configs, cfg.pretrained)
     # The run folder and the checkpoint to resume from are checked before any data is prepared.
-    out = args.out if args.out is not None else default_out_dir(args.profile, cfg.variant, cfg.seed)
+    out = args.out if args.out is not None else configs.folders.train(cfg.variant, cfg.seed)
     out.mkdir(parents=True, exist_ok=True)
     # A second training into this folder is refused at once (the loop takes the lock again,
     # re-entrant). Rank 0 is its one holder: under torchrun the launch's rank 0 (the environment
@@ -46,10 +48,10 @@ def _cmd_train(args: argparse.Namespace) -> int:
     launch = launch_env()
     holder = launch[0] == 0 if launch is not None else cfg.world_size <= 1
     with folder_lock(out) if holder else contextlib.nullcontext():
-        return _train_locked(args, cfg, out)
+        return _train_locked(args, cfg, inputs, out)
 
 
-def _train_locked(args: argparse.Namespace, cfg, out: Path) -> int:
+def _train_locked(args: argparse.Namespace, cfg, inputs, out: Path) -> int:
     from airpose_lib.engine.checkpoint import last_checkpoint, load_checkpoint
     from airpose_lib.train import train
 
@@ -60,7 +62,7 @@ def _train_locked(args: argparse.Namespace, cfg, out: Path) -> int:
         except DamagedFileError as e:
             raise CLIError(f"cannot resume: {last} is damaged (cut short by a crash or a full disk?); copy the "
                            f"newest {last.parent}/step_*.pt over it, or start afresh with --no-resume") from e
-    result = train(args.variant, args.profile, out_dir=out, resume=args.resume, config=cfg)
+    result = train(args.variant, inputs, out_dir=out, resume=args.resume, config=cfg)
     print(f"step {result.step}  train loss {result.train_loss}  checkpoint {result.checkpoint}")
     if result.val_losses:
         print(f"validation loss {result.val_losses.get('total')}")
@@ -68,13 +70,15 @@ def _train_locked(args: argparse.Namespace, cfg, out: Path) -> int:
 
 
 def _cmd_pretrain(args: argparse.Namespace) -> int:
+    from airpose_lib.reproduce.configs import kit_configs
     from airpose_lib.train.pretrain import profile_backbone, write_reference_backbone
 
-    path = profile_backbone(args.profile, progress=not args.quiet)
+    configs = kit_configs(args.profile)
+    path = profile_backbone(configs.pretrain, progress=not args.quiet)
     record = json.loads(path.with_suffix(".json").read_text())
     print(f"backbone {path}\n  key {record['key']}  sha256 {record['sha256']}\n  gate {record['gate']}")
     if args.write_reference:
-        print(f"reference copy: {write_reference_backbone(args.profile, path)}")
+        print(f"reference copy: {write_reference_backbone(configs.folders, path)}")
     return 0
 
 

@@ -12,7 +12,7 @@ __all__ = ["add_video"]
 
 def _cmd_video(args: argparse.Namespace) -> int:
     from airpose_lib.experiments.video import VideoConfig, run_video, video_networks
-    from airpose_lib.fitting.airpose_plus import fitting_profile
+    from airpose_lib.reproduce.configs import kit_configs
 
     if args.intrinsics and len(args.intrinsics) > 2:
         raise CLIError("--intrinsics takes one file for both videos or one per video (UAV1 first)")
@@ -23,7 +23,7 @@ def _cmd_video(args: argparse.Namespace) -> int:
                       offset=args.offset, max_offset_s=args.max_offset, fps=args.fps, start=args.start,
                       end=args.end, every=args.every, fit=not args.no_fit, overlays=not args.no_overlays)
     nets = video_networks(args.networks, args.checkpoint, args.baseline_checkpoint, args.prior_path)
-    fit = fitting_profile(args.profile) if cfg.fit else None
+    fit = kit_configs(args.profile).fitting if cfg.fit else None
     run = run_video(cfg, nets, fit_config=fit, progress=not args.quiet)
     total = sum(run.seconds.values())
     print(f"{run.frames} paired frames in {total:.0f} s ({100 * total / max(run.frames, 1):.0f} s per 100 frames: "

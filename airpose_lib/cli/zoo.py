@@ -10,24 +10,27 @@ __all__ = ["add_zoo"]
 
 def _cmd_zoo_build(args: argparse.Namespace) -> int:
     from airpose_lib.experiments.zoo_build import build_shipped
+    from airpose_lib.reproduce.configs import kit_configs
 
-    print(f"wrote {build_shipped(args.profile, progress=not args.quiet)}")
+    print(f"wrote {build_shipped(kit_configs(args.profile), progress=not args.quiet)}")
     return 0
 
 
 def _cmd_zoo_verify(args: argparse.Namespace) -> int:
+    from airpose_lib.paths import RunFolders
     from airpose_lib.zoo import read_manifest, verified, zoo_dir
 
-    folder = zoo_dir(args.profile)
+    folder = zoo_dir(RunFolders.of(args.profile))
     for name in read_manifest(folder):  # raises one line on the first damaged file
         print(f"ok  {verified(folder, name).relative_to(folder.parent)}")
     return 0
 
 
 def _cmd_zoo_list(args: argparse.Namespace) -> int:
+    from airpose_lib.paths import RunFolders
     from airpose_lib.zoo import zoo_dir, zoo_table
 
-    print(zoo_table(zoo_dir(args.profile)))
+    print(zoo_table(zoo_dir(RunFolders.of(args.profile))))
     return 0
 
 

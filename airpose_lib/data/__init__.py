@@ -27,13 +27,13 @@ _EXPORTS = {
     **dict.fromkeys(("AppearanceConfig", "sample_appearance", "BodyPaint"), "still.appearance"),
     **dict.fromkeys(("SceneRenderer", "ground_textures"), "still.render"),  # imports VTK
     **dict.fromkeys(("DatasetError", "ShardIntegrityError", "load_manifest"), "still.manifest"),
-    **dict.fromkeys(("GENERATOR_VERSION", "GenerationConfig", "profile_config", "default_root"), "still.config"),
+    **dict.fromkeys(("GENERATOR_VERSION", "GenerationConfig"), "still.config"),
     "StillFrameGenerator": "still.frames",
     **dict.fromkeys(("generate_still_dataset", "ensure_still_dataset"), "still.generate"),
     **dict.fromkeys(("StillFrameDataset", "split_arrays", "denormalize_images"), "still.dataset"),
     # recordings
-    **dict.fromkeys(("SequenceConfig", "profile_sequences"), "sequences.config"),
-    **dict.fromkeys(("default_sequence_root", "ensure_sequences"), "sequences.cache"),
+    "SequenceConfig": "sequences.config",
+    "ensure_sequences": "sequences.cache",
     "SequenceFormatError": "sequences.layout",
     "OfficialLayoutWriter": "sequences.writer",
     **dict.fromkeys(("Sequence", "load_sequence"), "sequences.reader"),

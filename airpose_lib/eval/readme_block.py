@@ -15,6 +15,8 @@ from pathlib import Path
 
 import pandas as pd
 
+from airpose_lib.paths import RunFolders
+
 from .reference import reference_dir
 
 __all__ = ["block_markers", "results_block", "recordings_block", "video_block", "replace_block", "readme_block"]
@@ -24,15 +26,15 @@ _TABLE_COLUMNS = (("MPE", "MPE [m]", "MPE std [m]", "MPE paper [m]"),
                   ("MPJPE", "MPJPE [m]", "MPJPE std [m]", "MPJPE paper [m]"))
 
 
-def block_markers(profile: str, kind: str = "results") -> tuple[str, str]:
-    """The opening and closing comment of ``profile``'s block of ``kind`` (``results``: Table I;
+def block_markers(name: str, kind: str = "results") -> tuple[str, str]:
+    """The opening and closing comment of the profile ``name``'s block of ``kind`` (``results``: Table I;
     ``recordings``: :func:`recordings_block`)."""
-    return f"<!-- {kind}:{profile} -->", f"<!-- /{kind}:{profile} -->"
+    return f"<!-- {kind}:{name} -->", f"<!-- /{kind}:{name} -->"
 
 
-def _block_pattern(profile: str, kind: str = "results") -> re.Pattern:
-    """The block of ``profile``, markers included, in a text."""
-    opening, closing = block_markers(profile, kind)
+def _block_pattern(name: str, kind: str = "results") -> re.Pattern:
+    """The block of the profile ``name``, markers included, in a text."""
+    opening, closing = block_markers(name, kind)
     return re.compile(re.escape(opening) + r".*?" + re.escape(closing), re.S)
 
 
@@ -69,7 +71,7 @@ def _claim_lines(claims: pd.DataFrame) -> list[str]:
     return lines
 
 
-def _bound_lines(ref: Path, profile: str, claims: pd.DataFrame) -> list[str]:
+def _bound_lines(ref: Path, name: str, claims: pd.DataFrame) -> list[str]:
     """The measured bound of what an exchange could buy (``results/<profile>/mechanism/``, when
     made) beside the paper's Fullcam -> AirPose gain; none without that table."""
     path = ref / "mechanism" / "mechanism.csv"
@@ -82,13 +84,13 @@ def _bound_lines(ref: Path, profile: str, claims: pd.DataFrame) -> list[str]:
     if row.empty or paper.empty:
         return []
     r = row.iloc[0]
-    return ["", f"What an exchange could buy on this data (`results/{profile}/mechanism/`, validation split): one "
+    return ["", f"What an exchange could buy on this data (`results/{name}/mechanism/`, validation split): one "
                 f"depth scale shared by the two views, the most a shared body number could give, would cut Baseline "
                 f"+ Fullcam's MPE by at most {r['value']:.1f} % ({r['CI low']:.1f}, {r['CI high']:.1f}), against the "
                 f"paper's Fullcam -> AirPose gain of {float(paper.iloc[0]):.1f} %."]
 
 
-def results_block(profile: str, root: str | Path | None = None) -> str:
+def results_block(name: str, root: str | Path | None = None) -> str:
     """The block's Markdown (markers included) made from ``results/<profile>/``: Table I (kit mean
     ± seed spread, the paper's), the claims with their intervals and gains, the measured bound of
     what an exchange could buy (when ``mechanism/`` is there), and the provenance (commit, date,
@@ -97,20 +99,20 @@ def results_block(profile: str, root: str | Path | None = None) -> str:
     Raises:
         FileNotFoundError: the bundle lacks ``table1.csv``, ``claims.csv`` or ``provenance.json``.
     """
-    ref = reference_dir(profile, root)
+    ref = reference_dir(RunFolders(name), root)
     table = pd.read_csv(ref / "table1.csv", index_col=0)
     claims = pd.read_csv(ref / "claims.csv")
     prov = json.loads((ref / "provenance.json").read_text())
     commit = (prov.get("git") or {}).get("commit") or "unknown"
     seeds = prov.get("seeds") or []
-    opening, closing = block_markers(profile)
+    opening, closing = block_markers(name)
     lines = [opening,
-             f"Table I on the `{profile}` profile (`results/{profile}/`: {len(seeds)} seed{'s' * (len(seeds) != 1)}, "
+             f"Table I on the `{name}` profile (`results/{name}/`: {len(seeds)} seed{'s' * (len(seeds) != 1)}, "
              f"commit {commit[:7]}, {str(prov.get('created_at', ''))[:10]}; `{prov.get('command', '')}`). "
              "Kit: mean ± standard deviation over seeds; paper: its Table I.", "",
              *_table_lines(table), "",
              "The paper's orderings (\"A > B\": A's error is larger), paired over the test samples:", "",
-             *_claim_lines(claims), *_bound_lines(ref, profile, claims), closing]
+             *_claim_lines(claims), *_bound_lines(ref, name, claims), closing]
     return "\n".join(lines)
 
 
@@ -118,12 +120,12 @@ def results_block(profile: str, root: str | Path | None = None) -> str:
 _MARKER_TABLES = (("markers.csv", "clean"), ("field_markers.csv", "field"))
 
 
-def recordings_block(profile: str, root: str | Path | None = None) -> str | None:
+def recordings_block(name: str, root: str | Path | None = None) -> str | None:
     """The README's block (markers included) of the recordings' UAV2 in UAV1 against the ArUco
     markers, from ``results/<profile>/recordings/`` (``markers.csv``, ``field_markers.csv``):
     per recording and person, the markers against the generated cameras, then each method against
     both references, medians. None when the bundle has no marker table."""
-    ref = reference_dir(profile, root) / "recordings"
+    ref = reference_dir(RunFolders(name), root) / "recordings"
     parts = [pd.read_csv(ref / name).assign(recordings=tag) for name, tag in _MARKER_TABLES if (ref / name).is_file()]
     if not parts:
         return None
@@ -131,8 +133,8 @@ def recordings_block(profile: str, root: str | Path | None = None) -> str | None
     commit = (prov.get("git") or {}).get("commit") or "unknown"
     head = ["recordings", "person", "method", "reference", "frames", "position median [m]",
             "orientation median [deg]"]
-    lines = [*block_markers(profile, "recordings")[:1],
-             f"UAV2 in UAV1 on the `{profile}` recordings (`results/{profile}/recordings/`: commit {commit[:7]}, "
+    lines = [*block_markers(name, "recordings")[:1],
+             f"UAV2 in UAV1 on the `{name}` recordings (`results/{name}/recordings/`: commit {commit[:7]}, "
              f"{str(prov.get('created_at', ''))[:10]}; `{prov.get('command', '')}`): the ArUco markers against the "
              "cameras the renderer used, then each method against both; medians over the frames where the markers "
              "posed both drones and every network estimated both views.", "",
@@ -141,33 +143,33 @@ def recordings_block(profile: str, root: str | Path | None = None) -> str | None
         lines.append("| " + " | ".join([r["recordings"], str(r["sequence"]), str(r["method"]), str(r["reference"]),
                                         str(int(r["frames"])), _fmt(r["rel_t_median_m"]),
                                         _fmt(r["rel_rot_median_deg"], 2)]) + " |")
-    return "\n".join(lines + [block_markers(profile, "recordings")[1]])
+    return "\n".join(lines + [block_markers(name, "recordings")[1]])
 
 
-def video_block(profile: str, root: str | Path | None = None) -> str | None:
-    """The video route on known truth (``results/<profile>/video/``, written by
+def video_block(name: str, root: str | Path | None = None) -> str | None:
+    """The video route on known truth (``results/<name>/video/``, written by
     :func:`airpose_lib.experiments.video_check.write_video_reference`): per recording and method,
     the median errors of ``airpose video`` next to the same networks on the recording's frames,
     the offset found, and the seconds per 100 frames; None without that folder."""
-    ref = reference_dir(profile, root) / "video"
+    ref = reference_dir(RunFolders(name), root) / "video"
     if not (ref / "known_truth.csv").is_file():
         return None
     t = pd.read_csv(ref / "known_truth.csv")
     prov = json.loads((ref / "provenance.json").read_text())
     commit = (prov.get("git") or {}).get("commit") or "unknown"
-    opening, closing = block_markers(profile, "video")
-    lines = [opening, f"`airpose video` on known truth (`results/{profile}/video/`: commit {commit[:7]}, "
+    opening, closing = block_markers(name, "video")
+    lines = [opening, f"`airpose video` on known truth (`results/{name}/video/`: commit {commit[:7]}, "
              f"{prov.get('created_at', '')[:10]}; `{prov.get('command', '')}`): UAV2's video started "
              f"{prov.get('shift')} frames late; medians over the paired frames, the video route against the same "
              "networks on the recording's own frames.", "",
              "| recordings | method | frames | MPJPE video / recording [m] | UAV2 in UAV1 position video / recording [m] "
              "| orientation video / recording [deg] | offset found (true) | s per 100 frames |",
              "|---|---|---|---|---|---|---|---|"]
-    for (name, method), g in t.groupby(["recordings", "method"], sort=False):
+    for (recs, method), g in t.groupby(["recordings", "method"], sort=False):
         v, r = g[g["route"] == "video"].iloc[0], g[g["route"] == "recording"].iloc[0]
-        timing = prov.get("timing", {}).get(name, {})
-        found = f"{int(v['offset_frames']):+d}" if name == next(iter(prov["recordings"])) else "given"
-        lines.append(f"| {name} | {method} | {int(v['frames'])} | {_fmt(v['mpjpe_median_m'], 4)} / "
+        timing = prov.get("timing", {}).get(recs, {})
+        found = f"{int(v['offset_frames']):+d}" if recs == next(iter(prov["recordings"])) else "given"
+        lines.append(f"| {recs} | {method} | {int(v['frames'])} | {_fmt(v['mpjpe_median_m'], 4)} / "
                      f"{_fmt(r['mpjpe_median_m'], 4)} | {_fmt(v['uav2_in_uav1_position_median_m'])} / "
                      f"{_fmt(r['uav2_in_uav1_position_median_m'])} | {_fmt(v['uav2_in_uav1_orientation_median_deg'], 2)}"
                      f" / {_fmt(r['uav2_in_uav1_orientation_median_deg'], 2)} | {found} ({int(r['offset_frames']):+d}) | "
@@ -176,19 +178,19 @@ def video_block(profile: str, root: str | Path | None = None) -> str | None:
     return "\n".join(lines)
 
 
-def replace_block(text: str, block: str, profile: str, kind: str = "results") -> str:
-    """``text`` with ``profile``'s block of ``kind`` replaced by ``block``.
+def replace_block(text: str, block: str, name: str, kind: str = "results") -> str:
+    """``text`` with the profile ``name``'s block of ``kind`` replaced by ``block``.
 
     Raises:
         ValueError: ``text`` lacks the block's markers.
     """
-    pattern = _block_pattern(profile, kind)
+    pattern = _block_pattern(name, kind)
     if not pattern.search(text):
-        raise ValueError(f"no {' ... '.join(block_markers(profile, kind))} block")
+        raise ValueError(f"no {' ... '.join(block_markers(name, kind))} block")
     return pattern.sub(lambda _: block, text, count=1)
 
 
-def readme_block(text: str, profile: str, kind: str = "results") -> str | None:
-    """The block of ``profile`` of ``kind`` in ``text`` (markers included), or None."""
-    m = _block_pattern(profile, kind).search(text)
+def readme_block(text: str, name: str, kind: str = "results") -> str | None:
+    """The block of the profile ``name`` of ``kind`` in ``text`` (markers included), or None."""
+    m = _block_pattern(name, kind).search(text)
     return m.group(0) if m else None

@@ -40,7 +40,7 @@ import pandas as pd
 from airpose_lib import __version__
 from airpose_lib.atomic import atomic_path
 from airpose_lib.errors import UserError
-from airpose_lib.paths import profile_name
+from airpose_lib.paths import RunFolders
 
 from .ablation import PER_SEED_METRICS, table_to_markdown
 
@@ -59,9 +59,9 @@ RESULTS_ROOT = Path(__file__).resolve().parents[2] / "results"
 COMPARED_METRICS = (*PER_SEED_METRICS, "mpe_tight_m", "mpjpe_tight_m")
 
 
-def reference_dir(profile: str, root: str | Path | None = None) -> Path:
-    """``results/<name>`` of the checkout (or of ``root``; ``<name>``: :func:`~airpose_lib.paths.profile_name`)."""
-    return Path(root if root is not None else RESULTS_ROOT) / profile_name(profile)
+def reference_dir(folders: RunFolders, root: str | Path | None = None) -> Path:
+    """``results/<name>`` of the checkout (or of ``root``; ``<name>``: ``folders.name``)."""
+    return Path(root if root is not None else RESULTS_ROOT) / folders.name
 
 
 # -- provenance -----------------------------------------------------------------------------------
@@ -107,13 +107,14 @@ def _git(root: Path, *args: str) -> subprocess.CompletedProcess:
     return subprocess.run(["git", *args], cwd=root, capture_output=True, text=True, timeout=10)
 
 
-def reference_outputs(profile: str) -> tuple[str, ...]:
+def reference_outputs(label: str) -> tuple[str, ...]:
     """The paths (relative to the checkout; a trailing ``/``: a folder) that a reproduction with
-    ``--write-reference`` writes for ``profile``: its own outputs, which do not make the checkout
+    ``--write-reference`` writes for the profile ``label`` (its name, or the path of a profile
+    file of one's own: how records name it): its own outputs, which do not make the checkout
     dirty for the writers that come after the first (notebook 02's bundle, then notebook 05's
     recordings, then the report). Inputs under ``results/<profile>/`` (the committed backbone) are
     not among them: a change to one is a change to what the results depend on."""
-    base = f"results/{profile_name(profile)}/"
+    base = f"results/{RunFolders.of(label).name}/"
     return (*(base + name for name in REFERENCE_FILES), base + "recordings/", base + "report/")
 
 
@@ -262,24 +263,24 @@ def _write_text(path: Path, text: str) -> None:
         tmp.write_text(text)
 
 
-def _portable(profile: str) -> str:
+def _portable(label: str) -> str:
     """A profile file inside the checkout as its path from the checkout's root (what another
     clone finds it by); a kit profile's name, or a file elsewhere, as it is."""
-    path = Path(str(profile))
+    path = Path(str(label))
     if path.suffix in (".yaml", ".yml") and path.is_absolute():
         try:
             return path.resolve().relative_to(RESULTS_ROOT.parent).as_posix()
         except ValueError:
             pass
-    return str(profile)
+    return str(label)
 
 
-def provenance_record(profile: str, command: str) -> dict:
-    """What every results bundle records about how it was made: profile, kit version, git commit
-    (clean but for the profile's own reference outputs, :func:`reference_outputs`), time (UTC),
-    machine and the command."""
-    return {"profile": _portable(profile), "kit_version": __version__,
-            "git": git_commit(outputs=reference_outputs(profile)),
+def provenance_record(label: str, command: str) -> dict:
+    """What every results bundle records about how it was made: the profile (``label``: its name
+    or file), kit version, git commit (clean but for the profile's own reference outputs,
+    :func:`reference_outputs`), time (UTC), machine and the command."""
+    return {"profile": _portable(label), "kit_version": __version__,
+            "git": git_commit(outputs=reference_outputs(label)),
             "created_at": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
             "machine": machine_description(), "command": command}
 
@@ -290,7 +291,7 @@ def _write_csv(path: Path, frame: pd.DataFrame, index: bool) -> None:
 
 
 def write_reference(out_dir: str | Path, *, table: pd.DataFrame, per_seed: pd.DataFrame, claims: pd.DataFrame,
-                    references: pd.DataFrame | None, profile: str, command: str,
+                    references: pd.DataFrame | None, label: str, command: str,
                     step_wall_s: Mapping[str, float | None], extra: Mapping | None = None) -> Path:
     """Write a results bundle (:data:`REFERENCE_FILES`), each file atomically.
 
@@ -301,7 +302,7 @@ def write_reference(out_dir: str | Path, *, table: pd.DataFrame, per_seed: pd.Da
         claims: :func:`airpose_lib.eval.significance.claims_table`.
         references: :func:`airpose_lib.eval.mean_body.mean_body_references` (None: no
             ``mean_body.csv``).
-        profile: the reproduction profile.
+        label: how the record names the reproduction profile (its name or file).
         command: the command that regenerates the bundle.
         step_wall_s: step name -> wall time in seconds (None when unknown).
         extra: more provenance entries (seeds, data source ...).
@@ -317,7 +318,7 @@ def write_reference(out_dir: str | Path, *, table: pd.DataFrame, per_seed: pd.Da
     if references is not None:
         _write_csv(out / "mean_body.csv", mean_body_summary(references), index=False)
     provenance = {
-        **provenance_record(profile, command),
+        **provenance_record(label, command),
         "wall_s": {k: (round(float(v), 1) if v is not None else None) for k, v in step_wall_s.items()},
         **dict(extra or {}),
     }
@@ -415,7 +416,7 @@ def _checkout_of(root: str | Path | None) -> Path:
     return Path(root if root is not None else RESULTS_ROOT).parent
 
 
-def install_reference(bundle: str | Path, profile: str, command: str | None = None,
+def install_reference(bundle: str | Path, label: str, command: str | None = None,
                       root: str | Path | None = None) -> Path:
     """Copy a run's results bundle into ``results/<profile>/`` (what ``--write-reference`` does).
 
@@ -426,16 +427,16 @@ def install_reference(bundle: str | Path, profile: str, command: str | None = No
         ProvenanceError: the checkout ``root`` belongs to has changes (:func:`require_clean_checkout`),
             or the bundle's provenance has :func:`provenance_problems` against it.
     """
-    src, dst = Path(bundle), reference_dir(profile, root)
+    src, dst = Path(bundle), reference_dir(RunFolders.of(label), root)
     if not (src / "per_seed.csv").is_file():
         raise FileNotFoundError(f"{src}: no results bundle (per_seed.csv); run notebook 02 first")
     checkout = _checkout_of(root)
-    require_clean_checkout(checkout, reference_outputs(profile))
+    require_clean_checkout(checkout, reference_outputs(label))
     problems = provenance_problems(src / "provenance.json", checkout)
     if problems:
         raise ProvenanceError(f"{src / 'provenance.json'}: {'; '.join(problems)}; reference results must come "
                               f"from a clean commit: rerun notebook 02 from one (airpose reproduce "
-                              f"--profile {profile} --only 02_ablation_table --write-reference)")
+                              f"--profile {label} --only 02_ablation_table --write-reference)")
     for name in REFERENCE_FILES:
         if not (src / name).is_file():
             (dst / name).unlink(missing_ok=True)
@@ -480,7 +481,7 @@ def machine_note(new_provenance: str | Path, reference_provenance: str | Path) -
             "round differently, so a mean may differ by more than the seeds' spread without any change of code")
 
 
-def reference_report(bundle: str | Path, profile: str, write: bool = False, command: str | None = None,
+def reference_report(bundle: str | Path, label: str, write: bool = False, command: str | None = None,
                      root: str | Path | None = None) -> str:
     """What ``airpose reproduce`` prints after notebook 02: the new run against ``results/<profile>/``.
 
@@ -490,13 +491,13 @@ def reference_report(bundle: str | Path, profile: str, write: bool = False, comm
     Returns:
         a few lines of text ("" when there is nothing to say: no bundle, or no reference).
     """
-    bundle, ref = Path(bundle), reference_dir(profile, root)
+    bundle, ref = Path(bundle), reference_dir(RunFolders.of(label), root)
     if not (bundle / "per_seed.csv").is_file():
         return f"reference: notebook 02 wrote no {bundle / 'per_seed.csv'}; nothing compared" if write else ""
     if write:
-        return f"reference: wrote {install_reference(bundle, profile, command, root)}"
+        return f"reference: wrote {install_reference(bundle, label, command, root)}"
     if not (ref / "per_seed.csv").is_file():
-        return f"reference: none for profile {profile!r} ({ref}); `--write-reference` records this run as one"
+        return f"reference: none for profile {label!r} ({ref}); `--write-reference` records this run as one"
     new, old = pd.read_csv(bundle / "per_seed.csv"), pd.read_csv(ref / "per_seed.csv")
     cmp = compare_to_reference(new, old)
     moved = cmp[cmp["differs"]]
@@ -527,7 +528,7 @@ MARKER_RECORDING_FILES = ("markers.csv", "markers.md", "field_markers.csv", "fie
 _OPTIONAL_RECORDING_FILES = FIELD_RECORDING_FILES + MARKER_RECORDING_FILES
 
 
-def install_recordings_reference(notebook_dir: str | Path, profile: str, command: str,
+def install_recordings_reference(notebook_dir: str | Path, label: str, command: str,
                                  root: str | Path | None = None) -> Path:
     """Copy notebook 05's tables into ``results/<profile>/recordings/`` with a provenance file.
 
@@ -538,28 +539,28 @@ def install_recordings_reference(notebook_dir: str | Path, profile: str, command
         FileNotFoundError: a file of :data:`RECORDING_FILES` is missing (notebook 05 did not finish).
         ProvenanceError: the checkout ``root`` belongs to has changes (:func:`require_clean_checkout`).
     """
-    src, dst = Path(notebook_dir), reference_dir(profile, root) / "recordings"
+    src, dst = Path(notebook_dir), reference_dir(RunFolders.of(label), root) / "recordings"
     missing = [n for n in RECORDING_FILES if not (src / n).is_file()]
     if missing:
         raise FileNotFoundError(f"{src}: no {', '.join(missing)}; run notebook 05_airpose_plus first")
-    require_clean_checkout(_checkout_of(root), reference_outputs(profile))
+    require_clean_checkout(_checkout_of(root), reference_outputs(label))
     for name in RECORDING_FILES + tuple(n for n in _OPTIONAL_RECORDING_FILES if (src / n).is_file()):
         with atomic_path(dst / name) as tmp:
             shutil.copyfile(src / name, tmp)
     for name in _OPTIONAL_RECORDING_FILES:
         if not (src / name).is_file():
             (dst / name).unlink(missing_ok=True)  # a reference never mixes two runs' tables
-    _write_text(dst / "provenance.json", json.dumps(provenance_record(profile, command), indent=2, default=str) + "\n")
+    _write_text(dst / "provenance.json", json.dumps(provenance_record(label, command), indent=2, default=str) + "\n")
     return dst
 
 
-def recordings_report(notebook_dir: str | Path, profile: str, write: bool = False, command: str | None = None,
+def recordings_report(notebook_dir: str | Path, label: str, write: bool = False, command: str | None = None,
                       root: str | Path | None = None) -> str:
     """What ``airpose reproduce`` prints after notebook 05: the claims' verdicts that differ from
     the committed ``results/<profile>/recordings/paper_claims.csv`` (or the install, with ``write``)."""
-    src, ref = Path(notebook_dir), reference_dir(profile, root) / "recordings"
+    src, ref = Path(notebook_dir), reference_dir(RunFolders.of(label), root) / "recordings"
     if write:
-        return f"reference: wrote {install_recordings_reference(src, profile, command or '', root)}"
+        return f"reference: wrote {install_recordings_reference(src, label, command or '', root)}"
     new_path, old_path = src / "paper_claims.csv", ref / "paper_claims.csv"
     if not (new_path.is_file() and old_path.is_file()):
         return ""

@@ -15,6 +15,6 @@
 
 Notebooks import these modules by name; the package imports only ``.recordings``.
 """
-from .recordings import RecordingExperiment, default_experiment_dir, run_recording_experiment
+from .recordings import RecordingExperiment, run_recording_experiment
 
-__all__ = ["RecordingExperiment", "default_experiment_dir", "run_recording_experiment"]
+__all__ = ["RecordingExperiment", "run_recording_experiment"]

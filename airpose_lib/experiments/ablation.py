@@ -21,7 +21,6 @@ import pandas as pd
 
 from airpose_lib.assets import DataSource
 from airpose_lib.data.official.synthetic import OfficialSyntheticDataset
-from airpose_lib.data.still.config import default_root
 from airpose_lib.data.still.dataset import StillFrameDataset, split_arrays
 from airpose_lib.data.still.generate import ensure_still_dataset
 from airpose_lib.eval.ablation import VARIANT_LABELS, per_seed_table
@@ -39,7 +38,8 @@ from airpose_lib.eval.significance import claims_table
 from airpose_lib.train.ablation import AblationRun, run_ablation
 from airpose_lib.train.official import official_ablation
 
-from .shipped import ShippedNetworks, shipped_ablation_tables, shipped_from, shipped_networks
+from .configs import KitConfigs
+from .shipped import ShippedNetworks, shipped_ablation_tables, shipped_networks
 
 __all__ = ["AblationExperiment", "run_ablation_experiment", "ablation_references", "ablation_claims",
            "write_ablation_bundle", "ablation_reference_dir", "reference_check"]
@@ -50,7 +50,7 @@ class AblationExperiment:
     """The trained (or official) networks of Table I, evaluated on a test split.
 
     Attributes:
-        profile: reproduction profile.
+        profile: how captions and records name the reproduction profile (a label).
         source: ``"generated"`` (the kit's networks on its data) or ``"official"`` (the
             authors' checkpoints on the official synthetic test split).
         variants: variant names, in table order.
@@ -59,6 +59,7 @@ class AblationExperiment:
         test: the test split (``StillFrameDataset`` or ``OfficialSyntheticDataset``).
         wall: step name -> wall time in seconds, recorded in the results bundle.
         shipped: the shipped networks evaluated (None: trained here, or the official ones).
+        data_root: the kit's still-frame dataset (None: the official data).
     """
 
     profile: str
@@ -69,6 +70,7 @@ class AblationExperiment:
     test: object
     wall: dict[str, float] = field(default_factory=dict)
     shipped: ShippedNetworks | None = None
+    data_root: Path | None = None
 
     @property
     def official(self) -> bool:
@@ -111,30 +113,33 @@ class AblationExperiment:
             what = f"the kit's networks on its own data, profile '{self.profile}', seeds {list(self.seeds)}"
         return f"Table I reproduced by the kit: {what}; paper columns from Saini et al. (RA-L 2022), Table I."
 
-    def smoke_warning(self) -> str | None:
-        """The warning a smoke run's numbers need (None otherwise)."""
-        if self.profile == "smoke" and not self.official:
-            return "SMOKE NUMBERS: a few dozen training steps; they only show that the pipeline runs."
+    def few_steps_warning(self, compare_reference: bool = True) -> str | None:
+        """The warning the numbers of networks trained a few steps need (None otherwise): the
+        profile says so with ``compare_reference: false`` (the notebook's parameter), whatever its
+        name."""
+        if not compare_reference and not self.official:
+            return "FEW-STEP NUMBERS: a few dozen training steps; they only show that the pipeline runs."
         return None
 
 
-def run_ablation_experiment(profile: str, source: DataSource, variants: Sequence[str], seeds: Sequence[int],
+def run_ablation_experiment(configs: KitConfigs, source: DataSource, variants: Sequence[str], seeds: Sequence[int],
                             eval_max_samples: int | None = None, workers: int = 1,
                             progress: bool = True) -> AblationExperiment:
     """Train (resuming finished runs) and evaluate every variant for every seed, or evaluate the
     official checkpoints when ``source`` is official.
 
     Args:
-        profile: reproduction profile (its ``train:`` settings and still-frame data).
+        configs: the profile's configs (its ``train:`` settings, still-frame data, ``networks:``).
         source: the resolved data source (needs ``official_synthetic`` and ``official_checkpoints``).
         variants, seeds: what to train (the official run has one network per variant, seed 0).
         eval_max_samples: evaluate on at most this many test samples (None: all).
         workers: runs trained at once.
     """
     t0 = time.perf_counter()
-    shipped = shipped_networks(profile) if source.source != "official" else None
+    shipped = shipped_networks(configs.networks) if source.source != "official" else None
+    root = None
     if shipped is not None:  # another profile's networks on this profile's fresh test split
-        root = ensure_still_dataset(profile, progress=progress)
+        root = ensure_still_dataset(configs.still, configs.folders.still, label=configs.label, progress=progress)
         evaluated = shipped_ablation_tables(shipped, root, variants, max_samples=eval_max_samples)
         runs = {(v, shipped.seed): AblationRun(v, shipped.seed, ckpt, tables) for v, (ckpt, tables) in evaluated.items()}
         seeds, test = [shipped.seed], StillFrameDataset(root, "test")
@@ -144,17 +149,20 @@ def run_ablation_experiment(profile: str, source: DataSource, variants: Sequence
         seeds = sorted({k for _, k in runs})  # the jitter draws of the test crops (official protocol)
         test = OfficialSyntheticDataset(source.roots["official_synthetic"], "test")
     else:
-        runs = run_ablation(profile, variants=variants, seeds=seeds, eval_max_samples=eval_max_samples,
+        runs = run_ablation(configs.train_inputs(), variants=variants, seeds=seeds, eval_max_samples=eval_max_samples,
                             workers=workers, progress=progress)
-        test = StillFrameDataset(default_root(profile), "test")
+        root = configs.folders.still
+        test = StillFrameDataset(root, "test")
     wall = {"train and evaluate": time.perf_counter() - t0}
-    return AblationExperiment(profile, source.source, list(variants), list(seeds), runs, test, wall, shipped)
+    return AblationExperiment(configs.label, source.source, list(variants), list(seeds), runs, test, wall, shipped,
+                              root)
 
 
-def ablation_reference_dir(profile: str) -> Path:
+def ablation_reference_dir(configs: KitConfigs) -> Path:
     """The committed reference notebook 02 compares with: ``results/<profile>/``, or for a
     profile on shipped networks, that of the profile that made them."""
-    return reference_dir(shipped_from(profile) or profile)
+    networks = configs.networks
+    return reference_dir(networks.folders if networks is not None else configs.folders)
 
 
 def reference_check(exp: AblationExperiment, table: pd.DataFrame, claims: pd.DataFrame, ref_dir: str | Path,
@@ -205,7 +213,7 @@ def ablation_references(exp: AblationExperiment, max_samples: int | None = None)
     t0 = time.perf_counter()
     references = None
     if not exp.official:
-        train = split_arrays(default_root(exp.profile), "train", ("beta", "gender"), STATURE_FIT_SUBJECTS)
+        train = split_arrays(exp.data_root, "train", ("beta", "gender"), STATURE_FIT_SUBJECTS)
         references = mean_body_references(exp.test.arrays, max_samples=max_samples, train_arrays=train)
     exp.wall["mean-body references"] = time.perf_counter() - t0
     return references
@@ -227,7 +235,7 @@ def write_ablation_bundle(exp: AblationExperiment, folder: str | Path, *, table:
     steps = {**exp.wall, **{f"train {v} seed {s}": w for (v, s), w in exp.train_wall().items()}}
     training = {f"{v} seed {s}": t for (v, s), t in train_settings(exp.runs).items()}
     return write_reference(folder, table=table, per_seed=exp.per_seed(), claims=claims, references=references,
-                           profile=exp.profile,
+                           label=exp.profile,
                            command=f"airpose reproduce --profile {exp.profile} --only 02_ablation_table",
                            step_wall_s=steps, extra={"seeds": list(exp.seeds), "variants": list(exp.variants),
                                                      "data_source": exp.source,

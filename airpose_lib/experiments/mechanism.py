@@ -31,7 +31,6 @@ import numpy as np
 import pandas as pd
 import torch
 
-from airpose_lib.data.still.config import default_root
 from airpose_lib.data.still.dataset import split_arrays
 from airpose_lib.eval.ablation import VARIANT_LABELS, table_to_markdown
 from airpose_lib.eval.mean_body import rest_statures
@@ -51,8 +50,9 @@ from airpose_lib.eval.significance import PAPER_ORDER, bootstrap_interval, paire
 from airpose_lib.model import to_smplx_params
 from airpose_lib.train.evaluate import load_network
 from airpose_lib.train.features import ensure_features, features_path
-from airpose_lib.train.loop import default_out_dir
 from airpose_lib.train.pretrain import profile_backbone
+
+from .configs import KitConfigs
 
 __all__ = ["COLUMNS", "probe_rows", "variant_rows", "mechanism_table", "write_mechanism_table"]
 
@@ -200,9 +200,9 @@ def variant_rows(variant: str, checkpoint: Path, features: np.ndarray, arrays: d
     return rows
 
 
-def _checkpoint(profile: str, variant: str, seed: int) -> Path | None:
+def _checkpoint(configs: KitConfigs, variant: str, seed: int) -> Path | None:
     """A finished run's final checkpoint (None while it trains or when it never ran)."""
-    result = default_out_dir(profile, variant, seed) / "result.json"
+    result = configs.folders.train(variant, seed) / "result.json"
     if not result.is_file():
         return None
     checkpoint = json.loads(result.read_text()).get("checkpoint")
@@ -215,7 +215,7 @@ def _portable(path: str | Path) -> str:
     return "/".join(parts[parts.index("train"):]) if "train" in parts else Path(path).name
 
 
-def mechanism_table(profile: str = "cpu", seed: int = 123, variants: Sequence[str] = PAPER_ORDER,
+def mechanism_table(configs: KitConfigs, seed: int = 123, variants: Sequence[str] = PAPER_ORDER,
                     fit_split: str = "auto", fit_samples: int | None = None, n_resamples: int = 2000,
                     mlp_steps: int = 400, checkpoints: Mapping[str, str | Path] | None = None,
                     log: Callable[[str], None] = print) -> tuple[pd.DataFrame, dict]:
@@ -223,6 +223,7 @@ def mechanism_table(profile: str = "cpu", seed: int = 123, variants: Sequence[st
     validation split.
 
     Args:
+        configs: the profile's configs (:func:`airpose_lib.reproduce.configs.kit_configs`).
         fit_split: where the probes are fitted: ``"train"`` (the first ``fit_samples`` training
             samples, None: all; their features are computed if missing), ``"val"`` (two thirds of the validation
             subjects, drawn with a fixed seed; the others are scored), ``"auto"``: train when its
@@ -235,7 +236,7 @@ def mechanism_table(profile: str = "cpu", seed: int = 123, variants: Sequence[st
         what (backbone, fit and score samples, variants and checkpoints, wall times).
     """
     t_start = time.time()
-    root, backbone = default_root(profile), profile_backbone(profile)
+    root, backbone = configs.folders.still, profile_backbone(configs.pretrain)
     if fit_split == "auto":
         fit_split = "train" if features_path(backbone, root, "train").is_file() else "val"
     val_feat = np.load(ensure_features(backbone, root, "val"), mmap_mode="r")
@@ -260,7 +261,7 @@ def mechanism_table(profile: str = "cpu", seed: int = 123, variants: Sequence[st
     walls = {"probes": round(time.time() - t_start, 1)}
     done = {}
     for variant in variants:
-        checkpoint = _checkpoint(profile, variant, seed) if checkpoints is None else checkpoints.get(variant)
+        checkpoint = _checkpoint(configs, variant, seed) if checkpoints is None else checkpoints.get(variant)
         if checkpoint is None:
             log(f"{variant} seed {seed}: no finished run, left out")
             continue
@@ -272,13 +273,13 @@ def mechanism_table(profile: str = "cpu", seed: int = 123, variants: Sequence[st
         rows += variant_rows(variant, checkpoint, feats, val, val_stature, stages, n_resamples, log)
         done[variant] = _portable(checkpoint)
         walls[variant] = round(time.time() - t0, 1)
-    notes = {"profile": profile, "split": "val", "backbone": backbone.stem, "probes fitted on": fit_note,
+    notes = {"profile": configs.label, "split": "val", "backbone": backbone.stem, "probes fitted on": fit_note,
              "seed": seed, "variants": done, "variants left out": [v for v in variants if v not in done],
              "n_resamples": n_resamples, "mlp_steps": mlp_steps, "wall_s": walls}
     return pd.DataFrame(rows, columns=list(COLUMNS)), notes
 
 
-def write_mechanism_table(out_dir: str | Path, profile: str = "cpu", command: str | None = None,
+def write_mechanism_table(out_dir: str | Path, configs: KitConfigs, command: str | None = None,
                           **kwargs) -> tuple[pd.DataFrame, Path]:
     """Run :func:`mechanism_table` and write ``mechanism.csv``, ``mechanism.md`` and ``provenance.json``
     (commit, command, what was measured on what) into ``out_dir``.
@@ -288,9 +289,11 @@ def write_mechanism_table(out_dir: str | Path, profile: str = "cpu", command: st
         kwargs: of :func:`mechanism_table`.
     """
     out = Path(out_dir)
+    profile = configs.label
     command = command or (f"python -c \"from airpose_lib.experiments.mechanism import write_mechanism_table; "
-                          f"write_mechanism_table('{out.as_posix()}', '{profile}')\"")
-    table, notes = mechanism_table(profile, **kwargs)
+                          f"from airpose_lib.reproduce.configs import kit_configs; "
+                          f"write_mechanism_table('{out.as_posix()}', kit_configs('{profile}'))\"")
+    table, notes = mechanism_table(configs, **kwargs)
     out.mkdir(parents=True, exist_ok=True)
     try:
         rel = out.resolve().relative_to(RESULTS_ROOT.parent).as_posix() + "/"

@@ -39,6 +39,8 @@ from airpose_lib.runtime.launcher import launch
 from airpose_lib.runtime.offline import max_abs_difference, offline_inputs, offline_staged
 from airpose_lib.viz.online import slot_states
 
+from .configs import KitConfigs
+
 __all__ = ["FIXED_PERIOD_S", "PIPELINED_PERIOD_S", "OnlineRig", "FleetRun", "OnlineOfflineCheck", "FaultRun",
            "online_rig", "run_schedule", "online_offline_check", "sequence_tau", "run_fault_scenario",
            "fault_summary_table", "float16_cost"]
@@ -84,13 +86,13 @@ class FleetRun(NamedTuple):
     results: list
 
 
-def online_rig(profile: str, source: DataSource, out: str | Path, *, backend: str, backbone: str,
+def online_rig(configs: KitConfigs, source: DataSource, out: str | Path, *, backend: str, backbone: str,
                input_size: int, drones: int, seconds: float, checkpoint: str | None = None,
                sequence_root: str | Path | None = None) -> OnlineRig:
     """The recording and backend of notebook 06's runs.
 
     Args:
-        profile: reproduction profile (its ``person2`` recording is generated on first use).
+        configs: the profile's configs (its ``person2`` recording is generated on first use).
         source: the resolved data source; official: the official real recording.
         out: output folder (the ONNX export goes to ``out/onnx_<backbone>_<input_size>``).
         backend: ``"onnx"`` or ``"torch"``.
@@ -102,7 +104,8 @@ def online_rig(profile: str, source: DataSource, out: str | Path, *, backend: st
     if sequence_root is None and source.source == "official":
         sequence_root = source.roots["official_real"]
     if sequence_root is None:
-        sequence_root = ensure_sequences(profile, only=[ONLINE_RECORDING], progress=True)[ONLINE_RECORDING]
+        sequence_root = ensure_sequences(configs.sequences, configs.folders.sequences(), only=[ONLINE_RECORDING],
+                                         progress=True)[ONLINE_RECORDING]
     onnx_dir = None
     if backend == "onnx":
         onnx_dir = out / f"onnx_{backbone}_{input_size}"

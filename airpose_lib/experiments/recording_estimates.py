@@ -17,7 +17,7 @@ from airpose_lib.eval.recordings import per_view_params
 from airpose_lib.finetune.keypoints import resolution_scales
 from airpose_lib.finetune.network import load_sized_network
 from airpose_lib.finetune.predict import image_sizes, predict_sequence
-from airpose_lib.fitting import airpose_plus, fitting_profile
+from airpose_lib.fitting import AirPosePlusConfig, airpose_plus
 from airpose_lib.model import posed_joints_and_vertices
 from airpose_lib.model.official import load_official_checkpoint
 
@@ -87,7 +87,7 @@ def marker_truth(sequence, out: Path) -> dict | None:
     return arrays
 
 
-def airpose_plus_estimate(sequence, init: dict, profile: str, prior, prior_info: dict, out: Path,
+def airpose_plus_estimate(sequence, init: dict, fitting: AirPosePlusConfig, prior, prior_info: dict, out: Path,
                           progress: bool) -> tuple[dict, dict]:
     """AirPose+ on a recording from the estimates ``init`` (:func:`network_estimate`'s arrays), with
     the profile's fitting settings, the Geman-McClure scale at the recording's resolution (cached in
@@ -98,7 +98,7 @@ def airpose_plus_estimate(sequence, init: dict, profile: str, prior, prior_info:
         ``tau (F, V, 3)``, ``theta (F, 21, 3, 3)``, ``beta (10,)``, ``kept (F,)``) and the run summary
         (seconds, skipped frames, loss).
     """
-    cfg = fitting_profile(profile)
+    cfg = fitting
     # The Geman-McClure scale (30 px) is a full-resolution value: rho is a function of residual / sigma.
     scale = float(np.mean(resolution_scales(image_sizes(sequence))))
     cfg = dataclasses.replace(cfg, sigma=cfg.sigma * scale)

@@ -10,10 +10,10 @@ from pathlib import Path
 
 from airpose_lib.data.sequences.reader import recording_fingerprint
 from airpose_lib.engine.checkpoint import StaleRunError
-from airpose_lib.finetune.config import finetune_config
 from airpose_lib.finetune.train import finetune
 from airpose_lib.train.ablation import trained_checkpoint
 
+from .configs import KitConfigs
 from .recording_cache import cache_key
 from .recording_diagnostic import ground_truth_diagnostic
 
@@ -58,7 +58,7 @@ def _tests_key(tests: dict) -> str | None:
     return cache_key(*((name, recording_fingerprint(seq)) for name, seq in sorted(tests.items()))) if tests else None
 
 
-def kit_networks(profile: str, seed: int, tuning, tests: dict, prior, prior_info: dict, out: Path,
+def kit_networks(configs: KitConfigs, seed: int, tuning, tests: dict, prior, prior_info: dict, out: Path,
                  progress: bool) -> tuple[dict, dict]:
     """Table I's Baseline and AirPose of the profile, their fine-tuning on ``tuning`` (model
     selected on its held-out frames) with the ``tests`` recordings' errors logged per checkpoint.
@@ -73,13 +73,14 @@ def kit_networks(profile: str, seed: int, tuning, tests: dict, prior, prior_info
         selected fine-tuned ones) and variant -> fine-tuning summary (the control's included).
     """
     checkpoints, finetune_info = {}, {}
-    ft_cfg = finetune_config(profile)
+    ft_cfg = configs.finetune
     if ft_cfg.frames is None and "person" in tuning.meta:  # an official split: fine-tune on its frames only
         ft_cfg = dataclasses.replace(ft_cfg, frames=[int(tuning.frames[0]), int(tuning.frames[-1]) + 1])
     ft_cfg = dataclasses.replace(ft_cfg, prior=prior_info["source"], prior_path=prior_info["file"])
     tests_key = _tests_key(tests)
+    trainings = configs.train_inputs()
     for variant, label in (("baseline", "Baseline"), ("airpose", "AirPose")):
-        pre = trained_checkpoint(profile, variant, seed, progress=progress)
+        pre = trained_checkpoint(trainings, variant, seed, progress=progress)
         checkpoints[f"{label} (pre-trained)"] = pre
         res, finetune_info[label] = _finetune_logged(pre, tuning, tests, ft_cfg, out / "finetune" / variant, prior,
                                                      progress, tests_key)

@@ -8,14 +8,14 @@ from pathlib import Path
 
 from airpose_lib.assets import resolve_data_source
 from airpose_lib.data.official.real import load_official_real
-from airpose_lib.data.sequences import profile_field_sequences
 from airpose_lib.errors import ConfigError
 from airpose_lib.prior import load_prior
 from airpose_lib.prior.build import ensure_prior
 from airpose_lib.train.official import find_official_checkpoint
 
+from .configs import KitConfigs
 from .recording_cache import file_stamp
-from .shipped import shipped_networks
+from .shipped import NetworksConfig, shipped_networks
 
 __all__ = ["OFFICIAL_REAL_CHECKPOINTS", "official_recordings", "official_networks", "networks_for", "recordings_for",
            "runs_field", "recording_prior"]
@@ -46,13 +46,13 @@ def official_networks(checkpoints_root: str | Path) -> dict[str, Path]:
     return nets
 
 
-def networks_for(source, profile: str | None = None, field: bool = False) -> dict[str, Path] | None:
+def networks_for(source, networks: NetworksConfig | None = None, field: bool = False) -> dict[str, Path] | None:
     """The networks the experiment runs instead of training its own: the official ones when the
     data source is official and ``official_checkpoints`` is present (see :func:`official_networks`),
-    the shipped set of a profile on shipped networks (``field``: those fine-tuned on the field
-    recordings), else None (the kit trains and fine-tunes its own)."""
+    the shipped set of a profile on shipped networks (its ``networks:`` section; ``field``: those
+    fine-tuned on the field recordings), else None (the kit trains and fine-tunes its own)."""
     if getattr(source, "source", "generated") != "official":
-        shipped = shipped_networks(profile) if profile is not None else None
+        shipped = shipped_networks(networks)
         return None if shipped is None else shipped.recordings(field)
 
     ckpts = resolve_data_source("official", needs=["official_checkpoints"])
@@ -62,7 +62,7 @@ def networks_for(source, profile: str | None = None, field: bool = False) -> dic
     return official_networks(ckpts.roots["official_checkpoints"])
 
 
-def recordings_for(source, profile: str) -> dict | None:
+def recordings_for(source) -> dict | None:
     """Recordings for a resolved data source (:func:`airpose_lib.assets.resolve_data_source`):
     None (the profile's generated recordings) or the official release's two persons."""
     if getattr(source, "source", "generated") != "official":
@@ -70,11 +70,12 @@ def recordings_for(source, profile: str) -> dict | None:
     return official_recordings(source.roots["official_real"])
 
 
-def runs_field(source, profile: str, field: bool | None = None) -> bool:
+def runs_field(source, configs: KitConfigs, field: bool | None = None) -> bool:
     """Whether the real-data notebooks also run the profile's field recordings.
 
     Args:
         source: the resolved data source (:func:`recordings_for`'s).
+        configs: the profile's configs.
         field: the notebook's parameter; None: when the recordings are generated and the profile
             has field recordings (``sequences: field_recordings:``).
     Raises:
@@ -82,17 +83,17 @@ def runs_field(source, profile: str, field: bool | None = None) -> bool:
             with a profile without field recordings.
     """
     generated = getattr(source, "source", "generated") != "official"
-    has = bool(profile_field_sequences(profile))
+    has = bool(configs.field_sequences)
     if field is None:
         return generated and has
     if field and not (generated and has):
         raise ConfigError(f"field=True needs the generated recordings of a profile with `sequences: field_recordings:` "
-                          f"({'the official recordings are field footage' if not generated else profile + ' has none'}); "
+                          f"({'the official recordings are field footage' if not generated else configs.label + ' has none'}); "
                           "set field to None or False")
     return bool(field)
 
 
-def recording_prior(profile: str, progress: bool = False):
+def recording_prior(configs: KitConfigs, progress: bool = False):
     """The pose prior of the experiment: VPoser V02_05 when it is installed (``vposer_v02_05``
     asset, e.g. ``$AIRPOSE_VPOSER_DIR``), else the profile's kit prior (trained on first use).
 
@@ -107,8 +108,8 @@ def recording_prior(profile: str, progress: bool = False):
         msg = f"Pose prior: VPoser V02_05 ({file}), as the paper."
         source = "vposer"
     else:
-        shipped = shipped_networks(profile)
-        file = shipped.prior if shipped is not None else ensure_prior(profile, progress=progress)
+        shipped = shipped_networks(configs.networks)
+        file = shipped.prior if shipped is not None else ensure_prior(configs.prior, progress=progress)
         prior = load_prior("kit", file)
         msg = (f"Pose prior: the kit's VPoser-architecture prior ({file}); VPoser V02_05 is not installed "
                "(data_manifests/vposer_v02_05.yaml says how to get it; it is then used automatically).")

@@ -51,9 +51,8 @@ from airpose_lib.data.sequences.reader import load_sequence
 from airpose_lib.eval.mean_body import NEUTRAL_LABEL, mean_body_recording_estimate
 from airpose_lib.eval.recordings import body_joints, recording_table
 from airpose_lib.folder_lock import folder_lock
-from airpose_lib.paths import profile_name, run_path
-from airpose_lib.train.config import load_train_config
 
+from .configs import KitConfigs
 from .recording_cache import method_slug
 from .recording_estimates import airpose_plus_estimate, body_vertices, marker_truth, network_estimate
 from .recording_finetune import CONTROL_LABEL, kit_networks
@@ -66,7 +65,7 @@ from .recording_inputs import (
     runs_field,
 )
 
-__all__ = ["METHODS", "RecordingExperiment", "default_experiment_dir", "run_recording_experiment", "runs_field",
+__all__ = ["METHODS", "RecordingExperiment", "run_recording_experiment", "runs_field",
            "body_vertices", "recording_prior", "scored_frames",
            "CONTROL_LABEL", "official_recordings", "official_networks", "networks_for", "recordings_for",
            "marker_truth"]
@@ -75,14 +74,6 @@ __all__ = ["METHODS", "RecordingExperiment", "default_experiment_dir", "run_reco
 METHODS = ("Baseline (pre-trained)", "AirPose (pre-trained)", "Baseline", "AirPose", "AirPose+")
 _NETWORKS = {"Baseline (pre-trained)": ("baseline", False), "AirPose (pre-trained)": ("airpose", False),
              "Baseline": ("baseline", True), "AirPose": ("airpose", True)}
-
-
-def default_experiment_dir(profile: str, field: bool = False) -> Path:
-    """``<runs>/recordings/<name>`` (:func:`airpose_lib.paths.runs_root`, like training runs;
-    ``<name>``: :func:`~airpose_lib.paths.profile_name`); on the profile's field recordings
-    ``<runs>/recordings/<name>_field``."""
-    name = profile_name(profile)
-    return run_path("recordings", f"{name}_field" if field else name)
 
 
 @dataclass
@@ -135,15 +126,17 @@ class RecordingExperiment:
         return self.sequences[person].ground_truth is not None
 
 
-def run_recording_experiment(profile: str = "smoke", out_dir: str | Path | None = None, *,
+def run_recording_experiment(configs: KitConfigs, out_dir: str | Path | None = None, *,
                              sequences: dict | None = None, seed: int | None = None,
                              fine_tune_on: str = "person1", networks: dict[str, str | Path] | None = None,
                              progress: bool = False, field: bool = False) -> RecordingExperiment:
     """Run (or load the cached steps of) the real-data experiment.
 
     Args:
-        profile: sizes of the recordings, networks, fine-tuning and AirPose+ (profile YAML).
-        out_dir: cache folder (default :func:`default_experiment_dir`).
+        configs: the profile's configs (:func:`airpose_lib.reproduce.configs.kit_configs`): sizes of
+            the recordings, networks, fine-tuning and AirPose+.
+        out_dir: cache folder (default ``configs.folders.recordings(field)``: ``<runs>/recordings/<name>``,
+            ``<name>_field`` on the field recordings).
         sequences: person -> recording folder in the official layout, or a loaded
             :class:`~airpose_lib.data.sequences.reader.Sequence` (default: the profile's generated
             recordings, made if missing).
@@ -153,12 +146,12 @@ def run_recording_experiment(profile: str = "smoke", out_dir: str | Path | None 
             ``AirPose (pre-trained)``, ``Baseline``, ``AirPose``), kit ``.pt`` or official
             ``.ckpt`` (:func:`official_networks`); then nothing is trained or fine-tuned.
         field: on the profile's field recordings (``sequences: field_recordings:``)
-            instead of the clean ones, cached in :func:`default_experiment_dir` ``(profile,
-            field=True)``: the same pre-trained networks, fine-tuned again on the field person 1.
+            instead of the clean ones, cached in their own folder: the same pre-trained networks,
+            fine-tuned again on the field person 1.
     """
-    out = Path(out_dir) if out_dir is not None else default_experiment_dir(profile, field)
+    out = Path(out_dir) if out_dir is not None else configs.folders.recordings(field)
     with folder_lock(out, stale=(".*.tmp", "estimates/*/.*.tmp")):  # one writer of the cached steps
-        return _run_recording_experiment(profile, out, sequences, seed, fine_tune_on, networks, progress, field)
+        return _run_recording_experiment(configs, out, sequences, seed, fine_tune_on, networks, progress, field)
 
 
 def scored_frames(estimates: dict) -> np.ndarray:
@@ -167,20 +160,20 @@ def scored_frames(estimates: dict) -> np.ndarray:
     return np.all([np.all(e["valid"], axis=1) for m, e in estimates.items() if m in _NETWORKS], axis=0)
 
 
-def _run_recording_experiment(profile: str, out: Path, sequences: dict | None, seed: int | None,
+def _run_recording_experiment(configs: KitConfigs, out: Path, sequences: dict | None, seed: int | None,
                               fine_tune_on: str, networks: dict | None, progress: bool,
                               field: bool = False) -> RecordingExperiment:
     import torch
 
     if sequences is None:
-        sequences = ensure_sequences(profile, progress=progress, field=field)
+        sequences = ensure_sequences(configs.recordings(field), configs.folders.sequences(field), progress=progress)
     seqs = {name: s if hasattr(s, "keypoints") else load_sequence(s) for name, s in sequences.items()}
     if fine_tune_on not in seqs:
         raise ValueError(f"fine_tune_on={fine_tune_on!r} is not one of the recordings {list(seqs)}")
     if seed is None:
-        seed = load_train_config(profile, "airpose").seed
+        seed = configs.train.config("airpose").seed
 
-    prior, prior_info = recording_prior(profile, progress)
+    prior, prior_info = recording_prior(configs, progress)
     finetune_info = {}
     if networks is not None:
         missing = set(_NETWORKS) - set(networks)
@@ -189,7 +182,7 @@ def _run_recording_experiment(profile: str, out: Path, sequences: dict | None, s
         checkpoints = {m: Path(networks[m]) for m in _NETWORKS}
     else:
         tests = {n: s for n, s in seqs.items() if n != fine_tune_on and s.ground_truth is not None}
-        checkpoints, finetune_info = kit_networks(profile, seed, seqs[fine_tune_on], tests, prior, prior_info, out,
+        checkpoints, finetune_info = kit_networks(configs, seed, seqs[fine_tune_on], tests, prior, prior_info, out,
                                                   progress)
     estimates, joints, fit_info, tables, markers = {}, {}, {}, [], {}
     body = load_body_model("open", "neutral", dtype=torch.float32)
@@ -198,7 +191,7 @@ def _run_recording_experiment(profile: str, out: Path, sequences: dict | None, s
         for method in _NETWORKS:
             est[method] = network_estimate(checkpoints[method], seq,
                                            out / "estimates" / person / f"{method_slug(method)}.npz")
-        plus, info = airpose_plus_estimate(seq, est["AirPose"], profile, prior, prior_info,
+        plus, info = airpose_plus_estimate(seq, est["AirPose"], configs.fitting, prior, prior_info,
                                            out / "estimates" / person / "airpose_plus.npz", progress)
         F, V = est["AirPose"]["phi"].shape[:2]
         plus = dict(plus)
@@ -222,6 +215,6 @@ def _run_recording_experiment(profile: str, out: Path, sequences: dict | None, s
                                         mask=mask)
             tables += [t, reference]
     table = pd.concat(tables, ignore_index=True) if tables else pd.DataFrame()
-    return RecordingExperiment(profile=profile, out_dir=out, sequences=seqs, estimates=estimates, joints=joints,
+    return RecordingExperiment(profile=configs.label, out_dir=out, sequences=seqs, estimates=estimates, joints=joints,
                                tables=table, checkpoints=checkpoints, fit_info=fit_info,
                                finetune_info=finetune_info, prior_info=prior_info, markers=markers)

@@ -17,11 +17,11 @@ import pandas as pd
 from airpose_lib.eval.ablation import VARIANT_LABELS
 from airpose_lib.eval.agreement import agreement_message, recordings_agreement, write_check
 from airpose_lib.eval.reference import reference_dir
-from airpose_lib.profiles import read_profile, section_config
+from airpose_lib.paths import RunFolders
 from airpose_lib.train.evaluate import evaluate_features
 from airpose_lib.zoo import kit_checkpoint, read_manifest, verified, zoo_dir
 
-__all__ = ["NetworksConfig", "networks_config", "shipped_from", "ShippedNetworks", "shipped_networks", "shipped_ablation_tables",
+__all__ = ["NetworksConfig", "shipped_from", "ShippedNetworks", "shipped_networks", "shipped_ablation_tables",
            "recordings_check", "recordings_reference_dir", "TUNED", "REBUILD"]
 
 #: Recording methods of notebooks 03-05 -> the manifest entry of their network (``{field}``: the
@@ -44,18 +44,16 @@ class NetworksConfig:
     shipped: str
     folder: str | None = None
 
-
-def networks_config(profile: str) -> NetworksConfig | None:
-    """The profile's ``networks:`` section (None: it trains its own networks)."""
-    if "networks" not in read_profile(profile):
-        return None
-    return section_config(profile, "networks", NetworksConfig, required="which profile's shipped networks")
+    @property
+    def folders(self) -> RunFolders:
+        """The folders of the profile that made the networks (its ``results/<shipped>/``)."""
+        return RunFolders.of(self.shipped)
 
 
-def shipped_from(profile: str) -> str | None:
-    """The profile whose shipped networks ``profile`` runs on (None: it trains its own)."""
-    cfg = networks_config(profile)
-    return None if cfg is None else cfg.shipped
+def shipped_from(networks: NetworksConfig | None) -> str | None:
+    """The profile whose shipped networks a profile with the ``networks:`` section ``networks``
+    runs on (None: it trains its own)."""
+    return None if networks is None else networks.shipped
 
 
 @dataclass(frozen=True)
@@ -93,13 +91,13 @@ class ShippedNetworks:
         return verified(self.folder, "prior")
 
 
-def shipped_networks(profile: str) -> ShippedNetworks | None:
-    """The shipped set ``profile`` runs on (None when it trains its own), verified lazily file by
-    file (:func:`airpose_lib.zoo.verified`)."""
-    cfg = networks_config(profile)
+def shipped_networks(networks: NetworksConfig | None) -> ShippedNetworks | None:
+    """The shipped set a profile with the ``networks:`` section ``networks`` runs on (None when it
+    trains its own), verified lazily file by file (:func:`airpose_lib.zoo.verified`)."""
+    cfg = networks
     if cfg is None:
         return None
-    folder = Path(cfg.folder) if cfg.folder is not None else zoo_dir(cfg.shipped)
+    folder = Path(cfg.folder) if cfg.folder is not None else zoo_dir(cfg.folders)
     seed = int(read_manifest(folder)["airpose"]["seed"])
     return ShippedNetworks(cfg.shipped, folder, seed)
 
@@ -118,7 +116,7 @@ def shipped_ablation_tables(nets: ShippedNetworks, data_root: str | Path, varian
     return out
 
 
-def recordings_reference_dir(profile: str) -> Path:
+def recordings_reference_dir(folders: RunFolders, networks: NetworksConfig | None) -> Path:
     """The recordings' reference of a profile on shipped networks: its own
     ``results/<profile>/recordings/`` when committed, else the shipping profile's.
 
@@ -130,11 +128,13 @@ def recordings_reference_dir(profile: str) -> Path:
     (``airpose reproduce --profile P --only 05 --write-reference``); it then measures what another
     machine's render and kernels change.
     """
-    own = reference_dir(profile) / "recordings"
-    return own if (own / "recording_errors.csv").is_file() else reference_dir(shipped_from(profile)) / "recordings"
+    own = reference_dir(folders) / "recordings"
+    if (own / "recording_errors.csv").is_file() or networks is None:
+        return own
+    return reference_dir(networks.folders) / "recordings"
 
 
-def recordings_check(profile: str, errors: pd.DataFrame, field_markers: pd.DataFrame | None = None, *,
+def recordings_check(folders: RunFolders, networks: NetworksConfig | None, errors: pd.DataFrame, field_markers: pd.DataFrame | None = None, *,
                      compare: bool = True, out: str | Path | None = None) -> tuple[pd.DataFrame | None, str]:
     """UAV2 in UAV1 on this profile's recordings against their reference
     (:func:`recordings_reference_dir`): the clean recordings' error table and the field
@@ -145,20 +145,20 @@ def recordings_check(profile: str, errors: pd.DataFrame, field_markers: pd.DataF
         compares those with ``results/<profile>/recordings/``) and a line saying what it shows;
         with ``out`` both also go to ``<out>/reference_check.md``.
     """
-    rows, message = _recordings_check(profile, errors, field_markers, compare)
+    rows, message = _recordings_check(folders, networks, errors, field_markers, compare)
     if out is not None:
         write_check(out, message, rows)
     return rows, message
 
 
-def _recordings_check(profile: str, errors: pd.DataFrame, field_markers: pd.DataFrame | None, compare: bool
+def _recordings_check(folders: RunFolders, networks: NetworksConfig | None, errors: pd.DataFrame, field_markers: pd.DataFrame | None, compare: bool
                       ) -> tuple[pd.DataFrame | None, str]:
-    source = shipped_from(profile)
+    source = shipped_from(networks)
     if not compare:
         return None, "no comparison with a reference: this profile's networks train a few steps"
     if source is None:
         return None, "networks trained here: `airpose reproduce` compares the recordings' claims with the reference"
-    ref = recordings_reference_dir(profile)
+    ref = recordings_reference_dir(folders, networks)
     parts = {"clean recordings": recordings_agreement(errors, pd.read_csv(ref / "recording_errors.csv"))}
     if field_markers is not None and not field_markers.empty and (ref / "field_markers.csv").is_file():
         cameras = lambda t: t[t["reference"] == "generated cameras"]  # noqa: E731

@@ -37,7 +37,7 @@ from airpose_lib.data.video import assemble, frames, intrinsics, keypoints, offs
 from airpose_lib.errors import UserError
 from airpose_lib.fitting.airpose_plus import AirPosePlusConfig
 from airpose_lib.folder_lock import folder_lock
-from airpose_lib.paths import repo_root
+from airpose_lib.paths import RunFolders, repo_root
 from airpose_lib.zoo import kit_checkpoint, read_manifest, verified, zoo_dir
 
 from . import video_network, video_outputs
@@ -133,7 +133,7 @@ def video_networks(shipped: str = "cpu", checkpoint: Path | None = None, baselin
     for flag, path in (("--checkpoint", checkpoint), ("--baseline-checkpoint", baseline), ("--prior-path", prior)):
         if path is not None and not Path(path).is_file():
             raise VideoError(f"{flag} {path}: no such file; give a checkpoint of `airpose train` or the authors' .ckpt")
-    folder = zoo_dir(shipped)
+    folder = zoo_dir(RunFolders(shipped))
     if not (folder / "manifest.yaml").is_file() and None in (checkpoint, baseline):
         raise VideoError(f"--networks {shipped}: {folder} holds no shipped networks; give --networks cpu, or "
                        "--checkpoint and --baseline-checkpoint")

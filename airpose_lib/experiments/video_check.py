@@ -12,11 +12,14 @@ import numpy as np
 import pandas as pd
 
 from airpose_lib.body import load_body_model
+from airpose_lib.data.sequences import ensure_sequences
 from airpose_lib.data.sequences.reader import load_sequence
 from airpose_lib.eval.recordings import body_joints, recording_frame_table
 from airpose_lib.finetune.network import load_sized_network
 from airpose_lib.finetune.predict import predict_sequence
 from airpose_lib.fitting.airpose_plus import AirPosePlusConfig, fit_sequence
+
+from .configs import KitConfigs
 
 __all__ = ["ROUTES", "known_truth_table", "route_agreement", "write_video_reference"]
 
@@ -84,11 +87,12 @@ def route_agreement(table: pd.DataFrame) -> pd.DataFrame:
     return (v / r).reset_index().melt(id_vars="method", var_name="metric", value_name="video / recording")
 
 
-def write_video_reference(out_dir: str | Path, recordings: dict[str, Path], networks, *, shift: int = 7,
-                          fit_config: AirPosePlusConfig | None = None, command: str = "") -> Path:
-    """The video route's reference on known truth into ``out_dir``: each recording (``{"clean": root,
-    "field": root}``) exported with UAV2 started ``shift`` frames late and run through
-    ``airpose video`` (the offset estimated on ``clean``, given on the others), then
+def write_video_reference(out_dir: str | Path, configs: KitConfigs, *, person: str = "person2", shift: int = 7,
+                          networks: str = "cpu", command: str = "") -> Path:
+    """The video route's reference on known truth into ``out_dir``: the profile's recording
+    ``person`` and its field twin, each exported with UAV2 started ``shift`` frames late and run
+    through ``airpose video`` with ``networks``' shipped set and the profile's AirPose+ settings
+    (the offset estimated on the clean recording, given on the field one), then
     :func:`known_truth_table`. Writes ``known_truth.csv`` (a ``recordings`` column), the overlay
     stills of the first recording (``video_overlays.jpg``) and ``provenance.json`` (clean commit,
     seconds per stage and per 100 frames, machine, command).
@@ -102,10 +106,13 @@ def write_video_reference(out_dir: str | Path, recordings: dict[str, Path], netw
     from airpose_lib.eval.reference import machine_description, require_clean_checkout
     from airpose_lib.prior import load_prior
 
-    from .video import VideoConfig, run_video
+    from .video import VideoConfig, run_video, video_networks
     from .video_outputs import overlay_stills
 
     git = require_clean_checkout()
+    recordings = {kind: ensure_sequences(configs.recordings(field), configs.folders.sequences(field), only=[person],
+                                         progress=True)[person] for kind, field in (("clean", False), ("field", True))}
+    networks, fit_config = video_networks(networks), configs.fitting
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     work = out / ".work"
@@ -128,7 +135,7 @@ def write_video_reference(out_dir: str | Path, recordings: dict[str, Path], netw
             fig.savefig(out / "video_overlays.jpg", dpi=110, pil_kwargs={"quality": 85})
             plt.close(fig)
     pd.concat(tables, ignore_index=True).to_csv(out / "known_truth.csv", index=False, float_format="%.5f")
-    record = {"git": git, "command": command, "shift": shift, "recordings": {k: Path(v).name for k, v in recordings.items()},
+    record = {"git": git, "profile": configs.label, "command": command, "shift": shift, "recordings": {k: Path(v).name for k, v in recordings.items()},
               "networks": {k: Path(v).name for k, v in (("airpose", networks.airpose), ("baseline", networks.baseline))},
               "timing": timing, "machine": machine_description(),
               "created_at": pd.Timestamp.now(tz="UTC").isoformat(timespec="seconds")}

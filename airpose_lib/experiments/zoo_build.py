@@ -8,24 +8,22 @@ from pathlib import Path
 
 import torch
 
-from airpose_lib.data.still.config import default_root
 from airpose_lib.eval.ablation import VARIANT_LABELS
 from airpose_lib.eval.reference import git_commit
-from airpose_lib.paths import profile_name
 from airpose_lib.prior.build import ensure_prior
 from airpose_lib.train.ablation import trained_checkpoint
-from airpose_lib.train.config import load_train_config
 from airpose_lib.train.evaluate import evaluate_features
 from airpose_lib.train.pretrain import profile_backbone, reference_backbone_path
 from airpose_lib.zoo import export_regressor, half_state, kit_checkpoint, sha256_file, write_manifest, zoo_dir
 
+from .configs import KitConfigs
 from .recordings import run_recording_experiment
 from .shipped import REBUILD
 
 __all__ = ["build_shipped"]
 
 
-def build_shipped(profile: str, progress: bool = True, folder: str | Path | None = None) -> Path:
+def build_shipped(configs: KitConfigs, progress: bool = True, folder: str | Path | None = None) -> Path:
     """Make ``results/<profile>/networks/`` from the profile's runs (trained first where missing):
     the first seed's four variants, the clean and field recordings' fine-tuned Baseline and
     AirPose, the kit's prior; every file float16, listed with its SHA-256 in the manifest.
@@ -35,24 +33,25 @@ def build_shipped(profile: str, progress: bool = True, folder: str | Path | None
     Returns:
         the manifest's path.
     """
-    name = profile_name(profile)
-    folder = Path(folder) if folder is not None else zoo_dir(profile)
+    name = configs.folders.name
+    folder = Path(folder) if folder is not None else zoo_dir(configs.folders)
     folder.mkdir(parents=True, exist_ok=True)
-    backbone = reference_backbone_path(profile)
+    backbone = reference_backbone_path(configs.folders)
     if not backbone.is_file():
-        backbone = profile_backbone(profile, progress=progress)
-    seed = load_train_config(profile, "airpose").seed
+        backbone = profile_backbone(configs.pretrain, progress=progress)
+    trainings = configs.train_inputs()
+    seed = trainings.section.config("airpose").seed
     commit = git_commit()
     rebuild = REBUILD.format(profile=name)
     entries = [_entry("backbone", backbone, folder, kind="backbone", made_by="airpose pretrain", rebuild=rebuild)]
     for variant in VARIANT_LABELS:
-        ckpt = trained_checkpoint(profile, variant, seed, progress=progress)
+        ckpt = trained_checkpoint(trainings, variant, seed, progress=progress)
         dst = export_regressor(ckpt, backbone, folder / f"{variant}.pt")
         entries.append(_entry(variant, dst, folder, kind="regressor", variant=variant, seed=seed,
-                              metric=_val_metric(ckpt, dst, backbone, profile, variant), made_by=_made_by(ckpt),
+                              metric=_val_metric(ckpt, dst, backbone, configs.folders.still, variant), made_by=_made_by(ckpt),
                               rebuild=rebuild))
     for field in (False, True):
-        exp = run_recording_experiment(profile, progress=progress, field=field)
+        exp = run_recording_experiment(configs, progress=progress, field=field)
         for method, label in (("Baseline", "baseline_tuned"), ("AirPose", "airpose_tuned")):
             entry = label + ("_field" if field else "")
             dst = export_regressor(exp.checkpoints[method], backbone, folder / f"{entry}.pt")
@@ -63,7 +62,7 @@ def build_shipped(profile: str, progress: bool = True, folder: str | Path | None
                                   made_by=f"recordings{' (field)' if field else ''} of notebook 05",
                                   rebuild=rebuild))
     prior = folder / "prior.pt"
-    blob = torch.load(ensure_prior(profile, progress=progress), map_location="cpu", weights_only=True)
+    blob = torch.load(ensure_prior(configs.prior, progress=progress), map_location="cpu", weights_only=True)
     torch.save({**blob, "state_dict": half_state(blob["state_dict"])}, prior)
     entries.append(_entry("prior", prior, folder, kind="pose prior", made_by=f"airpose prior train --profile {name}",
                           rebuild=rebuild, metric={k: _round(v, 4) for k, v in
@@ -92,9 +91,10 @@ def _round(x, digits: int):
     return None if x is None else round(float(x), digits)
 
 
-def _val_metric(checkpoint: Path, shipped: Path, backbone: Path, profile: str, variant: str) -> dict:
-    """The validation split's MPE and MPJPE of the float32 run and of the float16 shipped file."""
-    root, label = default_root(profile), VARIANT_LABELS[variant]
+def _val_metric(checkpoint: Path, shipped: Path, backbone: Path, root: Path, variant: str) -> dict:
+    """The validation split's MPE and MPJPE of the float32 run and of the float16 shipped file
+    (``root``: the profile's still-frame dataset)."""
+    label = VARIANT_LABELS[variant]
     full = evaluate_features(checkpoint, backbone, root, label, split="val")["per_view"]
     half = evaluate_features(kit_checkpoint(shipped, backbone), backbone, root, label, split="val")["per_view"]
     return {"val MPE [m]": _round(half["mpe_m"].mean(), 4), "val MPJPE [m]": _round(half["mpjpe_m"].mean(), 4),

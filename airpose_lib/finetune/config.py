@@ -4,14 +4,12 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from airpose_lib.config_fields import ConfigError, check_fields, config_from, ranged, require
 from airpose_lib.devices import is_device_name
-from airpose_lib.profiles import section_config
 
 from .selection import SELECTION_RULES
 
@@ -141,10 +139,9 @@ class FineTuneConfig:
         return dataclasses.replace(self, **changes)
 
 
-def finetune_config(profile: str | Path | None, **overrides: Any) -> FineTuneConfig:
-    """:class:`FineTuneConfig` from a profile's ``finetune:`` section (defaults where the profile
-    has none), then ``overrides``. An unknown key or a bad value raises
-    :class:`~airpose_lib.errors.ConfigError` naming the file (or the options) and the field."""
-    if profile is None:
-        return config_from(FineTuneConfig, overrides, "fine-tuning options")
-    return section_config(profile, "finetune", FineTuneConfig, overrides, overrides_where="fine-tuning options")
+def finetune_config(base: FineTuneConfig | None = None, **overrides: Any) -> FineTuneConfig:
+    """``base`` (a profile's ``finetune:`` section as the entry read it; None: the defaults), then
+    ``overrides``. An unknown key or a bad value of ``overrides`` raises
+    :class:`~airpose_lib.errors.ConfigError` naming the field."""
+    values = {} if base is None else {f.name: getattr(base, f.name) for f in dataclasses.fields(base)}
+    return config_from(FineTuneConfig, {**values, **overrides}, "fine-tuning options")

@@ -47,4 +47,4 @@ def load_sized_network(checkpoint: str | Path, device: str | torch.device = "cpu
                           "config.data crop_size, dataset manifest or profile); pass --input-size (input_size=)")
     model.input_size = int(size)
     model.camera_K = record.camera_K
-    return model, TrainConfig(**state["config"]), int(size)
+    return model, TrainConfig.from_dict(state["config"]), int(size)

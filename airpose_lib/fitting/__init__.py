@@ -8,7 +8,6 @@ from .airpose_plus import (
     AirPosePlusResult,
     airpose_plus,
     fit_sequence,
-    fitting_profile,
     frame_confidence,
     init_from_views,
 )
@@ -16,6 +15,6 @@ from .recording import fit_config, initialisation_for, open_initialisation, refi
 
 __all__ = [
     "AirPosePlusConfig", "AirPosePlusLoss", "AirPosePlusResult", "DETECTOR_JOINTS", "airpose_plus", "fit_sequence",
-    "fitting_profile", "frame_confidence", "init_from_views", "fit_config", "initialisation_for",
+    "frame_confidence", "init_from_views", "fit_config", "initialisation_for",
     "open_initialisation", "refined_path", "save_refinement",
 ]

@@ -75,7 +75,6 @@ from airpose_lib.geometry import (
 )
 from airpose_lib.losses.robust import geman_mcclure
 from airpose_lib.prior import VPoser, load_prior
-from airpose_lib.profiles import section_config
 from airpose_lib.progress import progress_bar
 
 __all__ = [
@@ -87,7 +86,6 @@ __all__ = [
     "fit_sequence",
     "init_from_views",
     "frame_confidence",
-    "fitting_profile",
 ]
 
 
@@ -137,12 +135,6 @@ class AirPosePlusConfig:
 
     def to_dict(self) -> dict:
         return asdict(self)
-
-
-def fitting_profile(profile: str, **overrides) -> AirPosePlusConfig:
-    """:class:`AirPosePlusConfig` from a profile's ``fitting:`` section (:mod:`airpose_lib.profiles`);
-    keys are the config's fields, missing ones keep the defaults; ``overrides`` win."""
-    return section_config(profile, "fitting", AirPosePlusConfig, overrides)
 
 
 @dataclass

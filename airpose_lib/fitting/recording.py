@@ -6,6 +6,7 @@ around it to go from files to files.
 """
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 from pathlib import Path
@@ -15,7 +16,7 @@ import numpy as np
 from airpose_lib.atomic import atomic_path
 from airpose_lib.errors import ConfigError, DamagedFileError, reading
 
-from .airpose_plus import AirPosePlusConfig, AirPosePlusResult, fitting_profile
+from .airpose_plus import AirPosePlusConfig, AirPosePlusResult
 
 __all__ = ["INIT_ARRAYS", "fit_config", "initialisation_for", "open_initialisation", "refined_path",
            "save_refinement"]
@@ -26,9 +27,10 @@ _WHAT = "an .npz of network outputs"
 _FIX = "write it again with `airpose predict`"
 
 
-def fit_config(profile: str, *, official_temporal: bool = False, iterations: int | None = None,
+def fit_config(base: AirPosePlusConfig, *, official_temporal: bool = False, iterations: int | None = None,
                threads: int | None = None, device: str | None = None) -> AirPosePlusConfig:
-    """The profile's ``fitting:`` configuration with the command's overrides.
+    """The profile's ``fitting:`` configuration (``base``, as the entry read it) with the
+    command's overrides (on a copy).
 
     Args:
         official_temporal: the official code's relative temporal weights
@@ -36,10 +38,8 @@ def fit_config(profile: str, *, official_temporal: bool = False, iterations: int
         iterations: Adam iterations (None: the profile's).
         threads: torch threads during the fit (None or 0: unchanged).
         device: ``auto``, ``cpu``, ``cuda`` or ``cuda:N`` (None: the profile's, default cpu).
-    Raises:
-        ValueError: unknown profile or keys.
     """
-    cfg = fitting_profile(profile)
+    cfg = dataclasses.replace(base)
     if official_temporal:
         cfg = AirPosePlusConfig.official_code(**{k: v for k, v in cfg.to_dict().items() if k not in _TEMPORAL})
     if iterations is not None:
@@ -103,13 +103,13 @@ def refined_path(init: str | os.PathLike) -> Path:
 
 
 def save_refinement(out: str | os.PathLike, frames: np.ndarray, result: AirPosePlusResult, *,
-                    sequence: str | os.PathLike, init: str | os.PathLike, profile: str,
+                    sequence: str | os.PathLike, init: str | os.PathLike, label: str,
                     prior: dict) -> Path:
     """Write ``result`` (:meth:`AirPosePlusResult.to_numpy`), ``frames`` (F,) and a JSON
-    ``provenance`` (recording, initialisation, profile, configuration, prior, seconds, final loss,
+    ``provenance`` (recording, initialisation, profile (``label``), configuration, prior, seconds, final loss,
     skipped frames) to ``out`` atomically."""
     cfg = result.config
-    provenance = {"sequence": str(sequence), "init": str(init), "profile": profile, "config": cfg.to_dict(),
+    provenance = {"sequence": str(sequence), "init": str(init), "profile": label, "config": cfg.to_dict(),
                   "prior": prior, "seconds": result.seconds, "final_loss": result.history["loss"][-1],
                   "skipped_frames": result.skipped_frames}
     with atomic_path(Path(out)) as tmp:

@@ -12,12 +12,12 @@ from .checkpoint import (
     save_prior,
     vposer_state_dict,
 )
-from .train import CorpusConfig, PriorTrainConfig, evaluate_prior, prior_profile, rotation_geodesic, train_prior
+from .train import CorpusConfig, PriorTrainConfig, evaluate_prior, rotation_geodesic, train_prior
 from .vposer import LATENT_DIM, NUM_JOINTS, NUM_NEURONS, VPoser
 
 __all__ = [
     "VPoser", "LATENT_DIM", "NUM_JOINTS", "NUM_NEURONS",
-    "PriorTrainConfig", "CorpusConfig", "prior_profile", "train_prior", "evaluate_prior", "rotation_geodesic",
+    "PriorTrainConfig", "CorpusConfig", "train_prior", "evaluate_prior", "rotation_geodesic",
     "PriorError", "VPOSER_ENV", "VPOSER_URL", "KIT_TAGS", "kit_prior_path", "save_prior",
     "load_prior", "find_vposer_checkpoint", "vposer_state_dict",
 ]

@@ -8,7 +8,9 @@ test motions, as the paper's VPoser had not).
 """
 from __future__ import annotations
 
+import copy
 import json
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -20,14 +22,31 @@ from airpose_lib.data.still.poses import sample_body_pose, within_limits
 from airpose_lib.devices import resolve_device
 from airpose_lib.errors import ConfigError
 from airpose_lib.folder_lock import file_lock_for
-from airpose_lib.paths import profile_name
-from airpose_lib.profiles import section_where
 
-from .checkpoint import kit_prior_path, load_prior, save_prior
-from .train import CorpusConfig, evaluate_prior, prior_profile, train_prior
+from .checkpoint import load_prior, save_prior
+from .train import CorpusConfig, PriorTrainConfig, evaluate_prior, train_prior
 
-__all__ = ["check_held_out_motions", "motion_poses", "prior_corpus", "prior_is_current", "train_and_save_prior",
-           "ensure_prior"]
+__all__ = ["PriorSetup", "check_held_out_motions", "motion_poses", "prior_corpus", "prior_is_current",
+           "train_and_save_prior", "ensure_prior"]
+
+
+@dataclass(frozen=True)
+class PriorSetup:
+    """A profile's kit prior, read once at the entry: its ``prior:`` section and where it lives.
+
+    Attributes:
+        train: the training settings.
+        corpus: the corpus settings.
+        where: how messages name the section (the file and the section).
+        path: the prior's file (``RunFolders.prior``).
+        label: how the prior's record names the profile.
+    """
+
+    train: PriorTrainConfig
+    corpus: CorpusConfig
+    where: str
+    path: Path
+    label: str
 
 
 def check_held_out_motions(corpus: CorpusConfig, where: str = "the prior's corpus") -> None:
@@ -82,34 +101,34 @@ def prior_corpus(corpus: CorpusConfig, stream: int, n_still: int, n_motion: int)
     return np.concatenate(parts).astype(np.float32)
 
 
-def train_and_save_prior(profile: str, out: str | Path | None = None, *, steps: int | None = None,
+def train_and_save_prior(setup: PriorSetup, out: str | Path | None = None, *, steps: int | None = None,
                          seed: int | None = None, device: str | None = None,
                          progress: bool = False) -> tuple[Path, dict]:
-    """Train the prior with a profile's ``prior:`` section, evaluate it on held-out poses, save it.
+    """Train the prior with a profile's ``prior:`` section (``setup``), evaluate it on held-out
+    poses, save it.
 
     ``steps``, ``seed``, ``device`` (``auto``, ``cpu``, ``cuda``, ``cuda:N``) replace the profile's
     (None: the profile's; the device's default is cpu).
 
     Returns:
-        the checkpoint path (default :func:`kit_prior_path` of ``profile``) and a report with
+        the checkpoint path (default ``setup.path``) and a report with
         ``steps, seconds, final_train_loss`` and the validation numbers of :func:`evaluate_prior`
         plus ``samples_within_joint_limits`` (share of N(0, I) samples within the joint limits +5 deg).
     """
-    path = Path(out) if out is not None else kit_prior_path(profile_name(profile))
-    prior_profile(profile)  # a bad `prior:` setting fails before the output folder is made
+    path = Path(out) if out is not None else setup.path
     with file_lock_for(path, "prior checkpoint"):  # one writer per output file
-        return _train_and_save_prior(profile, path, steps, seed, device, progress)
+        return _train_and_save_prior(setup, path, steps, seed, device, progress)
 
 
-def _train_and_save_prior(profile: str, path: Path, steps: int | None, seed: int | None, device: str | None,
+def _train_and_save_prior(setup: PriorSetup, path: Path, steps: int | None, seed: int | None, device: str | None,
                           progress: bool) -> tuple[Path, dict]:
-    cfg, corpus = prior_profile(profile)
+    cfg, corpus = copy.deepcopy(setup.train), copy.deepcopy(setup.corpus)  # changed below: the setup's stay
     if steps is not None:
         cfg.steps = steps
     if device is not None:
         cfg.device = device
     dev = resolve_device(cfg.device)  # a bad device fails before the corpus is drawn
-    check_held_out_motions(corpus, section_where(profile, "prior"))
+    check_held_out_motions(corpus, setup.where)
     if seed is not None:
         cfg.seed = corpus.seed = seed
     share = corpus.n_poses / max(corpus.n_poses + corpus.n_motion_poses, 1)
@@ -131,27 +150,27 @@ def _train_and_save_prior(profile: str, path: Path, steps: int | None, seed: int
     val["samples_within_joint_limits"] = float(within_limits(samples, tol=np.deg2rad(5.0)).mean())
     report = {"steps": cfg.steps, "seconds": hist["seconds"], "final_train_loss": hist["loss"][-1],
               "train_poses": len(train_poses), "val_poses": len(val_poses), **val}
-    save_prior(model, path, {"profile": str(profile), "train": cfg.to_dict(), "corpus": corpus.to_dict(),
+    save_prior(model, path, {"profile": setup.label, "train": cfg.to_dict(), "corpus": corpus.to_dict(),
                              "train_seconds": hist["seconds"], "final_train_loss": hist["loss"][-1],
                              "validation": val})
     return path, report
 
 
-def prior_is_current(path: str | Path, profile: str) -> bool:
+def prior_is_current(path: str | Path, setup: PriorSetup) -> bool:
     """The kit prior at ``path`` exists and was trained on the corpus the profile's ``prior:``
     section asks for (its record's ``corpus``; e.g. the same ``held_out_motions``)."""
     path = Path(path)
     if not path.is_file():
         return False
-    _, corpus = prior_profile(profile)
+    corpus = setup.corpus
     _, prov = load_prior("kit", path, return_provenance=True)
     return json.loads(json.dumps(prov.get("corpus"))) == json.loads(json.dumps(corpus.to_dict()))
 
 
-def ensure_prior(profile: str, progress: bool = False) -> Path:
+def ensure_prior(setup: PriorSetup, progress: bool = False) -> Path:
     """The profile's kit prior, trained first if it is not cached yet or was trained on another
     corpus than the profile's (:func:`prior_is_current`)."""
-    path = kit_prior_path(profile_name(profile))
-    if not prior_is_current(path, profile):
-        path, _ = train_and_save_prior(profile, progress=progress)
+    path = setup.path
+    if not prior_is_current(path, setup):
+        path, _ = train_and_save_prior(setup, progress=progress)
     return path

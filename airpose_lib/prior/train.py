@@ -31,11 +31,10 @@ from airpose_lib.config_fields import ranged
 from airpose_lib.devices import resolve_device
 from airpose_lib.engine import Schedule, TrainingTask, run_engine
 from airpose_lib.geometry import axis_angle_to_matrix, geodesic_angle
-from airpose_lib.profiles import section_config
 
 from .vposer import LATENT_DIM, NUM_JOINTS, NUM_NEURONS, VPoser
 
-__all__ = ["PriorTrainConfig", "CorpusConfig", "prior_profile", "train_prior", "evaluate_prior",
+__all__ = ["PriorTrainConfig", "CorpusConfig", "train_prior", "evaluate_prior",
            "rotation_geodesic"]
 
 
@@ -96,15 +95,6 @@ class CorpusConfig:
         else:
             del d["held_out_motions"]
         return d
-
-
-def prior_profile(profile: str) -> tuple[PriorTrainConfig, CorpusConfig]:
-    """Training and corpus settings from a profile's ``prior:`` section (:mod:`airpose_lib.profiles`).
-
-    Keys of the section are fields of :class:`PriorTrainConfig` or :class:`CorpusConfig`
-    (``seed`` sets both); missing keys keep the defaults.
-    """
-    return section_config(profile, "prior", (PriorTrainConfig, CorpusConfig))
 
 
 def rotation_geodesic(R1: Tensor, R2: Tensor, eps: float = 1e-7) -> Tensor:

@@ -25,6 +25,7 @@ from typing import Any
 from airpose_lib.assets import DataSource, resolve_data_source
 from airpose_lib.paths import figures_root, run_path, runs_root
 from airpose_lib.profiles import loaded
+from airpose_lib.reproduce.configs import kit_configs
 from airpose_lib.reproduce.runner import load_profile
 from airpose_lib.viz import use_kit_style
 
@@ -64,7 +65,9 @@ class NotebookContext:
     Attributes:
         notebook: catalogue name.
         profile: the ``profile`` parameter (name or YAML path), read once
-            (:class:`~airpose_lib.profiles.Profile`): the notebook passes this one down.
+            (:class:`~airpose_lib.profiles.Profile`): how titles and records name the profile.
+        configs: that profile's sections as typed configs, with its folders
+            (:class:`~airpose_lib.experiments.configs.KitConfigs`): the notebook passes these down.
         out: the output folder (absolute, created).
         runs: the kit's runs folder (:func:`airpose_lib.paths.runs_root`).
         figures: ``figures/<profile>/``, where ``reproduce`` collects the catalogued figures.
@@ -83,6 +86,7 @@ class NotebookContext:
     source: DataSource
     values: dict[str, Any] = field(default_factory=dict)
     params: dict[str, Any] = field(default_factory=dict)
+    configs: Any = None
 
     def __getattr__(self, name: str) -> Any:
         # only called for names that are not fields: the resolved parameters
@@ -132,7 +136,7 @@ def setup_notebook(notebook: str, profile: str, output_dir: str | Path | None = 
     Returns:
         The :class:`NotebookContext`.
     """
-    profile = loaded(profile)  # read once here; the notebook passes ctx.profile down
+    profile = loaded(profile)  # read once here, and typed once (ctx.configs): the notebook passes those down
     p = notebook_defaults(notebook, profile, output_dir, **values)
     use_kit_style()
     _show_kit_warnings()
@@ -146,4 +150,5 @@ def setup_notebook(notebook: str, profile: str, output_dir: str | Path | None = 
               **(record or {})}
     name = profile.name
     return NotebookContext(notebook=notebook, profile=profile, out=p.output_dir, runs=runs_root(),
-                           figures=figures_root() / name, source=source, values=filled, params=params)
+                           figures=figures_root() / name, source=source, values=filled, params=params,
+                           configs=kit_configs(profile))

@@ -24,12 +24,11 @@ import numpy as np
 import torch
 
 from airpose_lib.data.still.dataset import StillFrameDataset
-from airpose_lib.data.still.generate import default_root
 from airpose_lib.folder_lock import file_lock
 from airpose_lib.hashing import sha256_file
 from airpose_lib.model.onnx_export import OPSET, export_onnx
 from airpose_lib.model.quantize import QuantSettings, calibration_digest, quantize_stage1
-from airpose_lib.paths import cache_dir
+from airpose_lib.paths import RunFolders, cache_dir
 
 from .backends import ONNX_PRECISIONS, BackendSpec, build_torch_model, checkpoint_settings
 
@@ -44,7 +43,7 @@ def default_calibration_root(checkpoint: str | Path | None = None) -> Path:
         root = ((state.get("config") or {}).get("data") or {}).get("root") if isinstance(state, dict) else None
         if root:
             return Path(root)
-    return Path(default_root("smoke"))
+    return RunFolders("smoke").still
 
 
 def calibration_crops(root: str | Path, input_size: int, samples: int = 32, split: str = "train"

@@ -13,11 +13,10 @@ from airpose_lib.engine import StaleRunError
 from airpose_lib.eval.ablation import VARIANT_LABELS
 from airpose_lib.process_guard import die_with_parent
 
-from .config import load_train_config
 from .evaluate import evaluate_checkpoint
-from .loop import TrainResult, default_out_dir
+from .loop import TrainResult
 from .pretrain import other_profile, own_backbone_keys, profile_backbone_keys
-from .run import prepare_data, train
+from .run import TrainInputs, prepare_data, train
 
 __all__ = ["AblationRun", "run_ablation", "trained_checkpoint"]
 
@@ -32,7 +31,7 @@ class AblationRun:
     tables: dict[str, pd.DataFrame]
 
 
-def run_ablation(profile: str, variants: Sequence[str] = tuple(VARIANT_LABELS), seeds: Sequence[int] = (123,),
+def run_ablation(inputs: TrainInputs, variants: Sequence[str] = tuple(VARIANT_LABELS), seeds: Sequence[int] = (123,),
                  out_root: str | Path | None = None, eval_max_samples: int | None = None,
                  progress: bool = False, workers: int = 1) -> dict[tuple[str, int], AblationRun]:
     """Train (or resume / reuse finished runs of) every variant for every seed, then evaluate.
@@ -41,7 +40,8 @@ def run_ablation(profile: str, variants: Sequence[str] = tuple(VARIANT_LABELS), 
     an unfinished one resumes from ``last.pt``. Re-running a notebook therefore only evaluates.
 
     Args:
-        profile: reproduction profile (its ``train:`` and ``data: still:`` sections).
+        inputs: the profile's trainings (:class:`~airpose_lib.train.run.TrainInputs`: its ``train:``
+            section, still-frame dataset, backbone and folders).
         variants: kit variant names (``baseline``, ``multiview``, ``fullcam``, ``airpose``).
         seeds: training seeds.
         out_root: parent of the run folders (default ``runs/train/<profile>``).
@@ -58,12 +58,12 @@ def run_ablation(profile: str, variants: Sequence[str] = tuple(VARIANT_LABELS), 
         on the tight-box test crops when the dataset has them).
     """
     if workers > 1:
-        _train_parallel(profile, variants, seeds, out_root, workers)
+        _train_parallel(inputs, variants, seeds, out_root, workers)
     results = {}
     # Seed-major: the first seed's four variants are ready first (the real-data notebooks need them).
     for seed in seeds:
         for variant in variants:
-            checkpoint = trained_checkpoint(profile, variant, seed, out_root, progress)
+            checkpoint = trained_checkpoint(inputs, variant, seed, out_root, progress)
             label = VARIANT_LABELS[variant]
             tables = evaluate_checkpoint(checkpoint, split="test", method=label, max_samples=eval_max_samples)
             try:
@@ -76,9 +76,9 @@ def run_ablation(profile: str, variants: Sequence[str] = tuple(VARIANT_LABELS), 
     return results
 
 
-def _run_dir(profile: str, variant: str, seed: int, out_root: str | Path | None) -> Path:
+def _run_dir(inputs: TrainInputs, variant: str, seed: int, out_root: str | Path | None) -> Path:
     return (Path(out_root) / variant / f"seed{seed}") if out_root is not None \
-        else default_out_dir(profile, variant, seed)
+        else inputs.folders.train(variant, seed)
 
 
 # This worker process's index k among the parallel workers (set by :func:`_init_worker`).
@@ -95,30 +95,31 @@ def _init_worker(parent_pid: int, indices) -> None:
 def _train_single_thread(job: tuple) -> str:
     """Worker of :func:`_train_parallel` (module level: it is pickled into spawned processes).
 
-    ``job``: ``(profile, variant, seed, out_root)``; the run's device is spread over the visible
+    ``job``: ``(inputs, variant, seed, out_root)`` (the inputs pickled whole: a worker reads no
+    profile); the run's device is spread over the visible
     GPUs by the worker's index (:func:`airpose_lib.devices.worker_device`; unchanged on the CPU).
     """
     import torch
 
     torch.set_num_threads(1)
-    profile, variant, seed, out_root = job
-    asked = load_train_config(profile, variant, seed).device
+    inputs, variant, seed, out_root = job
+    asked = inputs.section.config(variant, seed).device
     gpus = torch.cuda.device_count() if torch.cuda.is_available() else 0
     device = worker_device(_WORKER_INDEX, gpus, asked)
-    return str(trained_checkpoint(profile, variant, seed, out_root, device=None if device == asked else device))
+    return str(trained_checkpoint(inputs, variant, seed, out_root, device=None if device == asked else device))
 
 
-def _train_parallel(profile: str, variants: Sequence[str], seeds: Sequence[int],
+def _train_parallel(inputs: TrainInputs, variants: Sequence[str], seeds: Sequence[int],
                     out_root: str | Path | None, workers: int) -> None:
     """Train the unfinished runs in ``workers`` spawned single-thread processes."""
     import multiprocessing as mp
     from concurrent.futures import ProcessPoolExecutor
 
-    todo = [(profile, v, s, out_root) for s in seeds for v in variants
-            if _finished_run(_run_dir(profile, v, s, out_root), profile, v, s) is None]
+    todo = [(inputs, v, s, out_root) for s in seeds for v in variants
+            if _finished_run(_run_dir(inputs, v, s, out_root), inputs, v, s) is None]
     if not todo:
         return
-    prepare_data(load_train_config(profile, todo[0][1], todo[0][2]))  # generate the data once, here
+    prepare_data(inputs.section.config(todo[0][1], todo[0][2]), inputs)  # generate the data once, here
     ctx, n = mp.get_context("spawn"), min(workers, len(todo))
     indices = ctx.Queue()  # each worker takes one k = 0 .. n-1 at its start (its GPU, see above)
     for k in range(n):
@@ -129,7 +130,7 @@ def _train_parallel(profile: str, variants: Sequence[str], seeds: Sequence[int],
             pass
 
 
-def trained_checkpoint(profile: str, variant: str, seed: int, out_root: str | Path | None = None,
+def trained_checkpoint(inputs: TrainInputs, variant: str, seed: int, out_root: str | Path | None = None,
                        progress: bool = False, device: str | None = None) -> Path:
     """The final checkpoint of a profile's run of ``variant`` (trained, or resumed, first if needed).
 
@@ -138,21 +139,21 @@ def trained_checkpoint(profile: str, variant: str, seed: int, out_root: str | Pa
     new one was committed) is stale: it is trained afresh, with a line saying so, instead of
     stopping the reproduction. ``device`` replaces the profile's (None: the profile's).
     """
-    out = _run_dir(profile, variant, seed, out_root)
-    run = _finished_run(out, profile, variant, seed)
+    out = _run_dir(inputs, variant, seed, out_root)
+    run = _finished_run(out, inputs, variant, seed)
     if run is None:
         kw = dict(seed=seed, out_dir=out, overrides={"progress": progress, **({"device": device} if device else {})})
         try:
-            run = train(variant, profile, resume=True, **kw)
+            run = train(variant, inputs, resume=True, **kw)
         except StaleRunError as e:
             print(f"{out}: trained with other {', '.join(e.fields)} than the profile asks for now; training it afresh")
-            run = train(variant, profile, resume=False, **kw)
+            run = train(variant, inputs, resume=False, **kw)
     if run.checkpoint is None:
         raise RuntimeError(f"training {variant} (seed {seed}) wrote no checkpoint in {out}")
     return Path(run.checkpoint)
 
 
-def _finished_run(out: Path, profile: str, variant: str, seed: int) -> TrainResult | None:
+def _finished_run(out: Path, inputs: TrainInputs, variant: str, seed: int) -> TrainResult | None:
     """The run in ``out`` if it completed with the configuration the profile asks for now."""
     import json
 
@@ -160,7 +161,7 @@ def _finished_run(out: Path, profile: str, variant: str, seed: int) -> TrainResu
         done = TrainResult.from_json(json.loads((Path(out) / "result.json").read_text()))
     except (OSError, ValueError, KeyError):
         return None
-    wanted = load_train_config(profile, variant, seed).to_dict()
+    wanted = inputs.section.config(variant, seed).to_dict()
     # training fills in the resolved dataset folder when the profile names none, and the
     # profile's backbone file for `pretrained: profile` (named by its key: it must be the key the
     # profile's `pretrain:` settings give now); the device may be a parallel worker's own GPU
@@ -170,12 +171,13 @@ def _finished_run(out: Path, profile: str, variant: str, seed: int) -> TrainResu
         ignore.add("pretrained")
         used = Path(str(done.config.get("pretrained")))
         root = (done.config.get("data") or {}).get("root")
-        if root is None or not used.is_file() or used.stem not in profile_backbone_keys(profile, root):
+        if root is None or not used.is_file() or inputs.pretrain is None \
+                or used.stem not in profile_backbone_keys(inputs.pretrain, root):
             return None
     elif (other := other_profile(wanted.get("pretrained"))) is not None:  # another profile's backbone
         ignore.add("pretrained")
         used = Path(str(done.config.get("pretrained")))
-        if not used.is_file() or used.stem not in own_backbone_keys(other):
+        if not used.is_file() or other not in inputs.others or used.stem not in own_backbone_keys(inputs.others[other]):
             return None
     same = all(done.config.get(k) == wanted[k] for k in wanted.keys() - ignore)
     if same and done.step >= wanted["steps"] and done.checkpoint is not None and Path(done.checkpoint).is_file():

@@ -12,15 +12,16 @@ A profile (``airpose_lib/profiles/<name>.yaml``, the one place sizes live) holds
       variants:             # per-variant overrides of the fields above
         baseline: {lr: 1.0e-4}
 
-The file is read by :mod:`airpose_lib.profiles`; ``train`` imports nothing from ``reproduce``.
+The entry (the command, ``airpose reproduce``, a notebook's set-up) reads the section once into a
+:class:`TrainSection` (:func:`train_section`); ``train`` reads no profile.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
 from airpose_lib.config_fields import (
@@ -35,9 +36,9 @@ from airpose_lib.config_fields import (
 )
 from airpose_lib.devices import PRECISION_CHOICES, is_device_name
 from airpose_lib.errors import ProfileSettingError
-from airpose_lib.profiles import profile_section, section_where
 
-__all__ = ["DATA_KEYS", "TrainConfig", "check_options", "load_train_config", "option_types"]
+__all__ = ["DATA_KEYS", "TrainConfig", "TrainSection", "check_options", "load_train_config", "option_types",
+           "train_section"]
 
 
 @dataclass
@@ -63,11 +64,10 @@ class TrainConfig:
         loss: :class:`airpose_lib.losses.LossConfig` field overrides; ``official_loss`` applies the
             official code's variations first.
         body_source: body model of the losses (``open`` or ``smplx``).
-        profile: the profile the config came from (names the default dataset): a kit profile's name,
-            or the absolute path of a profile file of one's own.
-        data: the still-frame dataset: ``root`` (a generated dataset folder) or ``profile`` (whose
-            ``data: still:`` dataset is used, generated on first use; default: ``profile`` above),
-            other keys are passed to ``StillFrameDataset`` (e.g. ``augment``).
+        data: the still-frame dataset: ``root`` (a generated dataset folder; default: the
+            profile's ``data: still:`` dataset, generated on first use,
+            :class:`~airpose_lib.train.run.TrainInputs`), other keys are passed to
+            ``StillFrameDataset`` (e.g. ``augment``).
         train_split, val_split: split names passed to the dataset (``train``, ``val``, ``test``):
             the validation loss, and every choice made on it, reads ``val``; ``test`` is read only
             by the evaluation that makes the reported tables, and a training refuses it.
@@ -120,7 +120,6 @@ class TrainConfig:
     loss: dict = field(default_factory=dict)
     official_loss: bool = False
     body_source: str = "open"
-    profile: str | None = None
     data: dict = field(default_factory=dict)
     train_split: str = "train"
     val_split: str = "val"
@@ -180,6 +179,15 @@ class TrainConfig:
     def to_dict(self) -> dict:
         return dataclasses.asdict(self)
 
+    #: Keys that configs written by earlier versions of the kit hold and this one drops
+    #: (``profile``: the profile's name, which the kit now reads once at the entry).
+    LEGACY_KEYS = ("profile",)
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> "TrainConfig":
+        """A config as :meth:`to_dict` wrote it, by this version of the kit or an earlier one."""
+        return cls(**{k: v for k, v in d.items() if k not in cls.LEGACY_KEYS})
+
     def replace(self, **changes: Any) -> "TrainConfig":
         return dataclasses.replace(self, **changes)
 
@@ -205,7 +213,7 @@ def _model_choices() -> tuple[tuple[str, ...], tuple[str, ...]]:
 
 
 #: Keys of ``data:`` that the training itself reads (the other keys are the dataset's keywords).
-DATA_KEYS = {"root": str | None, "profile": str | None, "source": str, "fingerprint": str | None,
+DATA_KEYS = {"root": str | None, "source": str, "fingerprint": str | None,
              "generation": dict}
 
 
@@ -257,37 +265,55 @@ def check_options(config: TrainConfig, names: tuple[str, ...] = ("model", "loss"
                 require(ranges[key].holds(options[key]), f"{name}.{key}", ranges[key].rule, options[key])
 
 
-def load_train_config(profile: str | Path | None, variant: str, seed: int | None = None,
-                      section: str = "train", **overrides: Any) -> TrainConfig:
-    """The profile's ``train`` section (or ``section``), then its ``variants[variant]`` entry, then
-    ``seed`` and ``overrides`` (TrainConfig fields), on top of :class:`TrainConfig`'s defaults.
+@dataclass(frozen=True)
+class TrainSection:
+    """A profile's ``train:`` section, checked (:func:`train_section`): the settings every
+    variant shares and each variant's changes; :meth:`config` makes one run's :class:`TrainConfig`.
 
-    ``profile=None`` uses the defaults only. Unknown keys and bad values raise ``ConfigError``
-    (in the profile: ``ProfileSettingError``, naming the file; typos fail before anything runs);
-    an unknown profile raises ``ProfileError``. The section goes through
-    ``config_fields.config_from`` as every section does (``profiles.section_config``); its
-    ``variants:`` entries are train's own.
+    Attributes:
+        values: the shared settings (TrainConfig fields).
+        variants: variant -> its changes (``variants:``).
+        where: how messages name the section (the file and the section).
     """
-    values: dict[str, Any] = {}
-    if profile is not None:
-        settings = profile_section(profile, section)
-        per_variant = settings.pop("variants", None) or {}
-        where = section_where(profile, section)
-        check_keys(settings, TrainConfig, where, ProfileSettingError)
-        if not isinstance(per_variant, dict) or not isinstance(per_variant.get(variant) or {}, dict):
-            raise ProfileSettingError(f"{where}: `variants:` must map a variant name to its settings")
-        check_keys(per_variant.get(variant) or {}, TrainConfig, f"{where} `variants: {variant}:`", ProfileSettingError)
-        values.update(settings)
-        values.update(per_variant.get(variant) or {})
-        # the profile's values alone first, so that a bad one is blamed on the file
-        config_from(TrainConfig, {**values, "variant": variant}, where, error=ProfileSettingError)
-    values["variant"] = variant
-    if profile is not None:
-        # a kit profile by name; a profile file of one's own by its path (read again for its data)
-        own = Path(str(profile)).suffix in (".yaml", ".yml")
-        values.setdefault("profile", str(Path(profile).absolute()) if own else Path(str(profile)).stem)
-    if seed is not None:
-        values["seed"] = seed
-    values.update(overrides)
-    check_keys(values, TrainConfig, "training options")
-    return TrainConfig(**values)
+
+    values: dict = field(default_factory=dict)
+    variants: dict = field(default_factory=dict)
+    where: str = "training options"
+
+    def config(self, variant: str, seed: int | None = None, **overrides: Any) -> TrainConfig:
+        """The section's settings, then ``variants[variant]``, then ``seed`` and ``overrides``
+        (TrainConfig fields), on top of :class:`TrainConfig`'s defaults. A bad value of the
+        section raises ``ProfileSettingError`` naming the file; one of ``overrides``,
+        ``ConfigError``."""
+        values: dict[str, Any] = {**self.values, **(self.variants.get(variant) or {})}
+        if self.values or self.variants.get(variant):
+            # the profile's values alone first, so that a bad one is blamed on the file
+            config_from(TrainConfig, {**values, "variant": variant}, self.where, error=ProfileSettingError)
+        values["variant"] = variant
+        if seed is not None:
+            values["seed"] = seed
+        values.update(overrides)
+        check_keys(values, TrainConfig, "training options")
+        return TrainConfig(**values)
+
+
+def train_section(settings: Mapping[str, Any], where: str) -> TrainSection:
+    """A ``train:`` section's settings (a plain mapping, as the profile has them) checked into a
+    :class:`TrainSection`: unknown keys, here or in a variant's changes, raise
+    ``ProfileSettingError`` naming ``where``. The section's ``variants:`` entries are train's own.
+    """
+    settings = dict(settings)
+    per_variant = settings.pop("variants", None) or {}
+    check_keys(settings, TrainConfig, where, ProfileSettingError)
+    if not isinstance(per_variant, dict) or not all(isinstance(v or {}, dict) for v in per_variant.values()):
+        raise ProfileSettingError(f"{where}: `variants:` must map a variant name to its settings")
+    for variant, changes in per_variant.items():
+        check_keys(changes or {}, TrainConfig, f"{where} `variants: {variant}:`", ProfileSettingError)
+    return TrainSection(settings, {k: dict(v or {}) for k, v in per_variant.items()}, where)
+
+
+def load_train_config(section: TrainSection | None, variant: str, seed: int | None = None,
+                      **overrides: Any) -> TrainConfig:
+    """``section.config(variant, seed, **overrides)`` (:class:`TrainSection`); ``None``: the
+    defaults only."""
+    return (section if section is not None else TrainSection()).config(variant, seed, **overrides)

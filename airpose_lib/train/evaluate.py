@@ -135,7 +135,7 @@ def load_trained_model(checkpoint: str | Path, device: str | torch.device = "cpu
     """The network of a training checkpoint (:func:`load_network`) on ``device`` and its
     :class:`TrainConfig`."""
     model, _, state = load_network(checkpoint, device)
-    return model, TrainConfig(**state["config"])
+    return model, TrainConfig.from_dict(state["config"])
 
 
 def evaluate_checkpoint(checkpoint: str | Path, split: str = "test", method: str | None = None,

@@ -76,7 +76,6 @@ from airpose_lib.losses.pretrain import PretrainLoss, PretrainLossConfig
 from airpose_lib.model import build_model, to_smplx_params
 from airpose_lib.model.pretrain import PretrainNet
 from airpose_lib.model.record import NETWORK_KEY, network_record
-from airpose_lib.paths import profile_name, run_path
 
 from .config import TrainConfig, check_options
 from .features import FeatureDataset, ensure_features, load_backbone_file
@@ -86,7 +85,6 @@ __all__ = [
     "TrainResult",
     "start_training",
     "run_training",
-    "default_out_dir",
     "default_model_factory",
     "default_dataset_factory",
     "default_loss_factory",
@@ -287,13 +285,6 @@ class TrainResult:
                    checkpoint=Path(d["checkpoint"]) if d["checkpoint"] else None, train_loss=d["train_loss"],
                    val_losses=d["val_losses"], tensorboard=d["tensorboard"], stopped_early=d["stopped_early"],
                    config=d["config"], wall_s=d.get("wall_s"), git=d.get("git"), precision=d.get("precision"))
-
-
-def default_out_dir(profile: str | Path | None, variant: str, seed: int) -> Path:
-    """``<runs>/train/<profile>/<variant>/seed<seed>``, ``<runs>`` = :func:`airpose_lib.paths.runs_root`
-    (the checkout's ``runs/`` or ``$AIRPOSE_RUNS``, whatever the working directory)."""
-    name = profile_name(profile) if profile is not None else "default"
-    return run_path("train", name, variant, f"seed{seed}")
 
 
 # -- entry point ----------------------------------------------------------------------------------

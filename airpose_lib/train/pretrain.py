@@ -1,6 +1,7 @@
 """The shared pretrained backbone of a profile: trained once, gated on held-out data, cached.
 
-``ensure_backbone(profile)`` returns the path of the profile's backbone file. It is looked for, in
+``ensure_backbone(setup, ...)`` returns the path of the profile's backbone file (:class:`PretrainSetup`:
+what the entry read of the profile for it). It is looked for, in
 order, in the kit cache (``<cache>/backbones/<key>.pt``), in the repository's committed reference
 (``results/<profile>/pretrained_backbone.pt``, used when its recorded key matches and its SHA-256
 is the recorded one), and otherwise trained with the profile's ``pretrain:`` section by the one
@@ -25,6 +26,7 @@ import hashlib
 import json
 import shutil
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 import torch
@@ -33,7 +35,7 @@ from torch.utils.data import DataLoader
 from airpose_lib.atomic import atomic_path, atomic_torch_save
 from airpose_lib.config_fields import config_from
 from airpose_lib.data.still.dataset import StillFrameDataset
-from airpose_lib.data.still.generate import GenerationConfig, default_root, ensure_still_dataset, profile_config
+from airpose_lib.data.still.generate import GenerationConfig, ensure_still_dataset
 from airpose_lib.data.still.manifest import load_manifest
 from airpose_lib.data.still.shards import sha256_file
 from airpose_lib.engine.checkpoint import kit_version, load_checkpoint
@@ -45,13 +47,12 @@ from airpose_lib.folder_lock import file_lock
 from airpose_lib.geometry import axis_angle_to_matrix, rot6d_to_matrix
 from airpose_lib.losses.pretrain import heading_bin
 from airpose_lib.model.backbone import build_backbone
-from airpose_lib.paths import cache_dir, profile_name, run_path
-from airpose_lib.profiles import profile_section, section_where
+from airpose_lib.paths import RunFolders, cache_dir
 
 from .config import TrainConfig
 from .loop import check_data_root, default_model_factory, start_training
 
-__all__ = ["PRETRAIN_VERSION", "DATA_OPTIONS", "pretrain_config", "pretrain_stages", "backbone_key",
+__all__ = ["PRETRAIN_VERSION", "DATA_OPTIONS", "PretrainSetup", "pretrain_config", "pretrain_stages", "backbone_key",
            "stage_keys", "stage_key_options", "ensure_backbone", "profile_backbone", "profile_backbone_key",
            "profile_backbone_keys", "own_backbone_keys", "OTHER_PROFILE",
            "other_profile", "own_backbone_key", "other_profile_backbone", "export_backbone",
@@ -62,10 +63,34 @@ __all__ = ["PRETRAIN_VERSION", "DATA_OPTIONS", "pretrain_config", "pretrain_stag
 PRETRAIN_VERSION = 1
 #: Training-data options a pretraining stage's ``data:`` may set (StillFrameDataset keywords).
 DATA_OPTIONS = ("mirror",)
-_REPO = Path(__file__).resolve().parents[2]
 
 
-def pretrain_stages(profile: str, **overrides) -> list[TrainConfig]:
+@dataclass(frozen=True)
+class PretrainSetup:
+    """What makes a profile's shared backbone, read once at the entry: its ``pretrain:``
+    settings, its still-frame dataset's, its folders.
+
+    Attributes:
+        section: the ``pretrain:`` settings, as the profile has them (checked by :meth:`stages`).
+        where: how messages name the section (the file and the section).
+        still: the profile's ``data: still:`` settings (None: it has none; only a stage with
+            ``data: still:`` changes needs them).
+        folders: the profile's folders (its dataset, pretraining runs, committed backbone).
+        label: how records and commands name the profile.
+    """
+
+    section: dict
+    where: str
+    still: GenerationConfig | None
+    folders: RunFolders
+    label: str
+
+    def stages(self, **overrides) -> list[TrainConfig]:
+        """:func:`pretrain_stages` of this setup."""
+        return pretrain_stages(self, **overrides)
+
+
+def pretrain_stages(setup: PretrainSetup, **overrides) -> list[TrainConfig]:
     """The stages of a profile's pretraining, first to last, as :class:`TrainConfig` s (task
     ``pretrain``). A ``pretrain:`` section may name the stage it continues (``continue_from:``, the
     earlier stage's settings as changes to its own), which may name one in turn, and so on.
@@ -79,15 +104,13 @@ def pretrain_stages(profile: str, **overrides) -> list[TrainConfig]:
     (:data:`DATA_OPTIONS`, e.g. ``mirror: true``, :class:`~airpose_lib.data.still.dataset.StillFrameDataset`'s
     keywords); they are part of the stage's key.
     """
-    settings = profile_section(profile, "pretrain")
-    chain = [settings]
+    chain = [dict(setup.section)]
     while (earlier := chain[-1].pop("continue_from", None)) is not None:
         if not isinstance(earlier, dict):
-            raise ProfileError(f"profile {profile}: `pretrain: continue_from:` must be a mapping of settings "
+            raise ProfileError(f"profile {setup.label}: `pretrain: continue_from:` must be a mapping of settings "
                                f"(e.g. {{steps: 4000}}), not {earlier!r}")
         chain.append({**chain[-1], **earlier})
-    name = profile_name(profile)
-    where = section_where(profile, "pretrain")
+    where = setup.where
 
     def stage(values: dict, extra: dict) -> TrainConfig:
         values = dict(values)
@@ -99,34 +122,37 @@ def pretrain_stages(profile: str, **overrides) -> list[TrainConfig]:
         extra = dict(extra)
         if "data" in extra:  # an override's data replaces the section's
             data = extra.pop("data") or {}
-        cfg = config_from(TrainConfig, {**values, **extra}, "training options").replace(profile=name)
+        cfg = config_from(TrainConfig, {**values, **extra}, "training options")
         unknown = set(data) - {"still", *DATA_OPTIONS}
         if unknown:
-            raise ProfileError(f"profile {profile}: a pretraining stage's `data:` takes only `still:` "
+            raise ProfileError(f"profile {setup.label}: a pretraining stage's `data:` takes only `still:` "
                                f"(changes to the profile's `data: still:`) and {', '.join(DATA_OPTIONS)}, "
                                f"not {sorted(unknown)}")
         options = {k: data[k] for k in DATA_OPTIONS if k in data}
         if "still" in data:
-            cfg = cfg.replace(data=_stage_dataset(profile, name, data["still"] or {}))
+            cfg = cfg.replace(data=_stage_dataset(setup, data["still"] or {}))
         return cfg.replace(data={**cfg.data, **options}) if options else cfg
 
     return [stage(values, overrides if i == 0 else {}) for i, values in reversed(list(enumerate(chain)))]
 
 
-def _stage_dataset(profile: str, name: str, changes: dict) -> dict:
+def _stage_dataset(setup: PretrainSetup, changes: dict) -> dict:
     """``root``, ``fingerprint`` and ``generation`` of the profile's still-frame dataset with
     ``changes``; the profile's own folder when the changes change nothing."""
-    base = profile_config(profile)
+    base = setup.still
+    if base is None:
+        raise ProfileError(f"{setup.where}: a stage's `data: still:` changes the profile's `data: still:` "
+                           "section, which it has none of; add one")
     config = GenerationConfig.from_dict({**base.to_dict(), **changes})
-    fp, root = config.fingerprint(), default_root(name)
+    fp, root = config.fingerprint(), setup.folders.still
     if fp != base.fingerprint():
         root = root.with_name(f"{root.name}-{fp[:12]}")
     return {"root": str(root), "fingerprint": fp, "generation": config.to_dict()}
 
 
-def pretrain_config(profile: str, **overrides) -> TrainConfig:
+def pretrain_config(setup: PretrainSetup, **overrides) -> TrainConfig:
     """The last stage of a profile's pretraining (:func:`pretrain_stages`)."""
-    return pretrain_stages(profile, **overrides)[-1]
+    return pretrain_stages(setup, **overrides)[-1]
 
 
 def backbone_key(cfg: TrainConfig, data_fingerprint: str, start_key: str | None = None) -> str:
@@ -152,9 +178,9 @@ def backbone_key(cfg: TrainConfig, data_fingerprint: str, start_key: str | None 
     return hashlib.sha256(blob.encode()).hexdigest()[:16]
 
 
-def reference_backbone_path(profile: str) -> Path:
+def reference_backbone_path(folders: RunFolders) -> Path:
     """Where a profile's committed backbone lives in the repository."""
-    return _REPO / "results" / profile_name(profile) / "pretrained_backbone.pt"
+    return folders.results / "pretrained_backbone.pt"
 
 
 @torch.no_grad()
@@ -253,8 +279,8 @@ def import_torchvision_backbone(weights: str | Path, backbone: str = "resnet50",
     return _write_backbone_file(net.state_dict(), path, meta)
 
 
-def _reference_if_valid(profile: str, key: str) -> Path | None:
-    ref = reference_backbone_path(profile)
+def _reference_if_valid(folders: RunFolders, key: str) -> Path | None:
+    ref = reference_backbone_path(folders)
     try:
         record = json.loads(ref.with_suffix(".json").read_text())
     except (OSError, ValueError):
@@ -264,12 +290,12 @@ def _reference_if_valid(profile: str, key: str) -> Path | None:
     return ref
 
 
-def _at_hand(profile: str, key: str) -> Path | None:
+def _at_hand(folders: RunFolders, key: str) -> Path | None:
     """The backbone ``key`` from the cache, or from the committed reference (copied into the cache)."""
     target = cache_dir() / "backbones" / f"{key}.pt"
     if target.is_file():
         return target
-    ref = _reference_if_valid(profile, key)
+    ref = _reference_if_valid(folders, key)
     if ref is None:
         return None
     target.parent.mkdir(parents=True, exist_ok=True)
@@ -311,12 +337,12 @@ def _with_data(stages: list[TrainConfig], data_root: str | Path, data_fingerprin
     return [cfg if "generation" in cfg.data else cfg.replace(data={**cfg.data, **given}) for cfg in stages]
 
 
-def ensure_backbone(profile: str, data_root: str | Path, data_fingerprint: str, out_root: str | Path | None = None,
+def ensure_backbone(setup: PretrainSetup, data_root: str | Path, data_fingerprint: str, out_root: str | Path | None = None,
                     progress: bool = False, device: str | None = None, **overrides) -> Path:
     """The profile's pretrained backbone file (see the module docstring for where it comes from).
 
     Args:
-        profile: reproduction profile (its ``pretrain:`` section).
+        setup: the profile's pretraining (:class:`PretrainSetup`).
         data_root: the still-frame dataset to pretrain on (train split; the validation split gates).
         data_fingerprint: that dataset's configuration fingerprint (part of the key).
         out_root: parent of the pretraining run folders (default ``<runs>/pretrain/<profile>``).
@@ -324,36 +350,36 @@ def ensure_backbone(profile: str, data_root: str | Path, data_fingerprint: str, 
             ``device``, ``auto``); not part of the key.
         overrides: TrainConfig fields over the ``pretrain:`` section (its last stage).
     """
-    stages = _with_data(pretrain_stages(profile, **overrides), data_root, data_fingerprint)
+    stages = _with_data(pretrain_stages(setup, **overrides), data_root, data_fingerprint)
     if device is not None:
         stages = [cfg.replace(device=device) for cfg in stages]
     options = stage_key_options(stages, data_fingerprint)
     for other in options[1:]:  # made in the other precision auto may pick: complete, or not at all
         with file_lock(cache_dir() / "backbones" / f"{other[-1]}.lock"):
-            found = _at_hand(profile, other[-1])
+            found = _at_hand(setup.folders, other[-1])
         if found is not None:
             return found
     keys = options[0]
     start, path = 0, None
     for i in reversed(range(len(stages))):  # the latest stage already made needs nothing before it
         with file_lock(cache_dir() / "backbones" / f"{keys[i]}.lock"):
-            found = _at_hand(profile, keys[i])
+            found = _at_hand(setup.folders, keys[i])
         if found is not None:
             start, path = i + 1, found
             break
     for i in range(start, len(stages)):
-        path = _train_stage(profile, stages[i], keys[i], path, out_root, progress)
+        path = _train_stage(setup, stages[i], keys[i], path, out_root, progress)
     return path
 
 
-def _train_stage(profile: str, cfg: TrainConfig, key: str, start: Path | None, out_root: str | Path | None,
+def _train_stage(setup: PretrainSetup, cfg: TrainConfig, key: str, start: Path | None, out_root: str | Path | None,
                  progress: bool) -> Path:
     """Train one stage (from ``start``'s backbone, or from scratch) on its dataset (``cfg.data``),
     gate it on that dataset's validation split, export it as ``key``."""
     target = cache_dir() / "backbones" / f"{key}.pt"
     target.parent.mkdir(parents=True, exist_ok=True)
     with file_lock(target.with_suffix(".lock")):
-        found = _at_hand(profile, key)
+        found = _at_hand(setup.folders, key)
         if found is not None:
             return found
         data_root, data_fingerprint = cfg.data["root"], cfg.data["fingerprint"]
@@ -362,7 +388,7 @@ def _train_stage(profile: str, cfg: TrainConfig, key: str, start: Path | None, o
                                  progress=progress)
         options = {k: cfg.data[k] for k in DATA_OPTIONS if k in cfg.data}
         cfg = cfg.replace(pretrained=None if start is None else str(start), data={"root": str(data_root), **options})
-        out = Path(out_root) if out_root is not None else run_path("pretrain", profile_name(profile))
+        out = Path(out_root) if out_root is not None else setup.folders.pretrain
         t0 = time.time()
         # One process trains a backbone (the others, torchrun's ranks included, wait on the lock
         # above): a pretraining nested in a distributed training must not join its process group.
@@ -374,10 +400,10 @@ def _train_stage(profile: str, cfg: TrainConfig, key: str, start: Path | None, o
         model = _load_pretrain_model(run.checkpoint, cfg)
         gate = gate_metrics(model, StillFrameDataset(data_root, "val", augment=False),  # the whole validation split
                             device=resolve_device(cfg.device))
-        meta = {"backbone": cfg.backbone, "key": key, "profile": profile, "kit_version": kit_version(),
+        meta = {"backbone": cfg.backbone, "key": key, "profile": setup.label, "kit_version": kit_version(),
                 "config": cfg.to_dict(), "data_fingerprint": data_fingerprint, "gate": gate, "gate_split": "val",
                 "train_wall_s": round(wall, 1), "steps": run.step, "git": git_commit(),  # the code that trained it
-                "command": f"airpose pretrain --profile {profile}"}
+                "command": f"airpose pretrain --profile {setup.label}"}
         if start is not None:
             earlier = json.loads(Path(start).with_suffix(".json").read_text())
             meta["continued_from"] = {k: earlier.get(k) for k in ("key", "steps", "train_wall_s", "gate", "sha256",
@@ -393,24 +419,31 @@ def _load_pretrain_model(checkpoint: str | Path, cfg: TrainConfig) -> torch.nn.M
     return model.eval()
 
 
-def profile_backbone_key(profile: str, data_root: str | Path) -> str:
+def profile_backbone_key(setup: PretrainSetup, data_root: str | Path) -> str:
     """The key of the backbone a profile asks for on the dataset in ``data_root`` (its last stage),
     as this machine would train it."""
-    return profile_backbone_keys(profile, data_root)[0]
+    return profile_backbone_keys(setup, data_root)[0]
 
 
-def profile_backbone_keys(profile: str, data_root: str | Path) -> list[str]:
+def profile_backbone_keys(setup: PretrainSetup, data_root: str | Path) -> list[str]:
     """Every key a backbone the profile asks for may have (:func:`stage_key_options`; this
     machine's first)."""
     fingerprint = load_manifest(Path(data_root))["fingerprint"]
-    return [k[-1] for k in stage_key_options(_with_data(pretrain_stages(profile), data_root, fingerprint), fingerprint)]
+    return [k[-1] for k in stage_key_options(_with_data(pretrain_stages(setup), data_root, fingerprint), fingerprint)]
 
 
-def profile_backbone(profile: str, progress: bool = False) -> Path:
+def profile_backbone(setup: PretrainSetup, progress: bool = False) -> Path:
     """The backbone of a profile for its own still-frame dataset (generated first if missing)."""
-    pretrain_stages(profile)  # a bad `pretrain:` setting fails before a dataset is made
-    root = ensure_still_dataset(profile, progress=progress)
-    return ensure_backbone(profile, root, load_manifest(Path(root))["fingerprint"], progress=progress)
+    pretrain_stages(setup)  # a bad `pretrain:` setting fails before a dataset is made
+    root = ensure_still_dataset(config=_own_still(setup), root=setup.folders.still, progress=progress)
+    return ensure_backbone(setup, root, load_manifest(Path(root))["fingerprint"], progress=progress)
+
+
+def _own_still(setup: PretrainSetup) -> GenerationConfig:
+    if setup.still is None:
+        raise ProfileError(f"profile {setup.label} has no `data: still:` section (the still-frame dataset sizes) "
+                           "to pretrain its backbone on; add one")
+    return setup.still
 
 
 #: ``pretrained: profile:<name>`` in a training config: the backbone of profile ``<name>`` for its
@@ -428,33 +461,33 @@ def other_profile(pretrained: str | None) -> str | None:
     return name
 
 
-def own_backbone_key(profile: str) -> str:
+def own_backbone_key(setup: PretrainSetup) -> str:
     """The key of :func:`profile_backbone` (from the profile's settings; no dataset is read), as
     this machine would train it."""
-    return own_backbone_keys(profile)[0]
+    return own_backbone_keys(setup)[0]
 
 
-def own_backbone_keys(profile: str) -> list[str]:
+def own_backbone_keys(setup: PretrainSetup) -> list[str]:
     """Every key :func:`profile_backbone` may have (:func:`stage_key_options`; this machine's first)."""
-    fingerprint = profile_config(profile).fingerprint()
-    stages = _with_data(pretrain_stages(profile), default_root(profile), fingerprint)
+    fingerprint = _own_still(setup).fingerprint()
+    stages = _with_data(pretrain_stages(setup), setup.folders.still, fingerprint)
     return [k[-1] for k in stage_key_options(stages, fingerprint)]
 
 
-def other_profile_backbone(profile: str, progress: bool = False) -> Path:
+def other_profile_backbone(setup: PretrainSetup, progress: bool = False) -> Path:
     """:func:`profile_backbone`, without making the profile's dataset when the backbone is at hand
     (in the cache, or the committed reference)."""
-    for key in own_backbone_keys(profile):
+    for key in own_backbone_keys(setup):
         with file_lock(cache_dir() / "backbones" / f"{key}.lock"):
-            found = _at_hand(profile, key)
+            found = _at_hand(setup.folders, key)
         if found is not None:
             return found
-    return profile_backbone(profile, progress)
+    return profile_backbone(setup, progress)
 
 
-def write_reference_backbone(profile: str, backbone_file: str | Path) -> Path:
+def write_reference_backbone(folders: RunFolders, backbone_file: str | Path) -> Path:
     """Copy a backbone file and its record into ``results/<profile>/`` (the committed reference)."""
-    ref = reference_backbone_path(profile)
+    ref = reference_backbone_path(folders)
     ref.parent.mkdir(parents=True, exist_ok=True)
     for src, dst in ((Path(backbone_file), ref), (Path(backbone_file).with_suffix(".json"), ref.with_suffix(".json"))):
         with atomic_path(dst) as tmp:

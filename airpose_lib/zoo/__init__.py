@@ -26,7 +26,7 @@ from airpose_lib.atomic import atomic_path, atomic_torch_save
 from airpose_lib.engine.checkpoint import load_checkpoint, write_checkpoint
 from airpose_lib.errors import DamagedFileError, reading
 from airpose_lib.hashing import sha256_file
-from airpose_lib.paths import cache_dir, profile_name, repo_root
+from airpose_lib.paths import RunFolders, cache_dir, repo_root
 
 __all__ = ["MANIFEST", "FORMAT", "zoo_dir", "sha256_file", "read_manifest", "write_manifest", "verified",
            "regressor_blob", "export_regressor", "kit_checkpoint", "half_state", "zoo_table"]
@@ -40,13 +40,14 @@ BACKBONE_PREFIX = "backbone."
 _KEPT = ("network", "config", "step", "input_size", "camera_K", "finetune", "kit_version")
 
 
-def zoo_dir(profile: str) -> Path:
-    """``<checkout>/results/<profile>/networks`` (the shipped networks of ``profile``)."""
+def zoo_dir(folders: RunFolders) -> Path:
+    """``<checkout>/results/<profile>/networks`` (the shipped networks of the profile ``folders``
+    name)."""
     root = repo_root()
     if root is None:
         raise DamagedFileError("results/", "the kit's checkout", "the shipped networks live in a checkout of the "
                                "kit; clone it instead of installing a copy")
-    return root / "results" / profile_name(profile) / "networks"
+    return folders.results / "networks"
 
 
 def read_manifest(folder: str | Path) -> dict[str, dict]:

@@ -65,13 +65,13 @@ from airpose_lib._lazy import lazy_namespace
 
 # name -> module, each name written once (a module's other names: import them from the module)
 _EXPORTS = {
-    **dict.fromkeys(("default_sequence_root", "ensure_sequences"), "cache"),
+    "ensure_sequences": "cache",
     **dict.fromkeys(("PAPER_CAMERAS", "PERSONS", "SEQUENCE_GENERATOR_VERSION", "CameraSpec", "FlightConfig",
-                     "PersonSpec", "SequenceConfig", "profile_sequences", "scale_intrinsics",
+                     "PersonSpec", "SequenceConfig", "scale_intrinsics",
                      "sequence_configs_from_profile"), "config"),
     "FieldConfig": "field",
     "HeldOutConfig": "held_out",
-    **dict.fromkeys(("FIELD_PRESETS", "field_variant", "profile_field_sequences"), "presets"),
+    **dict.fromkeys(("FIELD_PRESETS", "field_variant", "field_sequence_configs_from_profile"), "presets"),
     "look_at_rotation": "flight",
     **dict.fromkeys(("generate_sequence", "recording_detections", "refresh_detections"), "recording"),
     **dict.fromkeys(("SequenceRenderer", "render_sequence"), "renderer"),

@@ -9,23 +9,12 @@ from pathlib import Path
 
 from airpose_lib.errors import ConfigError
 from airpose_lib.folder_lock import MAKER_WAIT_S, folder_lock
-from airpose_lib.paths import cache_dir, profile_name
-from airpose_lib.profiles import section_where
 
-from .config import SEQUENCE_GENERATOR_VERSION, SequenceConfig, profile_sequences
+from .config import SEQUENCE_GENERATOR_VERSION, SequenceConfig
 from .detections import DETECTOR_VERSION
-from .presets import FIELD_PRESETS, profile_field_sequences
 from .recording import generate_sequence, refresh_detections
 
-__all__ = ["default_sequence_root", "ensure_sequences"]
-
-
-def default_sequence_root(profile: str, field: bool = False) -> Path:
-    """Where a profile's recordings live by default: ``<kit cache>/data/sequences_<name>``,
-    its field recordings (``sequences: field_recordings:``) in ``sequences_<name>_field``
-    (``<name>``: :func:`~airpose_lib.paths.profile_name`)."""
-    name = profile_name(profile)
-    return cache_dir() / "data" / (f"sequences_{name}_field" if field else f"sequences_{name}")
+__all__ = ["ensure_sequences"]
 
 
 def _detections_current(root: Path) -> bool:
@@ -52,37 +41,22 @@ def _is_complete(root: Path, config: SequenceConfig) -> bool:
                for v in range(config.num_views))
 
 
-def ensure_sequences(profile: str | None = None, root: str | Path | None = None, *,
-                     configs: Mapping[str, SequenceConfig] | None = None, only=None,
-                     force: bool = False, progress: bool = False, field: bool = False) -> dict[str, Path]:
-    """Generate a profile's recordings unless an identical complete copy exists.
+def ensure_sequences(configs: Mapping[str, SequenceConfig], root: str | Path, *, only=None,
+                     force: bool = False, progress: bool = False) -> dict[str, Path]:
+    """Generate recordings unless an identical complete copy exists.
 
     Args:
-        profile: reproduction profile whose ``sequences:`` section lists the recordings.
-        root: parent folder (default :func:`default_sequence_root`); recording ``name`` goes to
-            ``root/name``.
-        configs: recordings to make instead of a profile's.
+        configs: name -> the recording's settings (a profile's: ``configs.sequences``, or its
+            field recordings ``configs.field_sequences``,
+            :class:`~airpose_lib.experiments.configs.KitConfigs`).
+        root: parent folder (a profile's: ``configs.folders.sequences(field)``); recording
+            ``name`` goes to ``root/name``.
         only: names to make (default: all).
         force: regenerate even if complete.
-        field: the profile's field recordings instead (``sequences: field_recordings:``,
-            :func:`~.presets.profile_field_sequences`), by default in their own folder.
     Returns:
         name -> sequence folder (read it with
         :func:`airpose_lib.data.sequences.reader.load_sequence`).
     """
-    # A profile gives both the settings and the default folder, as for the still frames
-    # (data.still.generate.ensure_still_dataset); explicit settings need an explicit folder.
-    if configs is None:
-        if profile is None:
-            raise ValueError("give a profile or configs")
-        configs = profile_field_sequences(profile) if field else profile_sequences(profile)
-        if field and not configs:
-            raise ConfigError(f"{section_where(profile, 'sequences')} has no field recordings; add "
-                              f"`field_recordings: <preset>` (presets: {', '.join(FIELD_PRESETS)})")
-    if root is None:
-        if profile is None:
-            raise ValueError("give root when no profile is given")
-        root = default_sequence_root(profile, field)
     root = Path(root)
     names = list(configs) if only is None else list(only)
     unknown = [n for n in names if n not in configs]

@@ -12,7 +12,6 @@ import numpy as np
 from airpose_lib.body.genders import GENDER_CODES
 from airpose_lib.config_fields import check_fields, config_from, ranged
 from airpose_lib.errors import ConfigError, ProfileError, ProfileSettingError
-from airpose_lib.profiles import profile_section, section_where
 
 from .field import FieldConfig
 from .held_out import HeldOutConfig
@@ -28,8 +27,7 @@ __all__ = [
     "SequenceConfig",
     "SEQUENCE_GENERATOR_VERSION",
     "sequence_configs_from_profile",
-    "profile_sequences",
-]
+    ]
 
 #: Bumped whenever the same settings would produce a different recording.
 SEQUENCE_GENERATOR_VERSION = 1
@@ -302,9 +300,3 @@ def sequence_configs_from_profile(profile_section: Mapping,
         out[name] = config_from(SequenceConfig, d, f"{where} `recordings: {name}:`", build=SequenceConfig.from_dict,
                                 error=ProfileSettingError)
     return out
-
-
-def profile_sequences(profile: str) -> dict[str, SequenceConfig]:
-    """The recordings of a reproduction profile (its ``sequences:`` section, :mod:`airpose_lib.profiles`)."""
-    return sequence_configs_from_profile(profile_section(profile, "sequences", required="the recordings' sizes"),
-                                         section_where(profile, "sequences"))

@@ -8,14 +8,13 @@ from __future__ import annotations
 import dataclasses
 
 from airpose_lib.errors import ConfigError, ProfileSettingError
-from airpose_lib.profiles import profile_section, section_where
 
 from .config import SequenceConfig, sequence_configs_from_profile
 from .field import RENDER_GAMMA, FieldConfig
 from .held_out import HeldOutConfig
 from .markers import marker_layout
 
-__all__ = ["FIELD_PRESETS", "field_variant", "field_sequence_configs_from_profile", "profile_field_sequences"]
+__all__ = ["FIELD_PRESETS", "field_variant", "field_sequence_configs_from_profile"]
 
 FIELD_PRESETS: dict[str, tuple[FieldConfig, HeldOutConfig]] = {
     # The paper's DJI drones filming a person in daylight (the values and their sources are in
@@ -69,10 +68,3 @@ def field_sequence_configs_from_profile(section, where: str = "a `sequences:` pr
     layout = marker_layout(markers, f"{where}: field_markers:", ProfileSettingError)
     twins = {name: field_variant(c, preset) for name, c in sequence_configs_from_profile(section, where).items()}
     return twins if layout is None else {name: dataclasses.replace(c, markers=layout) for name, c in twins.items()}
-
-
-def profile_field_sequences(profile: str) -> dict[str, SequenceConfig]:
-    """The field recordings of a reproduction profile (``sequences: field_recordings:``); ``{}``
-    when it has none."""
-    return field_sequence_configs_from_profile(profile_section(profile, "sequences", required="the recordings' sizes"),
-                                               section_where(profile, "sequences"))

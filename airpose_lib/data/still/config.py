@@ -1,5 +1,6 @@
 """Settings of the synthetic still-frame dataset: :class:`GenerationConfig` (everything a dataset
-depends on, with its fingerprint), the profile's ``data: still:`` section, the default folder."""
+depends on, with its fingerprint), made from a profile's ``data: still:`` section by the entry
+(:meth:`GenerationConfig.from_dict`); the default folder is ``RunFolders.still``."""
 from __future__ import annotations
 
 import dataclasses
@@ -7,18 +8,14 @@ import hashlib
 import json
 import math
 from dataclasses import dataclass, field
-from pathlib import Path
 
 from airpose_lib.config_fields import check_fields, check_keys, ranged
 from airpose_lib.errors import ConfigError
-from airpose_lib.paths import cache_dir, profile_name
-from airpose_lib.profiles import ProfileError, profile_path, section_config
 
 from .appearance import AppearanceConfig
-from .manifest import DatasetError
 from .scene import SceneConfig
 
-__all__ = ["GENERATOR_VERSION", "SPLITS", "GenerationConfig", "profile_config", "default_root"]
+__all__ = ["GENERATOR_VERSION", "SPLITS", "GenerationConfig"]
 
 #: Bumped whenever the same configuration would produce different shards.
 #: 2: test crops are jittered like training crops; test shards also hold the tight-box crops.
@@ -160,25 +157,3 @@ def _build(cls, d: dict, where: str, **extra):
 def _tuplify(x):
     """YAML lists -> tuples (every sequence setting is a tuple), recursively."""
     return tuple(_tuplify(v) for v in x) if isinstance(x, list) else x
-
-
-def profile_config(profile: str) -> GenerationConfig:
-    """The still-frame dataset settings of a reproduction profile.
-
-    Reads the ``data: still:`` section of the profile (:mod:`airpose_lib.profiles`; keys are
-    :class:`GenerationConfig` fields, ``scene:`` / ``appearance:`` sub-dicts allowed).
-    """
-    try:  # the data commands report every unusable input as a DatasetError
-        path = profile_path(profile)
-        return section_config(profile, "data.still", GenerationConfig, required="the still-frame dataset sizes",
-                              build=GenerationConfig.from_dict)
-    except ProfileError as e:  # before ValueError: it is one
-        raise DatasetError(str(e)) from None
-    except (TypeError, ValueError) as e:
-        raise DatasetError(f"{path}, `data: still:` section: {e}") from None
-
-
-def default_root(profile: str) -> Path:
-    """Where a profile's dataset lives by default: ``<kit cache>/data/still_<profile>`` (a profile
-    file of one's own: its stem)."""
-    return cache_dir() / "data" / f"still_{profile_name(profile)}"

@@ -33,7 +33,7 @@ from airpose_lib.folder_lock import MAKER_WAIT_S, folder_lock, locks_folder
 from airpose_lib.process_guard import die_with_parent
 from airpose_lib.progress import progress_bar
 
-from .config import GENERATOR_VERSION, SPLITS, GenerationConfig, default_root, profile_config
+from .config import GENERATOR_VERSION, SPLITS, GenerationConfig
 from .manifest import (
     DATASET_KIND,
     DatasetError,
@@ -52,8 +52,6 @@ __all__ = [
     "GenerationConfig",
     "generate_still_dataset",
     "ensure_still_dataset",
-    "profile_config",
-    "default_root",
 ]
 
 
@@ -86,12 +84,12 @@ def _body_model_hashes(config: GenerationConfig) -> dict[str, str]:
             for g in config.scene.genders}                                            # is named as such
 
 
-def _new_manifest(config: GenerationConfig, profile: str | None, body_models: dict) -> dict:
+def _new_manifest(config: GenerationConfig, label: str | None, body_models: dict) -> dict:
     return {
         "kind": DATASET_KIND,
         "generator_version": GENERATOR_VERSION,
         "kit_version": __version__,
-        "profile": profile,
+        "profile": label,
         "seed": config.seed,
         "fingerprint": config.fingerprint(),
         "status": "incomplete",
@@ -130,7 +128,7 @@ def generate_still_dataset(
     root: Path | str,
     *,
     workers: int = 1,
-    profile: str | None = None,
+    label: str | None = None,
     progress: bool = True,
     record: bool | Path = False,
     stop_after_shards: int | None = None,
@@ -145,7 +143,7 @@ def generate_still_dataset(
         root: dataset folder (created if needed).
         workers: processes rendering shards in parallel, each with its own renderer (1 = in
             this process). The result does not depend on it.
-        profile: profile name recorded in the manifest (and used for the repair hint).
+        label: the profile's name recorded in the manifest (and used for the repair hint).
         progress: show a tqdm bar over samples.
         record: when the dataset is complete, copy the manifest to the checkout's
             ``data_manifests/generated_<profile>.yaml`` (True) or into the given folder.
@@ -172,9 +170,9 @@ def generate_still_dataset(
             f"(see body_models in {root / 'manifest.yaml'}); delete the folder or choose another "
             f"--out to generate the dataset again with the current model")
     if manifest is None:
-        manifest = _new_manifest(config, profile, body_models)
-    if profile is not None:
-        manifest["profile"] = profile
+        manifest = _new_manifest(config, label, body_models)
+    if label is not None:
+        manifest["profile"] = label
 
     kept, todo = [], []
     records = {r["index"]: r for r in manifest.get("shards") or []}
@@ -223,7 +221,7 @@ def generate_still_dataset(
 
 def _run_inprocess(config, root, todo, bar, finished) -> None:
     # .frames pulls in torch and smplx: imported here, not at the top, because a drone's
-    # start-up imports this module (default_root) and must stay light
+    # start-up imports this module and must stay light
     import torch
 
     from .frames import StillFrameGenerator, _limit_threads
@@ -312,29 +310,21 @@ def _pool_once(config, root, todo, workers, bar, finished) -> None:
     ex.shutdown(wait=True)
 
 
-def ensure_still_dataset(profile: str | None = None, *, config: GenerationConfig | None = None,
-                         root: Path | str | None = None, workers: int | None = None,
-                         progress: bool = True, record: bool | Path = False,
+def ensure_still_dataset(config: GenerationConfig, root: Path | str, *, label: str | None = None,
+                         workers: int | None = None, progress: bool = True, record: bool | Path = False,
                          wait_s: float = MAKER_WAIT_S) -> Path:
-    """Make sure a complete, verified dataset exists and return its folder.
+    """Make sure a complete, verified dataset of ``config`` exists in ``root`` and return the folder.
 
-    Either ``profile`` (settings from the profile file, default folder
-    :func:`default_root`) or an explicit ``config`` and ``root``. Every shard is verified once
-    per process; damaged or missing ones are rebuilt (the kit owns this folder), so on a finished
-    dataset this only checks checksums. While another process generates the same folder, this
-    waits for it (a line on stderr says so) for at most ``wait_s`` seconds.
+    A profile's dataset is ``ensure_still_dataset(configs.still, configs.folders.still)``
+    (:class:`~airpose_lib.experiments.configs.KitConfigs`); ``label`` names the profile in the
+    manifest of a new dataset. Every shard is verified once per process; damaged or missing ones
+    are rebuilt (the kit owns this folder), so on a finished dataset this only checks checksums.
+    While another process generates the same folder, this waits for it (a line on stderr says so)
+    for at most ``wait_s`` seconds.
 
     Raises:
         FolderBusyError: the other process still holds the folder after ``wait_s``.
     """
-    if config is None:
-        if profile is None:
-            raise ValueError("give a profile or a config")
-        config = profile_config(profile)
-    if root is None:
-        if profile is None:
-            raise ValueError("give a root folder for an explicit config")
-        root = default_root(profile)
     root = Path(root)
     if not record and _finished_and_intact(root, config):
         # Readers take no writer's lock (parallel trainings open the dataset at once).
@@ -345,7 +335,7 @@ def ensure_still_dataset(profile: str | None = None, *, config: GenerationConfig
         if not record and _finished_and_intact(root, config):
             return root
         workers = workers if workers is not None else max(1, min(os.cpu_count() or 1, 4))
-        manifest = generate_still_dataset(config, root, workers=workers, profile=profile,
+        manifest = generate_still_dataset(config, root, workers=workers, label=label,
                                           progress=progress, record=record)
     if manifest["status"] != "complete":
         raise DatasetError(f"dataset in {root} is incomplete; resume with "

@@ -4,10 +4,12 @@ and ``cpu_paper_layout`` (cpu on still frames with the paper's camera layout).
 A profile is the one place where sizes live: every section configures one part of the kit
 (``data: still:`` the still-frame data, ``sequences:`` the recordings, ``train:``, ``pretrain:``,
 ``prior:``, ``finetune:``, ``fitting:``, ``notebooks:`` the notebooks' parameters). This module is
-the only code that knows where the files are and how they are read; each package turns its own
-section into its config through :func:`section_config` (unknown keys with the closest known one,
-bad values, both named with the file and the section), behind its own public name
-(``train.load_train_config``, ``data.still.config.profile_config`` ...).
+the only code that knows where the files are and how they are read. The entry turns every section
+into its package's config once, through :func:`section_config` (unknown keys with the closest known
+one, bad values, both named with the file and the section):
+:func:`airpose_lib.reproduce.configs.kit_configs`, called by the ``airpose`` commands,
+``airpose reproduce`` and a notebook's set-up; the packages below take those configs and read no
+profile.
 
 A profile may start from another: ``inherits: cpu`` (a profile name: ``cpu.yaml`` beside the file,
 else the kit's; or a YAML path relative to the file) takes that profile's sections and lays its
@@ -22,8 +24,8 @@ raise :class:`~airpose_lib.errors.ProfileError` (one line naming the file and th
 A run reads its profile once: :func:`loaded` reads the file (and those it inherits from) and gives
 a :class:`Profile`, which *is* the name or path it was given as (a ``str``: run folders, records
 and messages stay as they were) and carries the sections read. Every reader here takes it in place
-of a name and uses those sections, so that a command, a notebook or a reproduction passes one
-reading down and a file edited while it runs cannot change its later steps (``airpose`` loads
+of a name and uses those sections, so that a command, a notebook or a reproduction types one
+reading and a file edited while it runs cannot change its later steps (``airpose`` loads
 ``--profile`` once; ``reproduce`` also refuses to go on when the file changed under a run). A
 plain name or path is read afresh on every call. Imports nothing of the kit but the helpers
 ``errors`` and ``config_fields``, so that every layer may use it.

@@ -289,7 +289,7 @@ def sequence_configs_from_profile(profile_section: Mapping,
     """
     section = dict(profile_section)
     recordings = section.pop("recordings", None)
-    section.pop("field_recordings", None)  # the field twins' preset (.presets.profile_field_sequences)
+    section.pop("field_recordings", None)  # the field twins' preset (.presets.field_sequence_configs_from_profile)
     section.pop("field_markers", None)  # the field twins' markers (the same)
     if not recordings:
         raise ProfileError(f"{where} needs a `recordings:` mapping")

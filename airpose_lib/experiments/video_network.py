@@ -34,4 +34,4 @@ def refine(sequence: Path, init: dict, prior_path: Path | None, config: AirPoseP
     seq = load_sequence(sequence, detectors=("openpose",), ground_truth=False)
     prior, prior_prov = load_prior("kit", prior_path, return_provenance=True)
     res = fit_sequence(seq, init, prior=prior, config=config, progress=progress)
-    return save_refinement(out, seq.frames, res, sequence=sequence, init=init_file, profile="", prior=prior_prov)
+    return save_refinement(out, seq.frames, res, sequence=sequence, init=init_file, label="airpose video", prior=prior_prov)

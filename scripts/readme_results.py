@@ -22,6 +22,7 @@ from airpose_lib.eval.readme_block import (
     results_block,
     video_block,
 )
+from airpose_lib.paths import RunFolders
 from airpose_lib.zoo import zoo_dir, zoo_table
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -37,7 +38,7 @@ def block(profile: str, kind: str) -> str:
     """The block of ``kind`` made from ``results/<profile>/``."""
     if kind == "zoo":
         opening, closing = block_markers(profile, kind)
-        folder = zoo_dir(profile)
+        folder = zoo_dir(RunFolders(profile))
         return (f"{opening}\nThe `{profile}` profile's shipped networks (`{folder.relative_to(ROOT)}/manifest.yaml`; "
                 f"`airpose zoo verify --profile {profile}` checks them):\n\n{zoo_table(folder)}\n{closing}")
     if kind == "video":

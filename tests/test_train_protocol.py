@@ -459,3 +459,49 @@ def test_gate_reports_the_root_error_as_yaw_tilt_and_flips():
     assert gate["root_yaw_median_deg"] == pytest.approx(30.0, abs=1e-3)
     assert gate["root_tilt_median_deg"] == pytest.approx(0.0, abs=1e-3)
     assert gate["root_rot_median_deg"] == pytest.approx(30.0, abs=1e-3)
+
+
+def test_pretrain_stature_and_gender_terms(bodies):
+    """w_stature reads the T-posed gendered stature, standardised; w_gender is the female logit's
+    cross-entropy; both off by default (no heads needed), and body_scalars adds the heads last."""
+    from airpose_lib.body.genders import GENDER_CODES
+    from airpose_lib.eval.mean_body import rest_statures
+    from airpose_lib.losses.pretrain import PretrainLossConfig
+
+    batch = _batch(bodies, B=2)
+    batch["gender"] = torch.tensor([GENDER_CODES["male"], GENDER_CODES["female"]])
+    B, V = batch["phi"].shape[:2]
+    S = 64
+    batch["images"] = torch.zeros(B, V, 3, S, S)
+    theta = axis_angle_to_matrix(batch["theta"])
+    rep = lambda x: x.unsqueeze(1).expand(B, V, *x.shape[1:]).flatten(0, 1)  # noqa: E731
+    out = {"heading": torch.zeros(B * V, 12), "phi6d": matrix_to_rot6d(batch["phi"]).flatten(0, 1),
+           "theta6d": rep(matrix_to_rot6d(theta)), "beta": rep(batch["beta"]),
+           "j3d": torch.zeros(B * V, 22, 3), "j2d": torch.zeros(B * V, 22, 2),
+           "stature": torch.zeros(B * V, 1), "female": torch.zeros(B * V, 1)}
+    assert set(PretrainLoss(body_models=bodies)(out, batch, 12)) == {"total", "heading", "phi", "theta", "beta",
+                                                                     "j3d", "j2d"}
+    loss = PretrainLoss(PretrainLossConfig(w_stature=2.0, w_gender=3.0, stature_mean=1.7, stature_scale=0.1),
+                        body_models=bodies)
+    h = loss.rest_stature(batch["beta"], batch["gender"])
+    expected, _ = rest_statures(batch["beta"].numpy(), batch["gender"].numpy(), body_models=bodies)
+    assert np.allclose(h.numpy(), expected, atol=1e-4)
+    terms = loss(out, batch, 12)
+    # a head that reads 0 misses by (h - 1.7) / 0.1 in each view; logit 0 costs ln 2
+    assert terms["stature"].item() == pytest.approx(float(np.mean(((expected - 1.7) / 0.1) ** 2)), rel=1e-4)
+    assert terms["gender"].item() == pytest.approx(math.log(2.0), rel=1e-5)
+    base = PretrainLoss(body_models=bodies)(out, batch, 12)["total"]
+    assert (terms["total"] - base).item() == pytest.approx(2.0 * terms["stature"].item() + 3.0 * math.log(2.0),
+                                                           rel=1e-4)
+    out["stature"] = rep(((torch.as_tensor(expected) - 1.7) / 0.1).float()).unsqueeze(-1)
+    out["female"] = rep(torch.tensor([-50.0, 50.0])).unsqueeze(-1)
+    terms = loss(out, batch, 12)
+    assert terms["stature"].item() == pytest.approx(0.0, abs=1e-6) and terms["gender"].item() < 1e-6
+    torch.manual_seed(0)
+    plain = PretrainNet("resnet18")
+    torch.manual_seed(0)
+    scalars = PretrainNet("resnet18", body_scalars=True)
+    heads = scalars(torch.zeros(2, 3, 64, 64))
+    assert heads["stature"].shape == (2, 1) and heads["female"].shape == (2, 1) and "stature" not in plain(
+        torch.zeros(1, 3, 64, 64))
+    assert all(torch.equal(a, b) for a, b in zip(plain.state_dict().values(), scalars.state_dict().values()))

@@ -12,6 +12,10 @@ independent crops here; nothing couples them):
              (identity root), or with ``j3d_frame="camera"`` turned by the view's root rotation
              ``phi`` and centred on the pelvis (what the crop shows)
 ``j2d``      ``||u - u_gt||^2`` joints in the crop normalised to [-1, 1]
+``stature``  (only with ``w_stature > 0``; the network's ``body_scalars`` heads) ``(s - (h -
+             stature_mean) / stature_scale)^2``, ``h`` the height of the subject's T-posed
+             gendered body (its beta), metres
+``gender``   (only with ``w_gender > 0``) binary cross-entropy of the ``female`` logit
 
 Why the two options: with the defaults the root orientation is learnt from a weak signal. At a
 14 deg root error the matrix MSE is about 0.013 (against about 0.8 nats of the heading classes),
@@ -32,6 +36,8 @@ import torch
 from torch import Tensor, nn
 from torch.nn import functional as F
 
+from airpose_lib.body.genders import GENDER_CODES
+from airpose_lib.body.loader import stature
 from airpose_lib.errors import ConfigError
 from airpose_lib.geometry import (
     axis_angle_to_matrix,
@@ -77,6 +83,10 @@ class PretrainLossConfig:
         phi_loss: ``"mse"`` (matrix entries) or ``"geodesic"`` (angle, radians).
         j3d_frame: ``"model"`` (identity root) or ``"camera"`` (turned by the view's ``phi``,
             pelvis-centred).
+        w_stature, w_gender: weights of the stature and gender terms (0: not computed; the
+            network then needs no ``stature``/``female`` heads).
+        stature_mean, stature_scale: the stature head reads ``(h - mean) / scale`` (metres), so
+            that an untrained head starts at a term of about 1.
     """
 
     w_heading: float = 1.0
@@ -87,8 +97,14 @@ class PretrainLossConfig:
     w_j2d: float = 10.0
     phi_loss: str = "mse"
     j3d_frame: str = "model"
+    w_stature: float = 0.0
+    w_gender: float = 0.0
+    stature_mean: float = 1.72
+    stature_scale: float = 0.1
 
     def __post_init__(self) -> None:
+        if self.stature_scale <= 0:
+            raise ConfigError(f"loss.stature_scale must be positive, got {self.stature_scale}")
         if self.phi_loss not in ("mse", "geodesic"):
             raise ConfigError(f"loss.phi_loss must be 'mse' or 'geodesic', got {self.phi_loss!r}")
         if self.j3d_frame not in ("model", "camera"):
@@ -114,6 +130,15 @@ class PretrainLoss(nn.Module):
         self.config = config or PretrainLossConfig()
         # The supervised loss's gendered ground-truth body, without its vertices.
         self.gt = SupervisedLoss(body_models=body_models, source=source)
+
+    @torch.no_grad()
+    def rest_stature(self, beta: Tensor, gender: Tensor | None) -> Tensor:
+        """Height ``(B,)`` in metres of each subject's T-posed gendered body (float32, autocast off)."""
+        with torch.autocast(beta.device.type, enabled=False):
+            beta = beta.float()
+            identity = torch.eye(3, dtype=beta.dtype, device=beta.device).expand(len(beta), 21, 3, 3)
+            _, vertices = self.gt.ground_truth_body(identity, beta, gender, vertices=True)
+        return stature(vertices)
 
     def forward(self, out: Mapping[str, Tensor], batch: Mapping[str, Tensor], n_bins: int) -> dict[str, Tensor]:
         """Terms and their weighted ``total``.
@@ -149,5 +174,14 @@ class PretrainLoss(nn.Module):
         }
         w = {"heading": c.w_heading, "phi": c.w_phi, "theta": c.w_theta, "beta": c.w_beta, "j3d": c.w_j3d,
              "j2d": c.w_j2d}
+        if c.w_stature > 0:
+            h = rep(self.rest_stature(batch["beta"], batch.get("gender")))
+            target = ((h - c.stature_mean) / c.stature_scale).to(dtype)
+            terms["stature"] = (out["stature"].reshape(B * V) - target).square().mean()
+            w["stature"] = c.w_stature
+        if c.w_gender > 0:
+            female = rep((batch["gender"] == GENDER_CODES["female"]).to(dtype))
+            terms["gender"] = F.binary_cross_entropy_with_logits(out["female"].reshape(B * V), female)
+            w["gender"] = c.w_gender
         return {"total": sum(w[k] * terms[k] for k in terms), **terms}
 

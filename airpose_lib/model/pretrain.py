@@ -20,6 +20,9 @@ Heads on the feature ``f (N, C)``:
 ``beta``        (N, 10)         shape
 ``j3d``         (N, 22, 3)      model-frame body joints (identity root, zero translation), metres
 ``j2d``         (N, 22, 2)      body joints in the crop, normalised to [-1, 1]
+``stature``     (N, 1)          with ``body_scalars``: the T-posed stature, standardised
+                                (:class:`~airpose_lib.losses.pretrain.PretrainLossConfig`)
+``female``      (N, 1)          with ``body_scalars``: logit of the subject being female
 ==============  ==============  =================================================================
 """
 from __future__ import annotations
@@ -32,12 +35,15 @@ from airpose_lib.config_fields import Range
 
 from .backbone import ResNet, build_backbone
 
-__all__ = ["PretrainNet", "PRETRAIN_HEADS"]
+__all__ = ["PretrainNet", "PRETRAIN_HEADS", "BODY_SCALAR_HEADS"]
 
 #: Output widths of the linear heads (besides ``heading``, whose width is the number of bins).
 PRETRAIN_HEADS: dict[str, tuple[int, ...]] = {
     "phi6d": (6,), "theta6d": (21, 6), "beta": (10,), "j3d": (22, 3), "j2d": (22, 2),
 }
+#: The heads that ``body_scalars=True`` adds (after the others, so that without them the network,
+#: its random initialisation included, is the one of the earlier backbones).
+BODY_SCALAR_HEADS: dict[str, tuple[int, ...]] = {"stature": (1,), "female": (1,)}
 
 
 class PretrainNet(nn.Module):
@@ -47,19 +53,21 @@ class PretrainNet(nn.Module):
         backbone: ``"resnet18"`` / ``"resnet34"`` / ``"resnet50"`` or a :class:`ResNet`.
         n_heading_bins: classes of the heading head.
         channels_last: NHWC backbone (faster on CPU).
+        body_scalars: add the ``stature`` and ``female`` heads (:data:`BODY_SCALAR_HEADS`).
     """
 
     #: The numbers the keyword arguments accept (a training config checks them before it runs).
     OPTION_RANGES = {"n_heading_bins": Range(ge=1)}
 
     def __init__(self, backbone: str | ResNet = "resnet18", n_heading_bins: int = 12,
-                 channels_last: bool = False) -> None:
+                 channels_last: bool = False, body_scalars: bool = False) -> None:
         super().__init__()
         self.backbone = backbone if isinstance(backbone, ResNet) else build_backbone(backbone, channels_last)
         C = self.backbone.feature_dim
         self.n_heading_bins = int(n_heading_bins)
         self.heads = nn.ModuleDict({"heading": nn.Linear(C, self.n_heading_bins)})
-        for name, shape in PRETRAIN_HEADS.items():
+        self.head_shapes = {**PRETRAIN_HEADS, **(BODY_SCALAR_HEADS if body_scalars else {})}
+        for name, shape in self.head_shapes.items():
             self.heads[name] = nn.Linear(C, math.prod(shape))
 
     def forward(self, images: Tensor) -> dict[str, Tensor]:
@@ -67,6 +75,6 @@ class PretrainNet(nn.Module):
         and ``feature (N, C)``."""
         f = self.backbone(images)
         out = {"feature": f, "heading": self.heads["heading"](f)}
-        for name, shape in PRETRAIN_HEADS.items():
+        for name, shape in self.head_shapes.items():
             out[name] = self.heads[name](f).unflatten(-1, shape)
         return out

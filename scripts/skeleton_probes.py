@@ -20,10 +20,10 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from airpose_lib.data.still.config import default_root  # noqa: E402
 from airpose_lib.data.still.dataset import split_arrays  # noqa: E402
 from airpose_lib.eval.mean_body import rest_statures  # noqa: E402
 from airpose_lib.eval.mechanism import fit_mlp, fit_ridge, r2_score, view_error_correlation  # noqa: E402
+from airpose_lib.paths import RunFolders  # noqa: E402
 
 NAMES = ("j2d", "bbox", "P", "j3d_cam", "beta", "gender")
 
@@ -47,8 +47,8 @@ def targets(a: dict) -> dict[str, np.ndarray]:
             "gender (female = 1)": np.repeat((a["gender"] == 2)[:, None].astype(float), V, 1)}
 
 
-def main(profile: str = "cpu") -> None:
-    root = default_root(profile)
+def main(name: str = "cpu") -> None:
+    root = RunFolders(name).still
     tr, va = split_arrays(root, "train", NAMES), split_arrays(root, "val", NAMES)
     xt, xv, yt, yv = inputs(tr), inputs(va), targets(tr), targets(va)
     print("| quantity | input | readout | R2 | view error correlation / accuracy |\n|---|---|---|---|---|")

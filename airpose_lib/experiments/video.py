@@ -238,7 +238,8 @@ def _mediapipe(out: Path, infos, cams, numbers, log) -> list[Path]:
         rec = out / "detect" / f"uav{v + 1}"
         result = rec / "machine_1" / "mediapipe_res.pkl"
         record = rec / "mediapipe_detect.json"
-        stamp = _digest([n.tolist() for n in numbers[v:v + 1]])
+        # the decoded frames' record names the video file, its stamp and the frames: rerun when it changes
+        stamp = _digest((out / "frames" / f"uav{v + 1}" / "frames.json").read_text())
         if not (result.is_file() and record.is_file() and json.loads(record.read_text()).get("stamp") == stamp):
             assemble.single_view(rec, out / "frames" / f"uav{v + 1}", numbers[v], cams[v].K,
                                  (infos[v].width, infos[v].height), None, "mediapipe", infos[v].fps)
@@ -321,7 +322,8 @@ def run_video(cfg: VideoConfig, nets: VideoNetworks, *, fit_config: AirPosePlusC
         seconds["keypoints"] = time.perf_counter() - t
 
         t = time.perf_counter()
-        key = _digest({"videos": [asdict(i) for i in infos], "stamps": [frames.file_stamp(v) for v in cfg.videos], "numbers": [n.tolist() for n in numbers],
+        key = _digest({"videos": [asdict(i) for i in infos], "stamps": [frames.file_stamp(v) for v in cfg.videos],
+                       "numbers": [n.tolist() for n in numbers],
                        "keypoints": [hashlib.sha256(k.tobytes()).hexdigest() for k in kps],
                        "K": [c.K.tolist() for c in cams], "offset": cfg.offset, "baseline": str(nets.baseline),
                        "max_offset_s": cfg.max_offset_s})

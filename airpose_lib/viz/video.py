@@ -10,9 +10,32 @@ from airpose_lib.atomic import atomic_path
 
 from .trajectories import overlay_mesh
 
-__all__ = ["write_overlay_video", "plot_overlay_stills", "MESH_RGB"]
+__all__ = ["write_mp4", "write_overlay_video", "plot_overlay_stills", "MESH_RGB"]
 
 MESH_RGB = (0.55, 0.75, 0.95)
+
+
+def write_mp4(images: Iterable[np.ndarray], image_size: tuple[int, int], fps: float, out: str | Path) -> Path:
+    """Write ``(H, W, 3)`` uint8 RGB images as an mp4 (OpenCV's ``mp4v``), atomically.
+
+    Args:
+        image_size: ``(W, H)`` of every image.
+    """
+    import cv2
+
+    out = Path(out)
+    with atomic_path(out) as tmp:
+        tmp_mp4 = tmp.with_suffix(".mp4")  # OpenCV picks the container by the file's ending
+        writer = cv2.VideoWriter(str(tmp_mp4), cv2.VideoWriter_fourcc(*"mp4v"), float(fps), tuple(image_size))
+        if not writer.isOpened():
+            raise RuntimeError(f"OpenCV cannot write mp4 here ({tmp_mp4})")
+        try:
+            for image in images:
+                writer.write(np.ascontiguousarray(image[..., ::-1]))
+        finally:
+            writer.release()
+        tmp_mp4.replace(tmp)
+    return out
 
 
 def write_overlay_video(frames: Iterable[tuple[np.ndarray, np.ndarray | None]], faces: np.ndarray, K: np.ndarray,
@@ -23,27 +46,17 @@ def write_overlay_video(frames: Iterable[tuple[np.ndarray, np.ndarray | None]], 
     Args:
         faces: ``(M, 3)`` triangles; K: ``(3, 3)`` the images' intrinsics; image_size: ``(W, H)``.
     """
-    import cv2
-
     from .render import OffscreenRenderer  # VTK only when a video is made
 
-    out = Path(out)
-    W, H = image_size
-    with atomic_path(out) as tmp, OffscreenRenderer((W, H), np.asarray(K, dtype=np.float64)) as renderer:
-        tmp_mp4 = tmp.with_suffix(".mp4")
-        writer = cv2.VideoWriter(str(tmp_mp4), cv2.VideoWriter_fourcc(*"mp4v"), float(fps), (W, H))
-        if not writer.isOpened():
-            raise RuntimeError(f"OpenCV cannot write mp4 here ({tmp_mp4})")
-        try:
+    with OffscreenRenderer(tuple(image_size), np.asarray(K, dtype=np.float64)) as renderer:
+        def blended():
             for image, vertices in frames:
                 if vertices is not None and np.isfinite(vertices).all() and (vertices[:, 2] > 0).all():
                     rgb, depth = renderer.render(vertices, faces, MESH_RGB, return_depth=True)
                     image = overlay_mesh(image, rgb, depth, alpha)
-                writer.write(np.ascontiguousarray(image[..., ::-1]))
-        finally:
-            writer.release()
-        tmp_mp4.replace(tmp)
-    return out
+                yield image
+
+        return write_mp4(blended(), image_size, fps, out)
 
 
 def plot_overlay_stills(videos: list[str | Path], n: int = 3, title: str | None = None,

@@ -4,13 +4,14 @@ known truth the video route (``airpose video``) is tested and demonstrated on.
 from __future__ import annotations
 
 import json
-import pickle
 from pathlib import Path
 
 import numpy as np
 
 from airpose_lib.atomic import atomic_path
+from airpose_lib.data.sequences.detector_files import write_detector_file
 from airpose_lib.data.sequences.reader import load_sequence
+from airpose_lib.viz.video import write_mp4
 
 __all__ = ["export_videos"]
 
@@ -33,8 +34,6 @@ def export_videos(recording: str | Path, out_dir: str | Path, *, shift: int = 0,
         ``export.json`` names the recording, the shift and the recording frame of each video's
         first frame.
     """
-    import cv2
-
     seq = load_sequence(recording, frames=frames, detectors=(detector,), ground_truth=False)
     F = seq.num_frames
     if fps is None:
@@ -48,22 +47,9 @@ def export_videos(recording: str | Path, out_dir: str | Path, *, shift: int = 0,
         rows = range(starts[v], F)
         name = f"uav{v + 1}"
         h, w = seq.image(0, v).shape[:2]
-        target = out / f"{name}.mp4"
-        with atomic_path(target) as tmp:
-            tmp_mp4 = tmp.with_suffix(".mp4")
-            writer = cv2.VideoWriter(str(tmp_mp4), cv2.VideoWriter_fourcc(*"mp4v"), fps, (w, h))
-            if not writer.isOpened():
-                raise RuntimeError(f"OpenCV cannot write mp4 here ({tmp_mp4})")
-            for i in rows:
-                writer.write(np.ascontiguousarray(seq.image(i, v)[..., ::-1]))
-            writer.release()
-            tmp_mp4.replace(tmp)
-        kp = seq.keypoints[detector][:, v]
-        res = {j: (kp[i][None].astype(np.float32) if np.any(kp[i, :, 2] > 0) else np.zeros((0, 25, 3), np.float32))
-               for j, i in enumerate(rows)}
-        kp_path = out / f"{name}_keypoints.pkl"
-        with atomic_path(kp_path) as tmp:
-            tmp.write_bytes(pickle.dumps(res, protocol=4))
+        target = write_mp4((seq.image(i, v) for i in rows), (w, h), fps, out / f"{name}.mp4")
+        kp_path = out / f"{name}_keypoints.pkl"  # renumbered from the video's first frame
+        write_detector_file("openpose", kp_path, list(range(len(rows))), seq.keypoints[detector][starts[v]:, v])
         paths[name], paths[f"{name}_keypoints"] = target, kp_path
     record = {"recording": str(Path(recording).resolve()), "shift": int(shift), "fps": fps, "detector": detector,
               "first_frame": [int(seq.frames[starts[0]]), int(seq.frames[starts[1]])],

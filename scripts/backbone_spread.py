@@ -6,7 +6,7 @@ on a second backbone, pretrained from scratch with another seed, and each varian
 against the first backbone's with both seed spreads beside it; then each of the six claims on
 both. Two backbones are one draw of the between-backbone difference, not its distribution.
 
-    python scripts/backbone_spread.py results/cpu results/cpu_backbone_seed1 \
+    python scripts/backbone_spread.py results/cpu_four_stages results/cpu_backbone_seed1 \
         > results/cpu_backbone_seed1/backbone_spread.md
 
 Reads each folder's ``per_seed.csv`` and ``claims.csv`` (``airpose reproduce ... --write-reference``).

@@ -66,6 +66,6 @@ def test_the_committed_spread_is_what_the_script_prints(spread, capsys, monkeypa
     """results/cpu_backbone_seed1/backbone_spread.md is the script's output on the two committed folders."""
     results = Path(__file__).resolve().parents[1] / "results"
     monkeypatch.chdir(results.parent)
-    monkeypatch.setattr("sys.argv", ["backbone_spread.py", "results/cpu", "results/cpu_backbone_seed1"])
+    monkeypatch.setattr("sys.argv", ["backbone_spread.py", "results/cpu_four_stages", "results/cpu_backbone_seed1"])
     spread.main()
     assert capsys.readouterr().out == (results / "cpu_backbone_seed1" / "backbone_spread.md").read_text()

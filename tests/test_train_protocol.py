@@ -377,6 +377,23 @@ def test_the_committed_cpu_backbone_keeps_its_key():
     assert keys == chain[::-1]
 
 
+def test_the_four_stage_lab_profile_undoes_the_fifth_stage():
+    """lab/cpu_four_stages.yaml spells the fifth stage's shape terms at their defaults and cuts the
+    chain: its stages are the committed backbone's first four, key for key."""
+    from airpose_lib.profiles import PROFILES_DIR
+    from airpose_lib.train.pretrain import pretrain_stages, reference_backbone_path, stage_keys
+
+    record = json.loads(reference_backbone_path(RunFolders.of("cpu")).with_suffix(".json").read_text())
+    four = kit_configs(str(PROFILES_DIR / "lab" / "cpu_four_stages.yaml")).pretrain
+    chain = []
+    while record:
+        chain.append(record["key"])
+        record = record.get("continued_from")
+    assert len(chain) == 5
+    assert stage_keys(pretrain_stages(four), json.loads(reference_backbone_path(RunFolders.of("cpu")).with_suffix(
+        ".json").read_text())["data_fingerprint"]) == chain[::-1][:4]
+
+
 def test_training_and_pretraining_never_read_the_test_split(tmp_path, monkeypatch, private_cache):
     """Never choose on the test split: a pretraining (its validation and gate) and a regressor
     training (its features and validation) open the train and val splits only, every profile's

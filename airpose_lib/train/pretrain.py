@@ -155,6 +155,12 @@ def pretrain_config(setup: PretrainSetup, **overrides) -> TrainConfig:
     return pretrain_stages(setup, **overrides)[-1]
 
 
+#: Loss and network options that leave a backbone's key as it was when set at their defaults:
+#: ``{TrainConfig field: {option: default}}`` (``losses.pretrain.PretrainLossConfig``, ``model.pretrain.PretrainNet``).
+KEY_FREE_DEFAULTS = {"loss": {"w_beta": 0.1, "w_stature": 0.0, "w_gender": 0.0},
+                     "model": {"body_scalars": False}}
+
+
 def backbone_key(cfg: TrainConfig, data_fingerprint: str, start_key: str | None = None) -> str:
     """First 16 hex digits of the SHA-256 of the settings that make the backbone.
 
@@ -173,6 +179,11 @@ def backbone_key(cfg: TrainConfig, data_fingerprint: str, start_key: str | None 
                           ("sync_batchnorm", False)):
         if settings.get(name) == default:  # added after the first committed backbone, whose key stays
             settings.pop(name)
+    for part, defaults in KEY_FREE_DEFAULTS.items():
+        # the shape terms spelled out at their defaults (a profile undoing an inherited shape stage)
+        # make the backbone that leaving them out makes
+        if isinstance(settings.get(part), dict):
+            settings[part] = {k: v for k, v in settings[part].items() if not (k in defaults and defaults[k] == v)}
     blob = json.dumps({"version": PRETRAIN_VERSION, "settings": settings, "data": data_fingerprint},
                       sort_keys=True, default=str)
     return hashlib.sha256(blob.encode()).hexdigest()[:16]

@@ -8,7 +8,8 @@ Runs in the kit's environment:
 
 prints the per-view summary (all joints) and writes every row (views x detectors x references x
 joint groups) to ``--out``; ``--labels`` names the recordings in the ``recording`` column (default:
-their paths), ``--markdown`` also writes the summary against the true keypoints as a Markdown table.
+their paths, :func:`~airpose_lib.paths.portable`), ``--markdown`` also writes the summary against
+the true keypoints as a Markdown table.
 """
 from __future__ import annotations
 
@@ -24,6 +25,7 @@ from airpose_lib.data.sequences.reader import load_sequence  # noqa: E402
 from airpose_lib.errors import UserError  # noqa: E402
 from airpose_lib.experiments.detector_report import detector_report, write_report  # noqa: E402
 from airpose_lib.experiments.recording_tables import markdown_table  # noqa: E402
+from airpose_lib.paths import portable  # noqa: E402
 
 
 def main(argv=None) -> int:
@@ -34,7 +36,8 @@ def main(argv=None) -> int:
     ap.add_argument("--labels", nargs="+", help="one name per recording for the `recording` column")
     ap.add_argument("--markdown", type=Path, help="also the summary against the true keypoints, as Markdown")
     args = ap.parse_args(argv)
-    labels = args.labels or [str(r) for r in args.recordings]
+    # a table to commit: the default labels name no folder of this machine
+    labels = args.labels or [portable(str(r)) for r in args.recordings]
     if len(labels) != len(args.recordings):
         ap.error(f"--labels: give one per recording ({len(args.recordings)}), not {len(labels)}")
     rows = []

@@ -4,7 +4,7 @@
 Runs in MediaPipe's own environment, not the kit's (MediaPipe pins ``protobuf<5``, onnx needs a
 newer one; ``environment.md``, "The MediaPipe detector"). It imports only the kit's torch-free
 modules (``data.sequences.layout``, ``.reader``, ``.writer``, ``data.network_input``, ``data.sequences.mediapipe_pose``: numpy and
-OpenCV) from this checkout.
+OpenCV; ``paths``) from this checkout.
 
 Per frame and view: a square crop around a person box (``--crop``, see
 ``airpose_lib.data.sequences.mediapipe_pose.CROP_SOURCES``), ``--crop-scale`` times the box's longer side,
@@ -13,8 +13,9 @@ every frame on its own, so a frame's result never depends on the previous one's)
 landmarks become BODY_25 keypoints in full-frame pixels.
 
 Output: ``--out`` (default: the recording itself) gets ``machine_k/mediapipe_res.pkl`` and
-``mediapipe_detect.json`` (settings, versions, per-view counts). An ``--out`` other than the
-recording becomes a copy made of links: every other file of the recording is linked, so
+``mediapipe_detect.json`` (settings, versions, per-view counts; the recording's path
+:func:`~airpose_lib.paths.portable`). An ``--out`` other than the recording becomes a copy made
+of links: every other file of the recording is linked, so
 ``load_sequence(out, detectors=("openpose", "alphapose", "mediapipe"))`` reads it as the
 recording plus the new detector, and the recording is left untouched.
 
@@ -46,6 +47,7 @@ from airpose_lib.data.sequences.mediapipe_pose import (  # noqa: E402
 )
 from airpose_lib.data.sequences.reader import load_sequence  # noqa: E402
 from airpose_lib.errors import UserError  # noqa: E402
+from airpose_lib.paths import portable  # noqa: E402
 
 OUTPUT = DETECTOR_FILES["mediapipe"][0]
 
@@ -132,7 +134,8 @@ def main(argv=None) -> int:
     for v in range(V):
         write_body25(out / f"machine_{v + 1}" / OUTPUT, seq.frames.tolist(), kp[:, v])
     found = np.isfinite(landmarks[..., 0, 0])
-    info = {"sequence": str(src), "mediapipe_version": mediapipe.__version__, "crop": args.crop,
+    # the record is committed beside the tables (results/<profile>/detectors/): no folder of this machine
+    info = {"sequence": portable(str(src)), "mediapipe_version": mediapipe.__version__, "crop": args.crop,
             "crop_scale": args.crop_scale, "input_size": args.input_size,
             "model_complexity": args.model_complexity,
             "min_detection_confidence": args.min_detection_confidence,

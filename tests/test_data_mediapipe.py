@@ -3,6 +3,7 @@ mapping on hand-made landmarks, the crop geometry, the crop boxes and the file t
 The detector run itself needs the detector's own environment (test at the end, skipped here)."""
 from __future__ import annotations
 
+import json
 import os
 import subprocess
 from pathlib import Path
@@ -147,3 +148,5 @@ def test_detector_script_runs_on_a_rendered_recording(tmp_path):
     seq = load_sequence(tmp_path / "out", detectors=("openpose", "mediapipe"))
     assert seq.keypoints["mediapipe"].shape == (3, 2, 25, 3)
     np.testing.assert_array_equal(seq.keypoints["mediapipe"], 0.0)
+    record = json.loads((tmp_path / "out" / "mediapipe_detect.json").read_text())
+    assert str(tmp_path) not in record["sequence"] and record["sequence"].endswith("/rec")  # no machine's folders

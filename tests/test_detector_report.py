@@ -97,3 +97,6 @@ def test_the_script_names_the_recordings_and_writes_the_summary_it_printed(tmp_p
     assert f"| p1 | 0 | a | {truth.detection_rate.iloc[0]:.3f} |" in table[2]
     with pytest.raises(SystemExit):
         mod.main(["/x/one", "/x/two", "--labels", "p1", "--out", str(out)])
+    # without labels, the recordings' paths without this machine's folders
+    assert mod.main(["/work/mp/one", "/work/mp/two", "--detectors", "a", "b", "--out", str(out)]) == 0
+    assert list(dict.fromkeys(pd.read_csv(out).recording)) == ["<abs>/mp/one", "<abs>/mp/two"]

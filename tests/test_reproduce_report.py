@@ -88,6 +88,28 @@ def test_report_has_an_index_and_one_page_per_notebook_in_catalogue_order(run):
     assert result.total_bytes == sum(f.stat().st_size for f in out.rglob("*") if f.is_file())
 
 
+def test_the_pages_name_no_folder_of_this_machine(run, monkeypatch):
+    """The parameters cell's output folder and a printed cache file are named by their roots; the
+    pages' images and links are left as they are."""
+    monkeypatch.setenv("AIRPOSE_CACHE", str(run["root"] / "cache"))
+    monkeypatch.setenv("AIRPOSE_RUNS", str(run["root"] / "runs"))
+    path = run["run_dir"] / "notebooks" / "00_first.ipynb"
+    nb = nbformat.read(path, as_version=4)
+    prior = run["root"] / "cache" / "prior" / "smoke" / "vposer.pt"
+    printed = new_output("stream", name="stdout", text=f"prior: kit ({prior}); table in /tmp/elsewhere/x/t.csv\n")
+    nb.cells.insert(0, new_code_cell(f'output_dir = "{run["run_dir"] / "00_first"}"', outputs=[printed]))
+    nbformat.write(nb, path)
+    _build(run, max_image_px=400)
+    page = (run["out"] / "00_first.html").read_text()
+    assert str(run["root"]) not in page and "/tmp/elsewhere" not in page
+    # as text the browser shows: a bare <cache> would be a tag it hides
+    for text in ("&lt;runs&gt;/smoke/00_first", "&lt;cache&gt;/prior/smoke/vposer.pt", "&lt;abs&gt;/x/t.csv"):
+        assert text in page, text
+    assert "<cache>" not in page and "<abs>" not in page
+    image = page.split("data:image/png;base64,")[1].split('"')[0]
+    assert Image.open(io.BytesIO(base64.b64decode(image))).size == (400, 267)  # the image's bytes are whole
+
+
 def test_an_error_output_a_missing_figure_and_a_missing_notebook_are_problems(run):
     path = run["run_dir"] / "notebooks" / "01_second.ipynb"
     nb = nbformat.read(path, as_version=4)

@@ -17,7 +17,7 @@ from airpose_lib.geometry import axis_angle_to_matrix, matrix_to_rot6d, project_
 from airpose_lib.losses import BaselineLossConfig, SupervisedLoss
 from airpose_lib.losses.pretrain import PretrainLoss, heading_bin, heading_of
 from airpose_lib.model.pretrain import PretrainNet
-from airpose_lib.paths import RunFolders
+from airpose_lib.paths import RunFolders, portable
 from airpose_lib.reproduce.configs import kit_configs
 from airpose_lib.train.evaluate import predict
 from airpose_lib.train.features import feature_key
@@ -304,8 +304,47 @@ def test_earlier_stages_keep_their_dataset_when_the_profile_data_grow(tmp_path, 
     assert record["data_fingerprint"] == fp and record["total_steps"] == 4
     assert record["continued_from"]["key"] == keys[1]
     earlier = json.loads(path.with_name(f"{keys[1]}.json").read_text())
-    assert earlier["data_fingerprint"] == small_fp and earlier["config"]["data"]["root"] == stages[0].data["root"]
+    # the record names the stage's dataset without this machine's folders
+    assert earlier["data_fingerprint"] == small_fp
+    assert earlier["config"]["data"]["root"] == portable(stages[0].data["root"])
+    assert earlier["config"]["data"]["root"].startswith("<cache>/")
     assert load_manifest(Path(stages[0].data["root"]))["totals"]["samples"] == 8  # generated for them
+
+
+def test_the_reference_backbone_names_no_folder_of_this_machine(tmp_path, monkeypatch):
+    """A cache file an older kit wrote (its record names this machine's folders) becomes a
+    reference whose record, in the file and beside it, is portable, with the reference's own
+    SHA-256 (which the reference's check compares); a portable file is copied byte for byte."""
+    import airpose_lib.train.pretrain as pretrain
+    from airpose_lib.model.backbone import build_backbone
+    from airpose_lib.train.features import load_backbone_file
+
+    monkeypatch.setenv("AIRPOSE_CACHE", str(tmp_path / "cache"))
+    monkeypatch.setattr(pretrain, "reference_backbone_path", lambda folders: tmp_path / "results" / "backbone.pt")
+    sd = {k: v.half() if v.is_floating_point() else v for k, v in build_backbone("resnet18").state_dict().items()}
+    meta = {"backbone": "resnet18", "key": "k1", "profile": "/work/sel/cpu_x.yaml",
+            "command": "airpose pretrain --profile /work/sel/cpu_x.yaml",
+            "config": {"data": {"root": str(tmp_path / "cache" / "data" / "still_cpu")}, "pretrained": None}}
+    old = tmp_path / "cache" / "backbones" / "k1.pt"
+    old.parent.mkdir(parents=True)
+    torch.save({"state_dict": sd, "meta_json": json.dumps(meta)}, old)  # as the kit wrote it before
+    old.with_suffix(".json").write_text(json.dumps(dict(meta, sha256=pretrain.sha256_file(old))))
+
+    ref = pretrain.write_reference_backbone(RunFolders.of("cpu"), old)
+    record = json.loads(ref.with_suffix(".json").read_text())
+    _, inside = load_backbone_file(ref)
+    expected = {"backbone": "resnet18", "key": "k1", "profile": "<abs>/sel/cpu_x.yaml",
+                "command": "airpose pretrain --profile <abs>/sel/cpu_x.yaml",
+                "config": {"data": {"root": "<cache>/data/still_cpu"}, "pretrained": None}}
+    assert inside == expected
+    assert record == dict(expected, sha256=pretrain.sha256_file(ref), bytes=ref.stat().st_size)
+    assert pretrain._reference_if_valid(RunFolders.of("cpu"), "k1") == ref
+
+    new = pretrain._write_backbone_file(sd, tmp_path / "cache" / "backbones" / "k2.pt", dict(meta, key="k2"))
+    assert json.loads(new.with_suffix(".json").read_text())["profile"] == "<abs>/sel/cpu_x.yaml"  # written portable
+    ref = pretrain.write_reference_backbone(RunFolders.of("cpu"), new)
+    assert ref.read_bytes() == new.read_bytes()
+    assert ref.with_suffix(".json").read_text() == new.with_suffix(".json").read_text()
 
 
 def test_regressor_with_its_last_backbone_block_trainable(tmp_path, private_cache):

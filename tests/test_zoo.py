@@ -85,6 +85,28 @@ def test_a_regressor_on_another_backbone_is_refused(exported):
         export_regressor(tmp_path / "run.pt", other, tmp_path / "x.pt")
 
 
+def test_a_shipped_file_and_its_manifest_name_no_folder_of_this_machine(exported):
+    """A fine-tuned network's record (its prior, recording, base network) and the manifest are
+    committed: their paths are written portable, and the file still loads."""
+    model, backbone, _, tmp_path = exported
+    cache = tmp_path / "cache"
+    state = torch.load(tmp_path / "run.pt", weights_only=True)
+    state["finetune"] = {"sequence": str(cache / "data" / "sequences_cpu" / "person1"),
+                         "base_checkpoint": "/work/runs6/train/cpu/airpose/seed123/checkpoints/last.pt",
+                         "config": {"prior_path": str(cache / "prior" / "cpu" / "vposer.pt"), "lr": 1e-4}}
+    tuned = export_regressor(write_checkpoint(tmp_path / "tuned.pt", state), backbone, tmp_path / "zoo" / "tuned.pt")
+    blob = torch.load(tuned, weights_only=True)
+    assert blob["finetune"] == {"sequence": "<cache>/data/sequences_cpu/person1",
+                                "base_checkpoint": "<abs>/checkpoints/last.pt",
+                                "config": {"prior_path": "<cache>/prior/cpu/vposer.pt", "lr": 1e-4}}
+    assert load_network(kit_checkpoint(tuned, backbone))[2]["step"] == 7
+    write_manifest(tuned.parent, [{"name": "tuned", "file": "tuned.pt", "made_by": f"recordings of {cache}/x"}],
+                   {"profile": "x", "rebuild": "airpose zoo build --profile /tmp/p/x.yaml"})
+    text = (tuned.parent / "manifest.yaml").read_text()
+    assert str(tmp_path) not in text and "/tmp/" not in text
+    assert read_manifest(tuned.parent)["tuned"]["made_by"] == "recordings of <cache>/x"
+
+
 def test_the_manifest_refuses_a_damaged_or_foreign_file_in_one_line(exported):
     _, backbone, shipped, tmp_path = exported
     folder = shipped.parent

@@ -10,6 +10,7 @@ import torch
 
 from airpose_lib.eval.ablation import VARIANT_LABELS
 from airpose_lib.eval.reference import git_commit
+from airpose_lib.paths import portable
 from airpose_lib.prior.build import ensure_prior
 from airpose_lib.train.ablation import trained_checkpoint
 from airpose_lib.train.evaluate import evaluate_features
@@ -63,7 +64,9 @@ def build_shipped(configs: KitConfigs, progress: bool = True, folder: str | Path
                                   rebuild=rebuild))
     prior = folder / "prior.pt"
     blob = torch.load(ensure_prior(configs.prior, progress=progress), map_location="cpu", weights_only=True)
-    torch.save({**blob, "state_dict": half_state(blob["state_dict"])}, prior)
+    # its provenance is committed: named without this machine's folders
+    torch.save({**portable({k: v for k, v in blob.items() if k != "state_dict"}),
+                "state_dict": half_state(blob["state_dict"])}, prior)
     entries.append(_entry("prior", prior, folder, kind="pose prior", made_by=f"airpose prior train --profile {name}",
                           rebuild=rebuild, metric={k: _round(v, 4) for k, v in
                                                    (blob.get("provenance", {}).get("metrics") or {}).items()}))

@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import base64
 import hashlib
+import html
 import io
 import json
 import re
@@ -33,7 +34,7 @@ from pathlib import Path
 
 import nbformat
 
-from airpose_lib.paths import figures_root, profile_name, runs_root
+from airpose_lib.paths import PLACEHOLDERS, figures_root, portable, profile_name, runs_root
 
 from .runner import CATALOG_PATH, REPO_ROOT, CatalogEntry, load_catalog
 
@@ -163,14 +164,25 @@ def _nav_cell(catalog: list[CatalogEntry], i: int):
 
 
 def _notebook_page(nb, catalog: list[CatalogEntry], i: int, max_px: int, out_dir: Path) -> str:
-    """The notebook as a page of the report (nbconvert's lab template), with navigation links."""
+    """The notebook as a page of the report (nbconvert's lab template), with navigation links;
+    its paths (the parameters cell's ``output_dir``, a printed cache file) named
+    :func:`~airpose_lib.paths.portable`, as the reference report is committed."""
     from nbconvert import HTMLExporter  # with jupyter; offline
 
     _shrink_outputs(nb, max_px)
     nav = _nav_cell(catalog, i)
     nb.cells = [nav, *nb.cells, nbformat.v4.new_markdown_cell(nav.source.split("\n")[0])]
     body, _ = HTMLExporter(template_name="lab").from_notebook_node(nb)
-    return _shared_stylesheet(body, out_dir)
+    return _portable_page(_shared_stylesheet(body, out_dir))
+
+
+def _portable_page(page: str) -> str:
+    """An HTML page with its paths named :func:`~airpose_lib.paths.portable` (a reference report
+    is committed), the placeholders escaped: a bare ``<cache>`` is a tag the browser hides."""
+    page = portable(page)
+    for placeholder in PLACEHOLDERS:
+        page = page.replace(placeholder, html.escape(placeholder))
+    return page
 
 
 def _shared_stylesheet(page: str, out_dir: Path) -> str:
@@ -285,7 +297,7 @@ def build_report(profile: str, run_dir: str | Path | None = None, figures_dir: s
     index = Environment(autoescape=True).from_string(_INDEX_TEMPLATE.read_text()).render(
         profile=profile, run=run, rows=rows, bundle=bundle, problems=result.problems,
         md=markdown2html)
-    (tmp / "index.html").write_text(index)
+    (tmp / "index.html").write_text(_portable_page(index))
     shutil.rmtree(out_dir, ignore_errors=True)
     tmp.rename(out_dir)
     result.total_bytes = _folder_bytes(out_dir)

@@ -47,7 +47,7 @@ from airpose_lib.folder_lock import file_lock
 from airpose_lib.geometry import axis_angle_to_matrix, rot6d_to_matrix
 from airpose_lib.losses.pretrain import heading_bin
 from airpose_lib.model.backbone import build_backbone
-from airpose_lib.paths import RunFolders, cache_dir
+from airpose_lib.paths import RunFolders, cache_dir, portable
 
 from .config import TrainConfig
 from .loop import check_data_root, default_model_factory, start_training
@@ -241,12 +241,17 @@ def export_backbone(checkpoint: str | Path, path: str | Path, meta: dict) -> Pat
 
 def _write_backbone_file(sd: dict, path: str | Path, meta: dict) -> Path:
     """A backbone file (``state_dict`` + ``meta_json``, read by ``features.load_backbone_file``)
-    and its JSON record beside it."""
+    and its JSON record beside it (``meta`` with the file's ``sha256`` and ``bytes``), each
+    written atomically. ``meta``'s paths are written :func:`~airpose_lib.paths.portable`: the file
+    may become the committed reference (:func:`write_reference_backbone`), and nothing reads a
+    path back out of it."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
+    meta = portable(meta)
     atomic_torch_save({"state_dict": sd, "meta_json": json.dumps(meta, sort_keys=True)}, path)
     record = dict(meta, sha256=sha256_file(path), bytes=path.stat().st_size)
-    path.with_suffix(".json").write_text(json.dumps(record, indent=2, sort_keys=True) + "\n")
+    with atomic_path(path.with_suffix(".json")) as tmp:
+        tmp.write_text(json.dumps(record, indent=2, sort_keys=True) + "\n")
     return path
 
 
@@ -497,10 +502,22 @@ def other_profile_backbone(setup: PretrainSetup, progress: bool = False) -> Path
 
 
 def write_reference_backbone(folders: RunFolders, backbone_file: str | Path) -> Path:
-    """Copy a backbone file and its record into ``results/<profile>/`` (the committed reference)."""
+    """Copy a backbone file and its record into ``results/<profile>/`` (the committed reference).
+
+    A file whose record names this machine's folders (written before records were made
+    :func:`~airpose_lib.paths.portable`) is written again with a portable record, in the file
+    (``meta_json``) and beside it: the reference's ``sha256`` and ``bytes`` are then its own, not
+    the cache file's, so that :func:`_reference_if_valid` accepts it.
+    """
+    src = Path(backbone_file)
     ref = reference_backbone_path(folders)
     ref.parent.mkdir(parents=True, exist_ok=True)
-    for src, dst in ((Path(backbone_file), ref), (Path(backbone_file).with_suffix(".json"), ref.with_suffix(".json"))):
+    blob = torch.load(src, map_location="cpu", weights_only=True)
+    meta = json.loads(blob["meta_json"])
+    record = json.loads(src.with_suffix(".json").read_text())
+    if portable(meta) != meta or portable(record) != record:
+        return _write_backbone_file(blob["state_dict"], ref, meta)
+    for s, dst in ((src, ref), (src.with_suffix(".json"), ref.with_suffix(".json"))):
         with atomic_path(dst) as tmp:
-            shutil.copyfile(src, tmp)
+            shutil.copyfile(s, tmp)
     return ref

@@ -26,7 +26,7 @@ from airpose_lib.atomic import atomic_path, atomic_torch_save
 from airpose_lib.engine.checkpoint import load_checkpoint, write_checkpoint
 from airpose_lib.errors import DamagedFileError, reading
 from airpose_lib.hashing import sha256_file
-from airpose_lib.paths import RunFolders, cache_dir, repo_root
+from airpose_lib.paths import RunFolders, cache_dir, portable, repo_root
 
 __all__ = ["MANIFEST", "FORMAT", "zoo_dir", "sha256_file", "read_manifest", "write_manifest", "verified",
            "regressor_blob", "export_regressor", "kit_checkpoint", "half_state", "zoo_table"]
@@ -61,11 +61,13 @@ def read_manifest(folder: str | Path) -> dict[str, dict]:
 
 
 def write_manifest(folder: str | Path, entries: list[Mapping], about: Mapping[str, Any]) -> Path:
-    """Write ``manifest.yaml`` (``about``: what the set is and the command that rebuilds it)."""
+    """Write ``manifest.yaml`` (``about``: what the set is and the command that rebuilds it), any
+    path in it :func:`~airpose_lib.paths.portable` (it is committed; its files are named relative
+    to the folder)."""
     path = Path(folder) / MANIFEST
+    manifest = portable({**dict(about), "networks": [dict(e) for e in entries]})
     with atomic_path(path) as tmp:
-        Path(tmp).write_text(yaml.safe_dump({**dict(about), "networks": [dict(e) for e in entries]},
-                                            sort_keys=False, width=110))
+        Path(tmp).write_text(yaml.safe_dump(manifest, sort_keys=False, width=110))
     return path
 
 
@@ -103,7 +105,9 @@ def half_state(state: Mapping[str, torch.Tensor]) -> dict[str, torch.Tensor]:
 def regressor_blob(state: Mapping[str, Any], backbone_sha256: str) -> dict[str, Any]:
     """What a shipped regressor file holds, from a kit checkpoint's loaded ``state``: the weights
     that are not the backbone's in float16, the entries of :data:`_KEPT`, and the SHA-256 of the
-    backbone file it reads the features of. ``config``'s machine paths are dropped."""
+    backbone file it reads the features of. ``config``'s machine paths are dropped, and every
+    other path (a fine-tuned network's prior, recording and base network in ``finetune``) is
+    named :func:`~airpose_lib.paths.portable`: the file is committed, and no loader opens them."""
     model = state["model"]
     head = {k: v for k, v in model.items() if not k.startswith(BACKBONE_PREFIX)}
     kept = {k: state[k] for k in _KEPT if k in state}
@@ -112,6 +116,7 @@ def regressor_blob(state: Mapping[str, Any], backbone_sha256: str) -> dict[str, 
         cfg["data"] = {k: v for k, v in (cfg.get("data") or {}).items() if k != "root"}
         cfg["pretrained"] = "shipped"
         kept["config"] = cfg
+    kept = portable(kept)
     return {"format": FORMAT, "format_version": FORMAT_VERSION, "backbone_sha256": backbone_sha256,
             "regressor": half_state(head), **kept}
 

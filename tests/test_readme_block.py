@@ -36,7 +36,32 @@ def test_the_block_is_the_bundle(tmp_path):
     assert "3 seeds, commit abcdef0, 2026-12-04; `airpose reproduce`" in block[1]
     assert "| Baseline | 1.000 ± 0.010 | 0.500 | 0.123 ± 0.000 | 0.091 | 14.6 |" in block
     assert "| Reference: neutral mean body (GT pose) | 0.500 | - | - | - | - |" in block
-    assert "| MPE: A > B | +0.2500 (+0.2000, +0.3000) | +12.3 (+10.0, +15.0) | 32.0 | holds |" in block
+    assert "| MPE: A > B | +0.2500 (+0.2000, +0.3000) | +12.3 (+10.0, +15.0) | 32.0 | 10.7 (met) | holds |" in block
+    assert not any(line.startswith("Where a gain misses") for line in block)  # every gain met: no bound lines
+
+
+def test_a_missed_gain_gets_the_measured_bound_beside_it(tmp_path):
+    _bundle(tmp_path)
+    ref = tmp_path / "toy"
+    claims = pd.read_csv(ref / "claims.csv")
+    miss = claims.iloc[0].copy()
+    miss["claim"], miss["gain [%]"] = "MPE: A > B", 9.0  # a third of 32 is 10.67: missed
+    other = miss.copy()
+    other["claim"], other["gain [%]"], other["paper gain [%]"] = "MPJPE: A > B", 1.0, 9.0
+    pd.DataFrame([miss, other]).to_csv(ref / "claims.csv", index=False)
+    (ref / "mechanism").mkdir()
+    rows = [("c", "MPE [m]", "views' mean relative depth error (shared scalar)", "A", "gain over measured [%]",
+             18.25, 17.0, 19.5),
+            ("a", "stature [m]", "features + P", "ridge", "R2", 0.2, 0.18, 0.22),
+            ("a", "stature [m]", "features + P", "ridge", "R2 of the views' mean", 0.28, 0.26, 0.3),
+            ("a", "stature [m]", "features + P", "ridge", "view error correlation", 0.79, 0.78, 0.8)]
+    pd.DataFrame(rows, columns=["part", "quantity", "input", "readout", "metric", "value", "CI low", "CI high"]
+                 ).assign(samples=100).to_csv(ref / "mechanism" / "mechanism.csv", index=False)
+    block = results_block("toy", tmp_path).splitlines()
+    assert "| MPE: A > B | +0.2500 (+0.2000, +0.3000) | +9.0 (+10.0, +15.0) | 32.0 | 10.7 (missed) | holds |" in block
+    assert any("would cut A's MPE by at most 18.2 % (17.0, 19.5); the exchange buys 9.0 %" in line for line in block)
+    assert "- MPJPE: A > B: no bound measured; the measured reason is in docs/findings.md." in block
+    assert any("R² 0.20 (0.18, 0.22)" in line and "correlate 0.79" in line for line in block)
 
 
 def test_replace_block_swaps_only_the_block(tmp_path):

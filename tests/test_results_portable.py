@@ -20,8 +20,6 @@ KNOWN_LEAKS = {
     **{f"cpu/report/{name}.html": "notebook pages of the reference report, rebuilt by the next cpu run"
        for name in ("00_body_model", "01_synthetic_data", "02_ablation_table", "03_trajectories",
                     "04_spin_comparison", "05_airpose_plus", "06_online_runtime", "07_recording_3d")},
-    **{f"cpu/networks/{name}.pt": "a fine-tuned network's record, rebuilt by the next `airpose zoo build`"
-       for name in ("baseline_tuned", "airpose_tuned", "baseline_tuned_field", "airpose_tuned_field")},
 }
 
 

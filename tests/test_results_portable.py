@@ -14,15 +14,6 @@ TEXT_SUFFIXES = {".json", ".md", ".csv", ".yaml", ".yml", ".html", ".txt"}
 #: What an absolute path of a machine starts with (Linux, macOS, Windows).
 MACHINE_PATH = re.compile(r"/work/|/root/|/home/|/tmp/|/Users/|C:\\")
 
-#: Files written before their writers named paths portably, each with why it may still leak; the
-#: next reference run rewrites them (then drop the entry: the last test fails on a clean file).
-KNOWN_LEAKS = {
-    **{f"cpu/report/{name}.html": "notebook pages of the reference report, rebuilt by the next cpu run"
-       for name in ("00_body_model", "01_synthetic_data", "02_ablation_table", "03_trajectories",
-                    "04_spin_comparison", "05_airpose_plus", "06_online_runtime", "07_recording_3d")},
-}
-
-
 def _strings(value):
     """Every str inside a loaded torch file (dict keys and values, lists, tuples)."""
     if isinstance(value, str):
@@ -60,15 +51,7 @@ def test_the_results_name_no_folder_of_the_machine_that_made_them():
     leaking = {}
     for path in _files():
         name = path.relative_to(RESULTS).as_posix()
-        if name not in KNOWN_LEAKS and (found := _leaks(path)):
+        if found := _leaks(path):
             leaking[name] = found
     assert not leaking, ("files under results/ name a machine's folders (write them through "
                          "airpose_lib.paths.portable): " + "; ".join(f"{k}: {v}" for k, v in leaking.items()))
-
-
-def test_the_known_leaks_still_leak():
-    """An entry of KNOWN_LEAKS whose file was rebuilt clean (or is gone) is dropped from the list."""
-    if not RESULTS.is_dir():
-        pytest.skip("no results/ in this copy of the kit")
-    stale = [name for name in KNOWN_LEAKS if not (RESULTS / name).is_file() or not _leaks(RESULTS / name)]
-    assert not stale, f"these files name no machine's folder any more: drop them from KNOWN_LEAKS: {stale}"

@@ -16,7 +16,7 @@ from airpose_lib.data.sequences.recording import generate_sequence
 from airpose_lib.data.video.export import export_videos
 
 N_FRAMES = 150  # 5 s: the offset needs a few seconds of varied motion
-N_FIELD = 60  # the field test is given the offset
+N_FIELD = 150  # the field test is given the offset
 SHIFT = 7  # UAV2's video starts 7 frames late: the true offset is -7
 TOLERANCE = 0.10  # the issue's: the video route within 10 % of the recording route
 

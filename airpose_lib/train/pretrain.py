@@ -23,10 +23,11 @@ command that rebuilds it (``airpose pretrain --profile <profile>``).
 from __future__ import annotations
 
 import hashlib
+import inspect
 import json
 import shutil
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from pathlib import Path
 
 import torch
@@ -45,8 +46,9 @@ from airpose_lib.eval.metrics import root_yaw_tilt, rotation_error
 from airpose_lib.eval.reference import git_commit
 from airpose_lib.folder_lock import file_lock
 from airpose_lib.geometry import axis_angle_to_matrix, rot6d_to_matrix
-from airpose_lib.losses.pretrain import heading_bin
+from airpose_lib.losses.pretrain import PretrainLossConfig, heading_bin
 from airpose_lib.model.backbone import build_backbone
+from airpose_lib.model.pretrain import PretrainNet
 from airpose_lib.paths import RunFolders, cache_dir, portable
 
 from .config import TrainConfig
@@ -156,9 +158,11 @@ def pretrain_config(setup: PretrainSetup, **overrides) -> TrainConfig:
 
 
 #: Loss and network options that leave a backbone's key as it was when set at their defaults:
-#: ``{TrainConfig field: {option: default}}`` (``losses.pretrain.PretrainLossConfig``, ``model.pretrain.PretrainNet``).
-KEY_FREE_DEFAULTS = {"loss": {"w_beta": 0.1, "w_stature": 0.0, "w_gender": 0.0},
-                     "model": {"body_scalars": False}}
+#: ``{TrainConfig field: {option: default}}``, the defaults read from
+#: ``losses.pretrain.PretrainLossConfig`` and ``model.pretrain.PretrainNet``.
+KEY_FREE_DEFAULTS = {"loss": {f.name: f.default for f in fields(PretrainLossConfig)
+                              if f.name in ("w_beta", "w_stature", "w_gender")},
+                     "model": {"body_scalars": inspect.signature(PretrainNet).parameters["body_scalars"].default}}
 
 
 def backbone_key(cfg: TrainConfig, data_fingerprint: str, start_key: str | None = None) -> str:

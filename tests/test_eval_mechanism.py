@@ -99,3 +99,28 @@ def test_probe_rows_score_held_out_samples_and_the_views_errors():
     assert table["gender (female = 1)", "features + P", "ridge", "accuracy"]["value"] == 1.0
     assert table["log depth", "features", "ridge", "R2"]["value"] > 0.99
     assert all(r["samples"] == 300 and r["CI low"] <= r["value"] <= r["CI high"] for r in rows)
+
+
+def test_body_pose_rows_split_an_mpjpe_ordering_into_root_and_body_pose():
+    import pandas as pd
+
+    from airpose_lib.experiments.mechanism import COLUMNS, body_pose_rows
+
+    def table(mpjpe, true_root):  # two samples, two views each: a sample's error is its views' mean
+        return pd.DataFrame({"sample": [0, 0, 1, 1], "view": [0, 1, 0, 1], "mpjpe_m": mpjpe,
+                             "mpjpe_true_root_m": true_root})
+
+    per_view = {"multiview": table([0.08, 0.10, 0.08, 0.10], [0.06, 0.06, 0.06, 0.06]),
+                "fullcam": table([0.08, 0.08, 0.08, 0.08], [0.07, 0.07, 0.07, 0.07])}
+    rows = body_pose_rows(per_view, n_resamples=50, log=lambda _: None)
+    assert all(set(r) == set(COLUMNS) and r["part"] == "d" and r["samples"] == 2 for r in rows)
+    got = {(r["input"], r["readout"]): r["value"] for r in rows}
+    assert got["predicted root (Table I)", "Baseline + Multi-view"] == pytest.approx(0.09)
+    assert got["true root (the body pose alone)", "Baseline + Fullcam"] == pytest.approx(0.07)
+    pair = "Baseline + Multi-view > Baseline + Fullcam"
+    assert got["predicted root (Table I)", pair] == pytest.approx(100 * (0.09 - 0.08) / 0.09)
+    assert got["true root for both (the body pose alone)", pair] == pytest.approx(100 * (0.06 - 0.07) / 0.06)
+    assert got["true root for the second (an exact root orientation)", pair] == pytest.approx(100 * (0.09 - 0.07) / 0.09)
+    per_view["fullcam"] = per_view["fullcam"].assign(sample=[0, 0, 2, 2])
+    with pytest.raises(ValueError, match="different samples"):
+        body_pose_rows(per_view, n_resamples=50, log=lambda _: None)

@@ -14,7 +14,11 @@ One long table, one row per measurement:
 * part ``c``, each variant's depth: the two views' relative depth errors, their correlation, and
   the MPE if each view's relative depth error were the views' mean (what exchanging a body scalar
   can buy at most) or zero (a perfect depth scale), against the measured MPE, with the relative
-  gains' paired intervals.
+  gains' paired intervals;
+* part ``d``, each variant's MPJPE: Table I's (its predicted root orientation) and with the true
+  root orientation (the body pose alone), and for each of the paper's MPJPE orderings the paired
+  gain three ways: as Table I scores it, both methods with the true root, and the second method
+  with the true root (the most an exact root orientation could give it).
 
 Intervals: 95 % bootstrap over two-view validation samples. Never reads the test split.
 :func:`write_mechanism_table` runs it and writes ``mechanism.csv``, ``mechanism.md`` and
@@ -48,13 +52,13 @@ from airpose_lib.eval.metrics import translation_error
 from airpose_lib.eval.reference import RESULTS_ROOT, git_commit, provenance_record, reference_outputs
 from airpose_lib.eval.significance import PAPER_ORDER, bootstrap_interval, paired_bootstrap
 from airpose_lib.model import to_smplx_params
-from airpose_lib.train.evaluate import load_network
+from airpose_lib.train.evaluate import evaluate_checkpoint, load_network
 from airpose_lib.train.features import ensure_features, features_path
 from airpose_lib.train.pretrain import profile_backbone
 
 from .configs import KitConfigs
 
-__all__ = ["COLUMNS", "probe_rows", "variant_rows", "mechanism_table", "write_mechanism_table"]
+__all__ = ["COLUMNS", "probe_rows", "variant_rows", "body_pose_rows", "mechanism_table", "write_mechanism_table"]
 
 #: Columns of the table, in order.
 COLUMNS = ("part", "quantity", "input", "readout", "metric", "value", "CI low", "CI high", "samples")
@@ -138,18 +142,18 @@ def probe_rows(fit: tuple[np.ndarray, dict, np.ndarray], score: tuple[np.ndarray
 @torch.no_grad()
 def _regress(checkpoint: Path, features: np.ndarray, arrays: dict,
              batch_size: int = 512) -> tuple[np.ndarray, np.ndarray]:
-    """A checkpoint's regressor on cached features: tau ``(N, V, 3)`` (the final estimate, camera
+    """A checkpoint's regressor on cached features (``(N, V, C)`` pooled, or ``(N, V, C, h, w)``
+    the input of the first block it trains): tau ``(N, V, 3)`` (the final estimate, camera
     frame, as Table I scores it) and beta per iteration ``(iterations, N, V, 10)`` (from the
     messages every view sends after each iteration)."""
     model, record, state = load_network(checkpoint, "cpu")
-    if state["config"].get("trainable_from") is not None:
-        raise ValueError(f"{checkpoint}: trains backbone blocks from {state['config']['trainable_from']}; the pooled "
-                         f"features cached here are not its input")
+    cut = state["config"].get("trainable_from")
     taus, betas = [], []
     for start in range(0, len(features), batch_size):
         sl = slice(start, start + batch_size)
         P, K = torch.as_tensor(arrays["P"][sl]), torch.as_tensor(arrays["K"][sl])
-        out = model.regress(torch.as_tensor(np.array(features[sl], dtype=np.float32)), P)  # a copy: mmap is read-only
+        f = torch.as_tensor(np.array(features[sl], dtype=np.float32))  # a copy: mmap is read-only
+        out = model.regress(f if cut is None else model.features_from(f, cut), P)
         taus.append(to_smplx_params(out, P, K, input_size=record.input_size)["tau"].double().numpy())
         betas.append(torch.stack([m[..., -10:] for m in out["messages"]]).double().numpy())
     return np.concatenate(taus), np.concatenate(betas, axis=1)
@@ -197,6 +201,47 @@ def variant_rows(variant: str, checkpoint: Path, features: np.ndarray, arrays: d
                          (100 * r.relative, 100 * r.relative_low, 100 * r.relative_high), n))
     log(f"{label}: MPE {rows[-5]['value']:.3f} m, shared-scalar gain {rows[-3]['value']:.1f} %, "
         f"exact-scale gain {rows[-1]['value']:.1f} %")
+    return rows
+
+
+#: Part ``d``'s ways of scoring an MPJPE ordering "A > B": (input, A's column, B's column).
+_POSE_GAINS = (("predicted root (Table I)", "mpjpe_m", "mpjpe_m"),
+               ("true root for both (the body pose alone)", "mpjpe_true_root_m", "mpjpe_true_root_m"),
+               ("true root for the second (an exact root orientation)", "mpjpe_m", "mpjpe_true_root_m"))
+
+
+def body_pose_rows(per_view: Mapping[str, pd.DataFrame], n_resamples: int = 2000,
+                   log: Callable[[str], None] = print) -> list[dict]:
+    """Part ``d``: what each variant's MPJPE is made of, and what the paper's MPJPE orderings rest on.
+
+    Args:
+        per_view: variant -> its per-view table on one split
+            (:func:`~airpose_lib.eval.tables.per_view_table`: ``sample``, ``view``, ``mpjpe_m``,
+            ``mpjpe_true_root_m``), every variant on the same samples.
+    Returns:
+        per variant, Table I's MPJPE and the true-root MPJPE (mean over samples, interval); per
+        ordering of :data:`~airpose_lib.eval.significance.PAPER_ORDER` whose two variants are
+        given, the relative gain ``(e_A - e_B) / e_A`` of each of :data:`_POSE_GAINS`, paired over
+        two-view samples (a sample's error is its views' mean).
+    """
+    rows, sample = [], lambda t, col: t.groupby("sample")[col].mean().sort_index()  # noqa: E731
+    for variant, table in per_view.items():
+        label = VARIANT_LABELS[variant]
+        for inp, col in (("predicted root (Table I)", "mpjpe_m"), ("true root (the body pose alone)", "mpjpe_true_root_m")):
+            x = sample(table, col).to_numpy()
+            rows.append(_row("d", "MPJPE [m]", inp, label, "MPJPE [m]", _mean_interval(x, n_resamples), len(x)))
+    present = [v for v in PAPER_ORDER if v in per_view]
+    for a, b in zip(present, present[1:]):
+        pair = f"{VARIANT_LABELS[a]} > {VARIANT_LABELS[b]}"
+        for inp, col_a, col_b in _POSE_GAINS:
+            e_a, e_b = sample(per_view[a], col_a), sample(per_view[b], col_b)
+            if not e_a.index.equals(e_b.index):
+                raise ValueError(f"{a} and {b} were scored on different samples")
+            r = paired_bootstrap(e_a.to_numpy() - e_b.to_numpy(), n_resamples, base=e_a.to_numpy())
+            rows.append(_row("d", "MPJPE gain", inp, pair, "gain [%]",
+                             (100 * r.relative, 100 * r.relative_low, 100 * r.relative_high), len(e_a)))
+        log(f"MPJPE {pair}: gain {rows[-3]['value']:.1f} %, body pose alone {rows[-2]['value']:.1f} %, "
+            f"exact root for the second {rows[-1]['value']:.1f} %")
     return rows
 
 
@@ -259,20 +304,23 @@ def mechanism_table(configs: KitConfigs, seed: int = 123, variants: Sequence[str
     log(f"probes: {fit_note}")
     rows = probe_rows(fit, score, n_resamples, mlp_steps, log)
     walls = {"probes": round(time.time() - t_start, 1)}
-    done = {}
+    done, per_view = {}, {}
     for variant in variants:
         checkpoint = _checkpoint(configs, variant, seed) if checkpoints is None else checkpoints.get(variant)
         if checkpoint is None:
             log(f"{variant} seed {seed}: no finished run, left out")
             continue
         t0 = time.time()
-        model_backbone = Path(str(load_network(checkpoint, "cpu")[2]["config"].get("pretrained")))
-        feats = val_feat if model_backbone.is_file() and model_backbone.stem == backbone.stem else \
-            np.load(ensure_features(model_backbone, root, "val"), mmap_mode="r")
+        config = load_network(checkpoint, "cpu")[2]["config"]
+        model_backbone, cut = Path(str(config.get("pretrained"))), config.get("trainable_from")
+        same = cut is None and model_backbone.is_file() and model_backbone.stem == backbone.stem
+        feats = val_feat if same else np.load(ensure_features(model_backbone, root, "val", cut=cut), mmap_mode="r")
         stages = None if variant != "airpose" else range(1, 4)
         rows += variant_rows(variant, checkpoint, feats, val, val_stature, stages, n_resamples, log)
+        per_view[variant] = evaluate_checkpoint(checkpoint, "val", device="cpu", batch_size=64)["per_view"]
         done[variant] = _portable(checkpoint)
         walls[variant] = round(time.time() - t0, 1)
+    rows += body_pose_rows(per_view, n_resamples, log)
     notes = {"profile": configs.label, "split": "val", "backbone": backbone.stem, "probes fitted on": fit_note,
              "seed": seed, "variants": done, "variants left out": [v for v in variants if v not in done],
              "n_resamples": n_resamples, "mlp_steps": mlp_steps, "wall_s": walls}

@@ -400,6 +400,14 @@ def test_regressor_with_its_last_backbone_block_trainable(tmp_path, private_cach
     d_trunk = (state["backbone.layer4.1.conv2.weight"] - start["backbone.layer4.1.conv2.weight"]).abs().max()
     d_head = (state["regressor.fc1.weight"] - start["regressor.fc1.weight"]).abs().max()
     assert float(d_trunk) < 0.5 * float(d_head)
+    # evaluated through the cached features, the trained block runs: the same tables as on the crops
+    from airpose_lib.train.evaluate import evaluate, evaluate_features, load_trained_model
+
+    on_features = evaluate_features(result.checkpoint, bfile, root, "x", split="train")["per_view"]
+    trained, _ = load_trained_model(result.checkpoint)
+    on_images = evaluate(trained, crops, "x", body=cfg.body_source)["per_view"]
+    for col in ("mpe_m", "mpjpe_m", "mpjpe_true_root_m"):
+        np.testing.assert_allclose(on_features[col], on_images[col], rtol=1e-4, atol=1e-6)
 
 
 def test_the_committed_cpu_backbone_keeps_its_key():

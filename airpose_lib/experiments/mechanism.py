@@ -52,7 +52,7 @@ from airpose_lib.eval.metrics import translation_error
 from airpose_lib.eval.reference import RESULTS_ROOT, git_commit, provenance_record, reference_outputs
 from airpose_lib.eval.significance import PAPER_ORDER, bootstrap_interval, paired_bootstrap
 from airpose_lib.model import to_smplx_params
-from airpose_lib.train.evaluate import evaluate_checkpoint, load_network
+from airpose_lib.train.evaluate import evaluate_features, load_network
 from airpose_lib.train.features import ensure_features, features_path
 from airpose_lib.train.pretrain import profile_backbone
 
@@ -317,7 +317,8 @@ def mechanism_table(configs: KitConfigs, seed: int = 123, variants: Sequence[str
         feats = val_feat if same else np.load(ensure_features(model_backbone, root, "val", cut=cut), mmap_mode="r")
         stages = None if variant != "airpose" else range(1, 4)
         rows += variant_rows(variant, checkpoint, feats, val, val_stature, stages, n_resamples, log)
-        per_view[variant] = evaluate_checkpoint(checkpoint, "val", device="cpu", batch_size=64)["per_view"]
+        per_view[variant] = evaluate_features(checkpoint, model_backbone, root, VARIANT_LABELS[variant],
+                                              split="val")["per_view"]
         done[variant] = _portable(checkpoint)
         walls[variant] = round(time.time() - t0, 1)
     rows += body_pose_rows(per_view, n_resamples, log)

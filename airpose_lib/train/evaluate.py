@@ -162,12 +162,15 @@ def evaluate_features(checkpoint: str | Path, backbone_file: str | Path, data_ro
                       batch_size: int = 64) -> dict[str, pd.DataFrame]:
     """Evaluate a checkpoint of a frozen shared backbone on any dataset's split through the cached
     features of ``backbone_file`` (computed once per dataset, split and crops, shared by every
-    variant; the checkpoint's own training data need not exist).
+    variant; the checkpoint's own training data need not exist). A checkpoint that trained the
+    backbone's last blocks (``trainable_from``) reads the cached input of its first such block and
+    runs its own blocks.
 
     Returns:
         :func:`evaluate`'s tables.
     """
     model, cfg = load_trained_model(checkpoint, "cpu")
-    features = ensure_features(backbone_file, data_root, split, crops=crops)
+    features = ensure_features(backbone_file, data_root, split, crops=crops, cut=cfg.trainable_from)
     dataset = FeatureDataset(data_root, split, features, crops=crops, augment=False)
-    return evaluate(model, dataset, method, batch_size=batch_size, body=cfg.body_source, max_samples=max_samples)
+    return evaluate(model, dataset, method, batch_size=batch_size, body=cfg.body_source, max_samples=max_samples,
+                    feature_cut=cfg.trainable_from)
